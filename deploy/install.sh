@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Installs every Debian package volcast's build, tests and tools need.
+# Idempotent and non-interactive: safe to run on every quick-start command and in CI.
+set -euo pipefail
+
+packages=(
+  # Toolchain
+  cmake g++ make pkg-config git ca-certificates
+  # Server: Boost.Beast/Asio (header-only in 1.81)
+  libboost1.81-dev
+  # Images in and out (EXR, TIFF, PNG, JPEG)
+  libopenimageio-dev
+  # Volume formats: ITK image IO (NRRD, MetaImage, NIfTI, DICOM through GDCM)
+  libinsighttoolkit5-dev
+  # JSON, command line, logging
+  nlohmann-json3-dev libcli11-dev libspdlog-dev libfmt-dev
+  # OpenCL: ICD loader, headers, PoCL as the CPU device
+  ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd
+  # zlib: tests write gzip-encoded NRRD files of their own
+  zlib1g-dev
+  # Tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev python3
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "install.sh: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+echo "install.sh: all ${#packages[@]} packages present"

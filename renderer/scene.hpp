@@ -1,0 +1,69 @@
+#pragma once
+// The scene contract of DESIGN.md: volume + transfer function + camera + image size +
+// quality + clip planes. One JSON form, read by volcast-render and the server alike.
+
+#include "renderer/camera.hpp"
+#include "renderer/transfer_function.hpp"
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace volcast {
+
+enum class Interpolation { Linear, Cubic };
+
+// The quality switches of DESIGN.md's table, each measurable alone.
+struct Quality {
+    double step = 0.5;                 // segment length in units of the smallest spacing
+    bool jitter = false;
+    bool preintegrated = false;
+    Interpolation interpolation = Interpolation::Linear;
+    bool boundarySegment = true;
+    double earlyTermination = 0.99;    // opacity at which a ray stops; 1 turns it off
+    bool emptySpaceSkipping = true;
+    int mipLevel = 0;
+    double imageScale = 1.0;
+    bool shading = false;
+    uint64_t seed = 0;
+    bool operator==(const Quality &) const = default;
+};
+
+// Keeps the half-space its normal points into.
+struct ClipPlane {
+    Vec3d point;
+    Vec3d normal;
+    bool operator==(const ClipPlane &) const = default;
+};
+
+struct Scene {
+    // A file path (relative paths resolved against the scene file's folder when parsed)
+    // or "builtin:NAME" for a built-in synthetic volume (see synthetic.hpp).
+    std::string volume;
+    TransferFunction transferFunction;
+    Camera camera;
+    int width = 256;
+    int height = 256;
+    Quality quality;
+    std::vector<ClipPlane> clipPlanes;
+    bool operator==(const Scene &) const = default;
+};
+
+// Largest image side and pixel count a scene may ask for; beyond them the parser refuses
+// before anything is allocated.
+inline constexpr int kMaxImageSide = 16384;
+inline constexpr int64_t kMaxImagePixels = int64_t(8192) * 8192;
+
+// Parse scene JSON text. Relative volume paths are resolved against baseDir.
+// Throws SceneError whose message names the offending key, e.g. "camera.up: ...".
+Scene parseScene(std::string_view jsonText, const std::filesystem::path &baseDir = {});
+Scene loadSceneFile(const std::filesystem::path &file);
+std::string sceneToJson(const Scene &scene);
+
+struct SceneError : std::invalid_argument {
+    using std::invalid_argument::invalid_argument;
+};
+
+} // namespace volcast

@@ -1,0 +1,58 @@
+#include "renderer/volume.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace volcast {
+
+std::string_view voxelTypeName(VoxelType t) {
+    switch (t) {
+    case VoxelType::UInt8: return "uint8";
+    case VoxelType::Int8: return "int8";
+    case VoxelType::UInt16: return "uint16";
+    case VoxelType::Int16: return "int16";
+    case VoxelType::UInt32: return "uint32";
+    case VoxelType::Int32: return "int32";
+    case VoxelType::Float32: return "float32";
+    case VoxelType::Float64: return "float64";
+    }
+    return "unknown";
+}
+
+size_t voxelTypeSize(VoxelType t) {
+    switch (t) {
+    case VoxelType::UInt8:
+    case VoxelType::Int8: return 1;
+    case VoxelType::UInt16:
+    case VoxelType::Int16: return 2;
+    case VoxelType::UInt32:
+    case VoxelType::Int32:
+    case VoxelType::Float32: return 4;
+    case VoxelType::Float64: return 8;
+    }
+    return 0;
+}
+
+void computeStatistics(Volume &v) {
+    float lo = std::numeric_limits<float>::max();
+    float hi = std::numeric_limits<float>::lowest();
+    for (float x : v.voxels) {
+        if (!std::isfinite(x)) continue;
+        lo = std::min(lo, x);
+        hi = std::max(hi, x);
+    }
+    if (lo > hi) lo = hi = 0; // no finite voxel (callers reject such volumes)
+    v.range = {lo, hi};
+
+    v.histogram.range = v.range;
+    v.histogram.counts.assign(Histogram::kBins, 0);
+    const double width = double(hi) - double(lo);
+    for (float x : v.voxels) {
+        if (!std::isfinite(x)) continue;
+        int bin = width > 0 ? int((double(x) - lo) / width * Histogram::kBins) : 0;
+        v.histogram.counts[size_t(std::clamp(bin, 0, Histogram::kBins - 1))]++;
+    }
+}
+
+} // namespace volcast
