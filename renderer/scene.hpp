@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -42,7 +43,11 @@ struct Scene {
     // A file path (relative paths resolved against the scene file's folder when parsed)
     // or "builtin:NAME" for a built-in synthetic volume (see synthetic.hpp).
     std::string volume;
+    // Points in data units, or, when transferFunctionPreset is set, no points and only the
+    // opacity unit: some presets (MR, micro-CT) are placed on the value range, known once the
+    // volume is loaded, so renderers call resolvedTransferFunction() then.
     TransferFunction transferFunction;
+    std::string transferFunctionPreset;
     Camera camera;
     int width = 256;
     int height = 256;
@@ -61,6 +66,10 @@ inline constexpr int64_t kMaxImagePixels = int64_t(8192) * 8192;
 Scene parseScene(std::string_view jsonText, const std::filesystem::path &baseDir = {});
 Scene loadSceneFile(const std::filesystem::path &file);
 std::string sceneToJson(const Scene &scene);
+
+// The scene's transfer function, with a range-relative preset placed on the loaded
+// volume's value range (range is ignored when the scene has points).
+TransferFunction resolvedTransferFunction(const Scene &scene, const ValueRange &range);
 
 struct SceneError : std::invalid_argument {
     using std::invalid_argument::invalid_argument;
