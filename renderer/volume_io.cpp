@@ -1,0 +1,992 @@
+#include "renderer/volume_io.hpp"
+
+#include <itkGDCMImageIO.h>
+#include <itkGDCMImageIOFactory.h>
+#include <itkGDCMSeriesFileNames.h>
+#include <itkImage.h>
+#include <itkImageIOBase.h>
+#include <itkImageIOFactory.h>
+#include <itkImageSeriesReader.h>
+#include <itkMetaDataObject.h>
+#include <itkMetaImageIOFactory.h>
+#include <itkNiftiImageIOFactory.h>
+#include <itkNrrdImageIOFactory.h>
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <random>
+#include <regex>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+namespace volcast {
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void fail(const fs::path &path, const std::string &problem) {
+    throw VolumeLoadError(path.string() + ": " + problem);
+}
+
+// ITK's IO factories are registered explicitly (we do not use ITK_USE_FILE's generated
+// registration); a function-local static makes it happen once, thread-safely.
+void registerItkFactories() {
+    static const bool registered = [] {
+        itk::NrrdImageIOFactory::RegisterOneFactory();
+        itk::MetaImageIOFactory::RegisterOneFactory();
+        itk::NiftiImageIOFactory::RegisterOneFactory();
+        itk::GDCMImageIOFactory::RegisterOneFactory();
+        return true;
+    }();
+    (void)registered;
+}
+
+// ---------------------------------------------------------------------------------------
+// Small helpers
+
+std::string lower(std::string s) {
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return s;
+}
+
+std::string trim(const std::string &s) {
+    const auto b = s.find_first_not_of(" \t\r\n");
+    if (b == std::string::npos) return {};
+    const auto e = s.find_last_not_of(" \t\r\n");
+    return s.substr(b, e - b + 1);
+}
+
+std::optional<int64_t> parseInt(const std::string &s) {
+    try {
+        size_t used = 0;
+        const long long v = std::stoll(s, &used);
+        if (trim(s.substr(used)).empty()) return int64_t(v);
+    } catch (const std::exception &) {
+    }
+    return std::nullopt;
+}
+
+std::string withThousands(uint64_t n) {
+    const std::string digits = std::to_string(n);
+    std::string out;
+    for (size_t i = 0; i < digits.size(); ++i) {
+        if (i > 0 && (digits.size() - i) % 3 == 0) out.push_back(',');
+        out.push_back(digits[i]);
+    }
+    return out;
+}
+
+std::string humanBytes(uint64_t n) {
+    if (n < 1024) return fmt::format("{} bytes", n);
+    if (n < (uint64_t(1) << 20)) return fmt::format("{:.1f} KiB", double(n) / 1024.0);
+    if (n < (uint64_t(1) << 30)) return fmt::format("{:.1f} MiB", double(n) / double(1 << 20));
+    return fmt::format("{:.2f} GiB", double(n) / double(1 << 30));
+}
+
+// Multiplication that reports overflow instead of wrapping (sizes come from untrusted headers).
+std::optional<uint64_t> checkedMul(uint64_t a, uint64_t b) {
+    if (a != 0 && b > std::numeric_limits<uint64_t>::max() / a) return std::nullopt;
+    return a * b;
+}
+
+// ITK's messages carry the source location, the object address and teem's whole error
+// stack; keep the lines that say what went wrong.
+std::string cleanItkMessage(const itk::ExceptionObject &e) {
+    static const std::regex itkPrefix(R"(^(itk::ERROR|ITK ERROR): \w+\(0x[0-9a-fA-F]+\): )");
+    static const std::regex biffPrefix(R"(^\[\w+\] \w+:\s?)");
+    std::string description = e.GetDescription();
+    std::vector<std::string> kept;
+    size_t start = 0;
+    while (start <= description.size()) {
+        size_t end = description.find('\n', start);
+        if (end == std::string::npos) end = description.size();
+        std::string line = trim(description.substr(start, end - start));
+        start = end + 1;
+        line = std::regex_replace(line, itkPrefix, "");
+        line = trim(std::regex_replace(line, biffPrefix, ""));
+        // Headlines ("Read: Error reading x:") and teem's "trouble" breadcrumbs say nothing.
+        if (line.empty() || line.back() == ':' || line == "trouble" || line.starts_with("trouble reading"))
+            continue;
+        kept.push_back(line);
+    }
+    std::string out;
+    for (const auto &line : kept) out += (out.empty() ? "" : "; ") + line;
+    if (out.empty()) out = trim(description);
+    if (out.size() > 400) out = out.substr(0, 400) + "...";
+    return out;
+}
+
+std::optional<uint64_t> fileSize(const fs::path &p) {
+    std::error_code ec;
+    const auto size = fs::file_size(p, ec);
+    if (ec) return std::nullopt;
+    return uint64_t(size);
+}
+
+// A data file named by a header is relative to the header's folder unless absolute.
+fs::path besideHeader(const fs::path &header, const std::string &name) {
+    const fs::path p(name);
+    return p.is_absolute() ? p : header.parent_path() / p;
+}
+
+bool startsWithGzipMagic(const fs::path &file, uint64_t offset) {
+    std::ifstream in(file, std::ios::binary);
+    in.seekg(std::streamoff(offset));
+    unsigned char magic[2] = {0, 0};
+    in.read(reinterpret_cast<char *>(magic), 2);
+    return in.gcount() == 2 && magic[0] == 0x1f && magic[1] == 0x8b;
+}
+
+// ---------------------------------------------------------------------------------------
+// Byte counts on disk. ITK accepts raw and gzip NRRD data longer than the header says, and
+// MetaImageIO and NiftiImageIO "read" truncated data into garbage (MetaIO only prints a line
+// on stderr), so the loader compares what the data holds with what the header promises.
+
+struct Decoded {
+    uint64_t bytes = 0;
+    bool complete = false;  // the stream ended properly (false: truncated or corrupt)
+};
+
+// Decompressed length of the gzip or zlib stream starting at `offset` (concatenated gzip
+// members count together, trailing non-gzip bytes are ignored as teem and zlib do).
+Decoded inflatedSize(const fs::path &file, uint64_t offset) {
+    std::ifstream in(file, std::ios::binary);
+    in.seekg(std::streamoff(offset));
+    z_stream zs{};
+    if (inflateInit2(&zs, 15 + 32) != Z_OK) return {};  // 15 + 32: gzip or zlib header
+    std::vector<unsigned char> inBuf(size_t(1) << 16);
+    std::vector<unsigned char> outBuf(size_t(1) << 18);
+    // Keep the unread input and append more from the file.
+    auto refill = [&] {
+        const size_t keep = zs.avail_in;
+        if (keep > 0) std::memmove(inBuf.data(), zs.next_in, keep);
+        in.read(reinterpret_cast<char *>(inBuf.data() + keep), std::streamsize(inBuf.size() - keep));
+        zs.next_in = inBuf.data();
+        zs.avail_in = uInt(keep + size_t(in.gcount()));
+    };
+    Decoded result;
+    for (;;) {
+        if (zs.avail_in == 0) {
+            refill();
+            if (zs.avail_in == 0) break;  // the file ended inside the stream
+        }
+        zs.next_out = outBuf.data();
+        zs.avail_out = uInt(outBuf.size());
+        const int ret = inflate(&zs, Z_NO_FLUSH);
+        result.bytes += outBuf.size() - zs.avail_out;
+        if (ret == Z_STREAM_END) {
+            result.complete = true;
+            if (zs.avail_in < 2) refill();
+            if (zs.avail_in >= 2 && zs.next_in[0] == 0x1f && zs.next_in[1] == 0x8b) {
+                inflateReset(&zs);  // another gzip member follows
+                result.complete = false;
+                continue;
+            }
+            break;
+        }
+        if (ret != Z_OK && ret != Z_BUF_ERROR) break;  // corrupt stream
+    }
+    inflateEnd(&zs);
+    return result;
+}
+
+// Fast path: a single gzip member records its length (mod 2^32) in its last 4 bytes; only
+// when that disagrees is the whole stream inflated to count.
+Decoded compressedSize(const fs::path &file, uint64_t offset, uint64_t expected) {
+    const auto size = fileSize(file);
+    if (size && *size >= offset + 18 && startsWithGzipMagic(file, offset)) {
+        std::ifstream in(file, std::ios::binary);
+        in.seekg(std::streamoff(*size - 4));
+        unsigned char t[4] = {0, 0, 0, 0};
+        in.read(reinterpret_cast<char *>(t), 4);
+        const uint32_t isize = uint32_t(t[0]) | uint32_t(t[1]) << 8 | uint32_t(t[2]) << 16 | uint32_t(t[3]) << 24;
+        if (in.gcount() == 4 && isize == uint32_t(expected)) return {expected, true};
+    }
+    return inflatedSize(file, offset);
+}
+
+// `where` names the bytes ("data file 'x.raw'"); `need` is what the header promises.
+void checkLength(const fs::path &path, const std::string &where, uint64_t have, uint64_t need,
+                 const std::string &shape, bool extraAllowed = false) {
+    if (have < need)
+        fail(path, fmt::format("data is truncated: {} holds {} bytes, but the header's sizes and type "
+                               "({}) need {} bytes",
+                               where, withThousands(have), shape, withThousands(need)));
+    if (have > need && !extraAllowed)
+        fail(path, fmt::format("header sizes disagree with the data: {} holds {} bytes, more than the {} "
+                               "bytes the header's sizes and type ({}) need",
+                               where, withThousands(have), withThousands(need), shape));
+}
+
+void checkCompressedLength(const fs::path &path, const std::string &where, const Decoded &d, uint64_t need,
+                           const std::string &shape) {
+    if (!d.complete)
+        fail(path, fmt::format("data is truncated or corrupt: the compressed stream in {} breaks off "
+                               "after {} decompressed bytes (the header's sizes and type ({}) need {} bytes)",
+                               where, withThousands(d.bytes), shape, withThousands(need)));
+    checkLength(path, where + " (decompressed)", d.bytes, need, shape);
+}
+
+// Offset after skipping `lines` text lines from `offset`, or nothing if the file ends first.
+std::optional<uint64_t> skipLines(const fs::path &file, uint64_t offset, int64_t lines) {
+    std::ifstream in(file, std::ios::binary);
+    in.seekg(std::streamoff(offset));
+    std::string line;
+    for (int64_t i = 0; i < lines; ++i)
+        if (!std::getline(in, line)) return std::nullopt;
+    const auto pos = in.tellg();
+    if (pos < 0) return fileSize(file);
+    return uint64_t(pos);
+}
+
+// --- NRRD: just the fields that locate the data (ITK reads everything else).
+struct NrrdLayout {
+    std::string encoding = "raw";
+    std::optional<std::string> dataFile;  // a single detached data file, as written
+    bool multiFile = false;               // LIST or a file-name pattern: not checked here
+    int64_t lineSkip = 0;
+    int64_t byteSkip = 0;
+    bool attached = false;                // data follows the header's blank line
+    uint64_t headerEnd = 0;
+};
+
+std::optional<NrrdLayout> scanNrrdHeader(const fs::path &path) {
+    std::ifstream in(path, std::ios::binary);
+    std::string line;
+    if (!std::getline(in, line) || !line.starts_with("NRRD")) return std::nullopt;
+    NrrdLayout layout;
+    for (int count = 0; count < 100000 && std::getline(in, line); ++count) {
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        if (line.empty()) {
+            const auto pos = in.tellg();
+            layout.attached = !layout.dataFile && !layout.multiFile;
+            layout.headerEnd = pos < 0 ? fileSize(path).value_or(0) : uint64_t(pos);
+            break;
+        }
+        if (line[0] == '#') continue;
+        const auto colon = line.find(": ");
+        const auto kv = line.find(":=");
+        if (colon == std::string::npos || (kv != std::string::npos && kv < colon)) continue;
+        const std::string key = lower(trim(line.substr(0, colon)));
+        const std::string value = trim(line.substr(colon + 2));
+        if (key == "encoding") {
+            layout.encoding = lower(value);
+        } else if (key == "data file" || key == "datafile") {
+            // "LIST" and "pattern min max step [subdim]" name several files.
+            const bool pattern = value.find('%') != std::string::npos &&
+                                 std::count(value.begin(), value.end(), ' ') >= 3;
+            if (value.starts_with("LIST") || pattern) layout.multiFile = true;
+            else layout.dataFile = value;
+        } else if (key == "line skip" || key == "lineskip") {
+            layout.lineSkip = parseInt(value).value_or(0);
+        } else if (key == "byte skip" || key == "byteskip") {
+            layout.byteSkip = parseInt(value).value_or(0);
+        }
+    }
+    return layout;
+}
+
+void checkNrrdData(const fs::path &path, const NrrdLayout &layout, uint64_t need, const std::string &shape) {
+    if (layout.multiFile || (!layout.dataFile && !layout.attached)) return;
+    const fs::path file = layout.dataFile ? besideHeader(path, *layout.dataFile) : path;
+    const std::string where = layout.dataFile ? fmt::format("data file '{}'", *layout.dataFile) : "the file";
+    uint64_t start = layout.dataFile ? 0 : layout.headerEnd;
+    if (layout.lineSkip > 0) {
+        const auto skipped = skipLines(file, start, layout.lineSkip);
+        if (!skipped) fail(path, fmt::format("data is truncated: {} ends within the header's line skip", where));
+        start = *skipped;
+    }
+    const std::string encoding = layout.encoding;
+    if (encoding == "raw") {
+        const uint64_t size = fileSize(file).value_or(0);
+        uint64_t have = size > start ? size - start : 0;
+        if (layout.byteSkip == -1) {
+            checkLength(path, where, have, need, shape, /*extraAllowed=*/true);  // data sits at the end
+            return;
+        }
+        const uint64_t skip = uint64_t(std::max<int64_t>(layout.byteSkip, 0));
+        have = have > skip ? have - skip : 0;
+        checkLength(path, where, have, need, shape);
+    } else if (encoding == "gzip" || encoding == "gz") {
+        // teem applies a byte skip to the decompressed bytes; -1 is not allowed with gzip.
+        if (layout.byteSkip < 0) return;
+        const uint64_t skip = uint64_t(layout.byteSkip);
+        const Decoded d = compressedSize(file, start, skip + need);
+        checkCompressedLength(path, where, {d.bytes >= skip ? d.bytes - skip : 0, d.complete}, need, shape);
+    }
+    // ascii/hex/bzip2: teem itself fails on short data; not checked further here.
+}
+
+// --- MetaImage: the fields that locate the data.
+struct MetaLayout {
+    std::string dataFile;  // "LOCAL" or a file name
+    bool multiFile = false;
+    bool compressed = false;
+    bool binary = true;
+    int64_t headerSize = 0;
+    uint64_t localStart = 0;
+};
+
+std::optional<MetaLayout> scanMetaHeader(const fs::path &path) {
+    std::ifstream in(path, std::ios::binary);
+    std::string line;
+    MetaLayout layout;
+    for (int count = 0; count < 10000 && std::getline(in, line); ++count) {
+        const auto eq = line.find('=');
+        if (eq == std::string::npos) continue;
+        const std::string key = lower(trim(line.substr(0, eq)));
+        const std::string value = trim(line.substr(eq + 1));
+        if (key == "compresseddata") layout.compressed = lower(value) == "true";
+        else if (key == "binarydata") layout.binary = lower(value) != "false";
+        else if (key == "headersize") layout.headerSize = parseInt(value).value_or(0);
+        else if (key == "elementdatafile") {
+            // ElementDataFile is the header's last field; LOCAL data starts right after it.
+            layout.dataFile = value;
+            layout.multiFile = value.starts_with("LIST") || value.find('%') != std::string::npos;
+            const auto pos = in.tellg();
+            layout.localStart = pos < 0 ? fileSize(path).value_or(0) : uint64_t(pos);
+            return layout;
+        }
+    }
+    return std::nullopt;
+}
+
+void checkMetaData(const fs::path &path, const MetaLayout &layout, uint64_t need, const std::string &shape) {
+    if (layout.multiFile || !layout.binary) return;
+    const bool local = layout.dataFile == "LOCAL";
+    const fs::path file = local ? path : besideHeader(path, layout.dataFile);
+    const std::string where = local ? "the file" : fmt::format("data file '{}'", layout.dataFile);
+    const uint64_t start = local ? layout.localStart : uint64_t(std::max<int64_t>(layout.headerSize, 0));
+    if (layout.compressed) {
+        checkCompressedLength(path, where, inflatedSize(file, start), need, shape);
+        return;
+    }
+    const uint64_t size = fileSize(file).value_or(0);
+    const uint64_t have = size > start ? size - start : 0;
+    // HeaderSize -1 means "the data is the last bytes of the file".
+    checkLength(path, where, have, need, shape, /*extraAllowed=*/!local && layout.headerSize == -1);
+}
+
+// --- NIfTI-1/2: the header fields that give the data's length. NiftiImageIO reports a
+// size of 0 as 1 and reads short data without complaint, so these come from the header.
+template <typename T>
+T readScalar(const unsigned char *p, bool swap) {
+    std::array<unsigned char, sizeof(T)> b;
+    std::memcpy(b.data(), p, sizeof(T));
+    if (swap) std::reverse(b.begin(), b.end());
+    T v;
+    std::memcpy(&v, b.data(), sizeof(T));
+    return v;
+}
+
+void checkNiftiData(const fs::path &path) {
+    std::array<unsigned char, 540> h{};
+    int got = 0;
+    if (gzFile g = gzopen(path.string().c_str(), "rb")) {  // gzread also reads plain files
+        got = gzread(g, h.data(), unsigned(h.size()));
+        gzclose(g);
+    }
+    if (got < 348) fail(path, "NIfTI header is truncated");
+    const int32_t sizeofHdr = readScalar<int32_t>(h.data(), false);
+    const int32_t swappedSize = readScalar<int32_t>(h.data(), true);
+    const bool swap = sizeofHdr != 348 && sizeofHdr != 540;
+    const int32_t hdrSize = swap ? swappedSize : sizeofHdr;
+    if (hdrSize != 348 && hdrSize != 540) return;  // not a NIfTI header we know: ITK decides
+    if (hdrSize == 540 && got < 540) fail(path, "NIfTI-2 header is truncated");
+    std::array<int64_t, 8> dim{};
+    int bitpix = 0;
+    uint64_t voxOffset = 0;
+    bool singleFile = false;
+    if (hdrSize == 348) {
+        for (size_t i = 0; i < 8; ++i) dim[i] = readScalar<int16_t>(h.data() + 40 + 2 * i, swap);
+        bitpix = readScalar<int16_t>(h.data() + 72, swap);
+        const float off = readScalar<float>(h.data() + 108, swap);
+        voxOffset = std::isfinite(off) && off > 0 ? uint64_t(off) : 0;
+        singleFile = std::memcmp(h.data() + 344, "n+1", 4) == 0;
+    } else {
+        for (size_t i = 0; i < 8; ++i) dim[i] = readScalar<int64_t>(h.data() + 16 + 8 * i, swap);
+        bitpix = readScalar<int16_t>(h.data() + 14, swap);
+        voxOffset = uint64_t(std::max<int64_t>(readScalar<int64_t>(h.data() + 168, swap), 0));
+        singleFile = std::memcmp(h.data() + 4, "n+2", 4) == 0;
+    }
+    if (dim[0] < 1 || dim[0] > 7) fail(path, fmt::format("NIfTI header has an invalid dimension count {}", dim[0]));
+    if (bitpix <= 0 || bitpix % 8 != 0) fail(path, fmt::format("NIfTI header has an invalid bitpix {}", bitpix));
+    std::optional<uint64_t> bytes = uint64_t(bitpix / 8);
+    std::string shape;
+    for (int64_t i = 1; i <= dim[0]; ++i) {
+        if (dim[size_t(i)] < 1)
+            fail(path, fmt::format("size of axis {} is {} in the header; every size must be at least 1", i - 1,
+                                   dim[size_t(i)]));
+        bytes = bytes ? checkedMul(*bytes, uint64_t(dim[size_t(i)])) : std::nullopt;
+        shape += (shape.empty() ? "" : " x ") + std::to_string(dim[size_t(i)]);
+    }
+    if (!bytes) fail(path, "header sizes are absurd (the voxel count overflows)");
+    shape += fmt::format(", {} bits per voxel, data at byte {}", bitpix, voxOffset);
+
+    fs::path dataFile = path;
+    std::string where = "the file";
+    if (!singleFile) {
+        // A .hdr/.img pair (NIfTI "ni1"/"ni2" or Analyze): the voxels are in the .img file.
+        std::string stem = path.string();
+        const bool gz = stem.ends_with(".gz");
+        if (gz) stem.resize(stem.size() - 3);
+        if (!lower(stem).ends_with(".hdr")) return;
+        stem.resize(stem.size() - 4);
+        dataFile = fs::path(stem + (gz ? ".img.gz" : ".img"));
+        if (!fs::exists(dataFile)) dataFile = fs::path(stem + (gz ? ".img" : ".img.gz"));
+        if (!fs::exists(dataFile))
+            fail(path, fmt::format("data file '{}' named by the header was not found",
+                                   fs::path(stem + ".img").filename().string()));
+        where = fmt::format("data file '{}'", dataFile.filename().string());
+    }
+    const uint64_t need = voxOffset + *bytes;
+    if (startsWithGzipMagic(dataFile, 0)) {
+        checkCompressedLength(path, where, compressedSize(dataFile, 0, need), need, shape);
+    } else {
+        checkLength(path, where, fileSize(dataFile).value_or(0), need, shape);
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// From ITK's header information to a validated Volume.
+
+std::optional<VoxelType> voxelTypeOf(itk::IOComponentEnum t, size_t componentSize) {
+    using C = itk::IOComponentEnum;
+    switch (t) {
+    case C::UCHAR: return VoxelType::UInt8;
+    case C::CHAR: return VoxelType::Int8;
+    case C::USHORT: return VoxelType::UInt16;
+    case C::SHORT: return VoxelType::Int16;
+    case C::UINT: return VoxelType::UInt32;
+    case C::INT: return VoxelType::Int32;
+    case C::ULONG: return componentSize == 4 ? std::optional(VoxelType::UInt32) : std::nullopt;
+    case C::LONG: return componentSize == 4 ? std::optional(VoxelType::Int32) : std::nullopt;
+    case C::FLOAT: return VoxelType::Float32;
+    case C::DOUBLE: return VoxelType::Float64;
+    default: return std::nullopt;
+    }
+}
+
+itk::IOComponentEnum itkComponentOf(VoxelType t) {
+    using C = itk::IOComponentEnum;
+    switch (t) {
+    case VoxelType::UInt8: return C::UCHAR;
+    case VoxelType::Int8: return C::CHAR;
+    case VoxelType::UInt16: return C::USHORT;
+    case VoxelType::Int16: return C::SHORT;
+    case VoxelType::UInt32: return C::UINT;
+    case VoxelType::Int32: return C::INT;
+    case VoxelType::Float32: return C::FLOAT;
+    case VoxelType::Float64: return C::DOUBLE;
+    }
+    return C::UNKNOWNCOMPONENTTYPE;
+}
+
+// Calls f with a value of the C++ type that stores `t`.
+template <typename F>
+decltype(auto) withVoxelType(VoxelType t, F &&f) {
+    switch (t) {
+    case VoxelType::UInt8: return f(uint8_t{});
+    case VoxelType::Int8: return f(int8_t{});
+    case VoxelType::UInt16: return f(uint16_t{});
+    case VoxelType::Int16: return f(int16_t{});
+    case VoxelType::UInt32: return f(uint32_t{});
+    case VoxelType::Int32: return f(int32_t{});
+    case VoxelType::Float32: return f(float{});
+    case VoxelType::Float64: return f(double{});
+    }
+    return f(float{});
+}
+
+VoxelType checkedVoxelType(const fs::path &path, const itk::ImageIOBase &io) {
+    const auto components = io.GetNumberOfComponents();
+    if (components != 1)
+        fail(path, fmt::format("has {} components per voxel ({} data); only scalar volumes with one "
+                               "component can be loaded",
+                               components, itk::ImageIOBase::GetPixelTypeAsString(io.GetPixelType())));
+    const auto componentType = io.GetComponentType();
+    if (componentType == itk::IOComponentEnum::UNKNOWNCOMPONENTTYPE)
+        fail(path, "voxel type is unknown or unsupported");
+    const auto type = voxelTypeOf(componentType, io.GetComponentSize());
+    if (!type)
+        fail(path, fmt::format("voxel type '{}'{} is not supported (supported: int8, uint8, int16, uint16, "
+                               "int32, uint32, float, double)",
+                               itk::ImageIOBase::GetComponentTypeAsString(componentType),
+                               io.GetComponentSize() == 8 ? " (64-bit integer)" : ""));
+    return *type;
+}
+
+void checkShape(const fs::path &path, const Vec3i &dims, const LoadOptions &options) {
+    const std::string sizes = fmt::format("{} x {} x {}", dims.x, dims.y, dims.z);
+    for (int a = 0; a < 3; ++a) {
+        if (dims[a] < 1)
+            fail(path, fmt::format("size of axis {} is {} ({}); every size must be at least 1", a, dims[a], sizes));
+        if (dims[a] > options.maxDimension)
+            fail(path, fmt::format("size {} is absurd: axis {} has {} samples, more than the {} allowed per axis",
+                                   sizes, a, dims[a], options.maxDimension));
+    }
+    std::optional<uint64_t> bytes = sizeof(float);
+    for (int a = 0; a < 3; ++a) bytes = bytes ? checkedMul(*bytes, uint64_t(dims[a])) : std::nullopt;
+    if (!bytes || *bytes > options.maxBytes)
+        fail(path, fmt::format("volume of {} voxels needs {} as float32, more than the memory budget of {}",
+                               sizes, bytes ? humanBytes(*bytes) : std::string("more than 16 EiB"),
+                               humanBytes(options.maxBytes)));
+}
+
+// Spacing must be positive and finite, the direction matrix orthonormal; returns the
+// direction re-orthonormalized exactly (same handedness), since Volume inverts it by transposing.
+Mat3d checkedGeometry(const fs::path &path, const Vec3d &spacing, const Vec3d &origin, const Mat3d &direction) {
+    for (int a = 0; a < 3; ++a) {
+        if (!std::isfinite(spacing[a]) || spacing[a] <= 0)
+            fail(path, fmt::format("spacing of axis {} is {}; spacings must be finite and greater than 0", a,
+                                   spacing[a]));
+        if (!std::isfinite(origin[a])) fail(path, fmt::format("origin of axis {} is {}", a, origin[a]));
+    }
+    std::array<Vec3d, 3> c;
+    for (int a = 0; a < 3; ++a) c[size_t(a)] = {direction(0, a), direction(1, a), direction(2, a)};
+    constexpr double kTolerance = 1e-3;
+    const auto describe = [&] {
+        std::string s;
+        for (const auto &v : c) s += fmt::format(" ({:.6g}, {:.6g}, {:.6g})", v.x, v.y, v.z);
+        return s;
+    };
+    for (int a = 0; a < 3; ++a) {
+        const double len = length(c[size_t(a)]);
+        if (!std::isfinite(len) || std::abs(len - 1) > kTolerance)
+            fail(path, fmt::format("direction matrix is singular or not orthonormal: axis {} has length {:.6g} "
+                                   "(axes:{})",
+                                   a, len, describe()));
+    }
+    for (int a = 0; a < 3; ++a) {
+        const int b = (a + 1) % 3;
+        const double d = dot(c[size_t(a)], c[size_t(b)]);
+        if (std::abs(d) > kTolerance)
+            fail(path, fmt::format("direction matrix is not orthonormal: axes {} and {} are {:.3f} degrees apart, "
+                                   "not 90 (axes:{})",
+                                   a, b, std::acos(std::clamp(d, -1.0, 1.0)) * 180 / 3.14159265358979323846,
+                                   describe()));
+    }
+    // Gram-Schmidt on the first two axes; the third follows from the handedness.
+    const double det = dot(c[0], cross(c[1], c[2]));
+    const Vec3d x = normalize(c[0]);
+    const Vec3d y = normalize(c[1] - x * dot(c[1], x));
+    const Vec3d z = cross(x, y) * (det < 0 ? -1.0 : 1.0);
+    Mat3d out;
+    for (int r = 0; r < 3; ++r) {
+        out(r, 0) = x[r];
+        out(r, 1) = y[r];
+        out(r, 2) = z[r];
+    }
+    return out;
+}
+
+// NaN -> smallest finite, +Inf -> largest finite, -Inf -> smallest finite (see volume_io.hpp).
+size_t replaceNonFinite(const fs::path &path, std::vector<float> &voxels) {
+    float lo = std::numeric_limits<float>::max();
+    float hi = std::numeric_limits<float>::lowest();
+    size_t bad = 0;
+    for (float x : voxels) {
+        if (std::isfinite(x)) {
+            lo = std::min(lo, x);
+            hi = std::max(hi, x);
+        } else {
+            ++bad;
+        }
+    }
+    if (bad == voxels.size())
+        fail(path, fmt::format("has no finite voxel (all {} voxels are NaN or infinite)", voxels.size()));
+    if (bad == 0) return 0;
+    for (float &x : voxels)
+        if (!std::isfinite(x)) x = (x > 0) ? hi : lo;  // NaN compares false, so it takes lo
+    spdlog::warn("{}: replaced {} non-finite voxels (NaN and -Inf by the smallest finite value {}, +Inf by the "
+                 "largest {})",
+                 path.string(), bad, lo, hi);
+    return bad;
+}
+
+std::string displayName(const fs::path &path) {
+    const fs::path p = path.has_filename() ? path : path.parent_path();
+    return p.filename().string();
+}
+
+// Reads all voxels of an IO whose header is read and validated, converting to float32.
+std::vector<float> readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelType type, size_t count) {
+    itk::ImageIORegion region(io.GetNumberOfDimensions());
+    for (unsigned d = 0; d < io.GetNumberOfDimensions(); ++d) {
+        region.SetIndex(d, 0);
+        region.SetSize(d, io.GetDimensions(d));
+    }
+    io.SetIORegion(region);
+    std::vector<float> voxels(count);
+    size_t clamped = 0;
+    try {
+        withVoxelType(type, [&](auto tag) {
+            using T = decltype(tag);
+            if constexpr (std::is_same_v<T, float>) {
+                io.Read(voxels.data());
+            } else {
+                std::vector<T> native(count);
+                io.Read(native.data());
+                for (size_t i = 0; i < count; ++i) {
+                    if constexpr (std::is_same_v<T, double>) {
+                        // Finite doubles beyond float's range would become Inf; clamp them instead.
+                        constexpr double kMax = std::numeric_limits<float>::max();
+                        const double x = native[i];
+                        if (std::isfinite(x) && std::abs(x) > kMax) {
+                            voxels[i] = float(std::clamp(x, -kMax, kMax));
+                            ++clamped;
+                        } else {
+                            voxels[i] = float(x);
+                        }
+                    } else {
+                        voxels[i] = float(native[i]);
+                    }
+                }
+            }
+        });
+    } catch (const itk::ExceptionObject &e) {
+        const std::string message = cleanItkMessage(e);
+        const bool shortData = message.find("fread got only") != std::string::npos ||
+                               message.find("but received") != std::string::npos;
+        fail(path, (shortData ? "data is truncated: " : "cannot read the voxel data: ") + message);
+    }
+    if (clamped > 0)
+        spdlog::warn("{}: clamped {} float64 voxels beyond the float32 range", path.string(), clamped);
+    return voxels;
+}
+
+// A private temporary folder holding a link to the file being read; removed on scope exit.
+struct TemporaryLink {
+    fs::path folder;
+    fs::path link;
+    TemporaryLink() = default;
+    TemporaryLink(const TemporaryLink &) = delete;
+    TemporaryLink &operator=(const TemporaryLink &) = delete;
+    ~TemporaryLink() {
+        std::error_code ec;
+        if (!folder.empty()) fs::remove_all(folder, ec);
+    }
+};
+
+// niftilib looks for a single-file image's voxels in "x.nii" before "x.nii.gz", whatever
+// name it was given: with both side by side, loading x.nii.gz would pair its header with
+// x.nii's bytes. Such a file is read through a link in a folder of its own.
+fs::path niftiReadPath(const fs::path &path, TemporaryLink &alias) {
+    const std::string name = path.string();
+    if (!lower(name).ends_with(".nii.gz")) return path;
+    const fs::path sibling(name.substr(0, name.size() - 3));
+    if (!fs::exists(sibling)) return path;
+    std::random_device random;
+    alias.folder = fs::temp_directory_path() / fmt::format("volcast_nifti_{:08x}{:08x}", random(), random());
+    std::error_code ec;
+    fs::create_directories(alias.folder, ec);
+    if (!ec) fs::create_symlink(fs::absolute(path), alias.folder / path.filename(), ec);
+    if (ec)
+        fail(path, fmt::format("'{}' lies beside it and the NIfTI library would read that file's voxels instead; "
+                               "move one of the two away",
+                               sibling.filename().string()));
+    alias.link = alias.folder / path.filename();
+    spdlog::info("{}: '{}' lies beside it; reading through a link so that the NIfTI library takes the right voxels",
+                 path.string(), sibling.filename().string());
+    return alias.link;
+}
+
+Volume loadImageFile(const fs::path &path, const LoadOptions &options) {
+    {
+        std::ifstream probe(path, std::ios::binary);
+        if (!probe) fail(path, "cannot be opened (check its permissions)");
+    }
+    if (fileSize(path).value_or(0) == 0) fail(path, "is an empty file, not a volume");
+    itk::ImageIOBase::Pointer io =
+        itk::ImageIOFactory::CreateImageIO(path.string().c_str(), itk::IOFileModeEnum::ReadMode);
+    if (!io)
+        fail(path, "is not a volume file in a supported format (NRRD, MetaImage, NIfTI or DICOM): its "
+                   "contents were not recognised");
+    const std::string ioName = io->GetNameOfClass();
+
+    // A missing detached data file is named before ITK reports it in its own words.
+    std::optional<NrrdLayout> nrrd;
+    std::optional<MetaLayout> meta;
+    if (ioName == "NrrdImageIO") {
+        nrrd = scanNrrdHeader(path);
+        if (nrrd && nrrd->dataFile && !fs::exists(besideHeader(path, *nrrd->dataFile)))
+            fail(path, fmt::format("data file '{}' named by the header was not found", *nrrd->dataFile));
+    } else if (ioName == "MetaImageIO") {
+        meta = scanMetaHeader(path);
+        if (meta && !meta->multiFile && meta->dataFile != "LOCAL" && !fs::exists(besideHeader(path, meta->dataFile)))
+            fail(path, fmt::format("data file '{}' named by the header was not found", meta->dataFile));
+    }
+
+    TemporaryLink alias;
+    const fs::path readPath = ioName == "NiftiImageIO" ? niftiReadPath(path, alias) : path;
+    io->SetFileName(readPath.string());
+    try {
+        io->ReadImageInformation();
+    } catch (const itk::ExceptionObject &e) {
+        fail(path, "cannot read the header: " + cleanItkMessage(e));
+    }
+
+    // Validate everything the header says before any voxel memory is allocated.
+    const unsigned nd = io->GetNumberOfDimensions();
+    if (nd < 2)
+        fail(path, fmt::format("is a {}-D image; only 3-D volumes (or a 2-D image as one slice) can be loaded", nd));
+    for (unsigned d = 3; d < nd; ++d)
+        if (io->GetDimensions(d) != 1)
+            fail(path, fmt::format("is a {}-D image (axis {} has size {}); only 3-D volumes can be loaded", nd, d,
+                                   io->GetDimensions(d)));
+    const VoxelType type = checkedVoxelType(path, *io);
+    Volume v;
+    for (unsigned a = 0; a < 3; ++a) {
+        const uint64_t size = a < nd ? uint64_t(io->GetDimensions(a)) : 1;
+        v.dims[int(a)] = size > uint64_t(std::numeric_limits<int64_t>::max()) ? -1 : int64_t(size);
+    }
+    checkShape(path, v.dims, options);
+    Mat3d direction;
+    for (unsigned a = 0; a < 3 && a < nd; ++a) {
+        v.spacing[int(a)] = io->GetSpacing(a);
+        v.origin[int(a)] = io->GetOrigin(a);
+        const std::vector<double> column = io->GetDirection(a);
+        for (unsigned r = 0; r < 3 && r < column.size(); ++r) direction(int(r), int(a)) = column[r];
+    }
+    v.direction = checkedGeometry(path, v.spacing, v.origin, direction);
+    v.sourceType = type;
+
+    // The data must hold exactly what the header promises (see the byte-count helpers).
+    const uint64_t need = uint64_t(v.voxelCount()) * voxelTypeSize(type);
+    const std::string shape =
+        fmt::format("{} x {} x {} {}", v.dims.x, v.dims.y, v.dims.z, voxelTypeName(type));
+    if (nrrd) checkNrrdData(path, *nrrd, need, shape);
+    if (meta) checkMetaData(path, *meta, need, shape);
+    if (ioName == "NiftiImageIO") checkNiftiData(path);
+
+    v.voxels = readVoxels(path, *io, type, v.voxelCount());
+    return v;
+}
+
+Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options) {
+    auto names = itk::GDCMSeriesFileNames::New();
+    names->SetUseSeriesDetails(true);
+    names->SetDirectory(dir.string());
+    const auto &uids = names->GetSeriesUIDs();
+    if (uids.empty()) fail(dir, "folder holds no DICOM series (no DICOM image files were found in it)");
+    const std::vector<std::string> files = names->GetFileNames(uids.front());
+    if (files.empty()) fail(dir, "folder holds no DICOM image files");
+    if (uids.size() > 1)
+        spdlog::info("{}: folder holds {} DICOM series; loading the first ({}, {} files)", dir.string(), uids.size(),
+                     uids.front(), files.size());
+    // One file may be a multi-frame volume on its own.
+    if (files.size() == 1) {
+        try {
+            return loadImageFile(fs::path(files.front()), options);
+        } catch (const VolumeLoadError &e) {
+            fail(dir, e.what());  // keeps the promise that messages start with the path given
+        }
+    }
+
+    auto io = itk::GDCMImageIO::New();
+    io->SetFileName(files.front());
+    try {
+        io->ReadImageInformation();
+    } catch (const itk::ExceptionObject &e) {
+        fail(dir, fmt::format("cannot read the DICOM header of '{}': {}", fs::path(files.front()).filename().string(),
+                              cleanItkMessage(e)));
+    }
+    if (io->GetNumberOfDimensions() > 2 && io->GetDimensions(2) != 1)
+        fail(dir, "series of multi-frame DICOM files are not supported (each file holds several slices)");
+    const VoxelType type = checkedVoxelType(dir, *io);
+    Volume v;
+    v.dims = {int64_t(io->GetDimensions(0)), int64_t(io->GetDimensions(1)), int64_t(files.size())};
+    checkShape(dir, v.dims, options);
+
+    using Image = itk::Image<float, 3>;
+    auto reader = itk::ImageSeriesReader<Image>::New();
+    reader->SetImageIO(io);
+    reader->SetFileNames(files);
+    try {
+        reader->Update();
+    } catch (const itk::ExceptionObject &e) {
+        fail(dir, "cannot read the DICOM series: " + cleanItkMessage(e));
+    }
+    const Image *image = reader->GetOutput();
+    const auto size = image->GetLargestPossibleRegion().GetSize();
+    if (int64_t(size[0]) != v.dims.x || int64_t(size[1]) != v.dims.y || int64_t(size[2]) != v.dims.z)
+        fail(dir, fmt::format("DICOM series came out {} x {} x {}, but its first slice and file count say {} x {} x {}",
+                              size[0], size[1], size[2], v.dims.x, v.dims.y, v.dims.z));
+    Mat3d direction;
+    for (int a = 0; a < 3; ++a) {
+        v.spacing[a] = image->GetSpacing()[unsigned(a)];
+        v.origin[a] = image->GetOrigin()[unsigned(a)];
+        for (int r = 0; r < 3; ++r) direction(r, a) = image->GetDirection()(unsigned(r), unsigned(a));
+    }
+    v.direction = checkedGeometry(dir, v.spacing, v.origin, direction);
+    v.sourceType = type;
+    const float *buffer = image->GetBufferPointer();
+    v.voxels.assign(buffer, buffer + v.voxelCount());
+    return v;
+}
+
+// --- writing
+
+template <typename T>
+std::vector<T> convertForWriting(const float *src, size_t count) {
+    std::vector<T> out(count);
+    for (size_t i = 0; i < count; ++i) {
+        if constexpr (std::is_floating_point_v<T>) {
+            out[i] = T(src[i]);
+        } else {
+            const double x = std::isnan(src[i]) ? 0.0 : std::nearbyint(double(src[i]));
+            out[i] = T(std::clamp(x, double(std::numeric_limits<T>::lowest()), double(std::numeric_limits<T>::max())));
+        }
+    }
+    return out;
+}
+
+std::string dicomNumber(double x) { return fmt::format("{:.10g}", x); }
+
+} // namespace
+
+Volume loadVolume(const fs::path &path, const LoadOptions &options) {
+    registerItkFactories();
+    std::error_code ec;
+    const auto status = fs::status(path, ec);
+    if (!fs::exists(status)) fail(path, "file not found");
+    try {
+        Volume v = fs::is_directory(status) ? loadDicomFolder(path, options) : loadImageFile(path, options);
+        v.name = displayName(path);
+        v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
+        computeStatistics(v);
+        spdlog::debug("{}: loaded {} x {} x {} {} voxels, spacing {} {} {}, range {} .. {}", path.string(), v.dims.x,
+                      v.dims.y, v.dims.z, voxelTypeName(v.sourceType), v.spacing.x, v.spacing.y, v.spacing.z,
+                      v.range.min, v.range.max);
+        return v;
+    } catch (const VolumeLoadError &) {
+        throw;
+    } catch (const itk::ExceptionObject &e) {
+        fail(path, "cannot be read: " + cleanItkMessage(e));
+    } catch (const std::bad_alloc &) {
+        fail(path, "not enough memory to load the volume");
+    } catch (const std::exception &e) {
+        fail(path, std::string("cannot be read: ") + e.what());
+    }
+}
+
+void saveVolume(const Volume &v, const fs::path &path, const SaveOptions &options) {
+    registerItkFactories();
+    const auto saveFail = [&](const std::string &problem) {
+        throw VolumeSaveError(path.string() + ": " + problem);
+    };
+    if (v.voxelCount() == 0 || v.voxels.size() != v.voxelCount())
+        saveFail("volume has no voxels, or fewer voxels than its dims say");
+    const std::string name = lower(path.filename().string());
+    const bool known = name.ends_with(".nrrd") || name.ends_with(".nhdr") || name.ends_with(".mha") ||
+                       name.ends_with(".mhd") || name.ends_with(".nii") || name.ends_with(".nii.gz");
+    if (!known) saveFail("unsupported extension (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)");
+    try {
+        itk::ImageIOBase::Pointer io =
+            itk::ImageIOFactory::CreateImageIO(path.string().c_str(), itk::IOFileModeEnum::WriteMode);
+        if (!io) saveFail("no ITK writer accepts this file name");
+        io->SetNumberOfDimensions(3);
+        itk::ImageIORegion region(3);
+        for (unsigned a = 0; a < 3; ++a) {
+            io->SetDimensions(a, itk::SizeValueType(v.dims[int(a)]));
+            io->SetSpacing(a, v.spacing[int(a)]);
+            io->SetOrigin(a, v.origin[int(a)]);
+            io->SetDirection(a, std::vector<double>{v.direction(0, int(a)), v.direction(1, int(a)),
+                                                     v.direction(2, int(a))});
+            region.SetIndex(a, 0);
+            region.SetSize(a, itk::SizeValueType(v.dims[int(a)]));
+        }
+        io->SetPixelType(itk::IOPixelEnum::SCALAR);
+        io->SetNumberOfComponents(1);
+        io->SetComponentType(itkComponentOf(options.type));
+        io->SetUseCompression(options.compress);
+        io->SetFileName(path.string());
+        io->SetIORegion(region);
+        withVoxelType(options.type, [&](auto tag) {
+            const auto buffer = convertForWriting<decltype(tag)>(v.voxels.data(), v.voxels.size());
+            io->WriteImageInformation();
+            io->Write(buffer.data());
+        });
+    } catch (const VolumeSaveError &) {
+        throw;
+    } catch (const itk::ExceptionObject &e) {
+        saveFail(cleanItkMessage(e));
+    } catch (const std::exception &e) {
+        saveFail(e.what());
+    }
+}
+
+void saveDicomSeries(const Volume &v, const fs::path &folder, VoxelType type) {
+    registerItkFactories();
+    const auto saveFail = [&](const std::string &problem) {
+        throw VolumeSaveError(folder.string() + ": " + problem);
+    };
+    if (type == VoxelType::Float32 || type == VoxelType::Float64)
+        saveFail("DICOM series are written with integer voxels; choose an integer type");
+    if (v.voxelCount() == 0 || v.voxels.size() != v.voxelCount())
+        saveFail("volume has no voxels, or fewer voxels than its dims say");
+    try {
+        fs::create_directories(folder);
+        // One IO for every slice: it generates the study and series UIDs once and keeps them.
+        auto io = itk::GDCMImageIO::New();
+        const std::string orientation =
+            fmt::format("{}\\{}\\{}\\{}\\{}\\{}", dicomNumber(v.direction(0, 0)), dicomNumber(v.direction(1, 0)),
+                        dicomNumber(v.direction(2, 0)), dicomNumber(v.direction(0, 1)),
+                        dicomNumber(v.direction(1, 1)), dicomNumber(v.direction(2, 1)));
+        const size_t sliceCount = size_t(v.dims.x * v.dims.y);
+        for (int64_t k = 0; k < v.dims.z; ++k) {
+            const Vec3d position = v.worldFromIndex({0, 0, double(k)});
+            itk::MetaDataDictionary dict;
+            // CT Image Storage: GDCM ignores the position and orientation of secondary-capture
+            // images, which is what it writes for other modalities.
+            itk::EncapsulateMetaData<std::string>(dict, "0008|0060", "CT");
+            itk::EncapsulateMetaData<std::string>(dict, "0028|0004", "MONOCHROME2");
+            itk::EncapsulateMetaData<std::string>(dict, "0020|0013", std::to_string(k + 1));
+            itk::EncapsulateMetaData<std::string>(
+                dict, "0020|0032",
+                fmt::format("{}\\{}\\{}", dicomNumber(position.x), dicomNumber(position.y), dicomNumber(position.z)));
+            itk::EncapsulateMetaData<std::string>(dict, "0020|0037", orientation);
+            itk::EncapsulateMetaData<std::string>(dict, "0018|0050", dicomNumber(v.spacing.z));
+            itk::EncapsulateMetaData<std::string>(dict, "0018|0088", dicomNumber(v.spacing.z));
+            io->SetMetaDataDictionary(dict);
+            io->SetNumberOfDimensions(2);
+            itk::ImageIORegion region(2);
+            for (unsigned a = 0; a < 2; ++a) {
+                io->SetDimensions(a, itk::SizeValueType(v.dims[int(a)]));
+                io->SetSpacing(a, v.spacing[int(a)]);
+                io->SetOrigin(a, position[int(a)]);
+                region.SetIndex(a, 0);
+                region.SetSize(a, itk::SizeValueType(v.dims[int(a)]));
+            }
+            io->SetPixelType(itk::IOPixelEnum::SCALAR);
+            io->SetNumberOfComponents(1);
+            io->SetComponentType(itkComponentOf(type));
+            io->SetIORegion(region);
+            io->SetFileName((folder / fmt::format("slice_{:04d}.dcm", k)).string());
+            withVoxelType(type, [&](auto tag) {
+                const auto buffer =
+                    convertForWriting<decltype(tag)>(v.voxels.data() + size_t(k) * sliceCount, sliceCount);
+                io->WriteImageInformation();
+                io->Write(buffer.data());
+            });
+        }
+    } catch (const VolumeSaveError &) {
+        throw;
+    } catch (const itk::ExceptionObject &e) {
+        saveFail(cleanItkMessage(e));
+    } catch (const std::exception &e) {
+        saveFail(e.what());
+    }
+}
+
+} // namespace volcast

@@ -6,6 +6,28 @@
 // Non-finite voxels policy: NaN becomes the smallest finite value of the volume, +Inf the
 // largest and -Inf the smallest; the count is kept in Volume::nonFiniteReplaced and a
 // warning is logged. A volume with no finite voxel is rejected.
+//
+// What is accepted:
+// - Scalar images only (exactly one component per voxel); RGB, vector, tensor and complex
+//   images are rejected.
+// - 3-D images; a 2-D image is a volume of one slice (dims.z = 1, z spacing 1); images of
+//   more dimensions only when every axis beyond the third has size 1.
+// - Voxel types int8/uint8/int16/uint16/int32/uint32/float32/float64. 64-bit integers are
+//   rejected. int32/uint32 values above 2^24 and float64 values lose precision in float32;
+//   float64 values beyond the float32 range are clamped to it (and logged). ITK applies
+//   NIfTI scl_slope/scl_inter and DICOM rescale slope/intercept itself; sourceType is then
+//   the type ITK reports for the rescaled values (float32 for a scaled NIfTI).
+// - Geometry is ITK's: files that name a patient space (NRRD `space` RAS/LAS/LPS, NIfTI,
+//   DICOM) come out in LPS world coordinates; files without one keep their numbers. The
+//   direction matrix must be orthonormal within 1e-3 (it is then re-orthonormalized
+//   exactly, keeping its handedness); spacings must be finite and > 0.
+// - The data on disk must hold exactly what the header promises: ITK silently accepts a
+//   raw or gzip NRRD longer than its header says, and reads truncated MetaImage and NIfTI
+//   files into garbage, so the loader checks the byte counts itself before reading.
+// - x.nii.gz lying beside an x.nii is read through a temporary link: niftilib, given
+//   x.nii.gz, would take its header but x.nii's voxels.
+// - A folder is read as a DICOM series; if it holds several, the first one (in the order
+//   ITK's GDCMSeriesFileNames lists them) is loaded and the choice is logged.
 
 #include "renderer/volume.hpp"
 
@@ -26,5 +48,27 @@ struct VolumeLoadError : std::runtime_error {
 };
 
 Volume loadVolume(const std::filesystem::path &path, const LoadOptions &options = {});
+
+// Writing volumes through ITK, for exports and for building test fixtures in every format
+// the loader reads. Voxels are converted to `type` (integers: rounded and clamped to the
+// type's range, NaN as 0). Geometry (spacing, origin, direction) is written as ITK does.
+struct SaveOptions {
+    VoxelType type = VoxelType::Float32;
+    bool compress = false;  // gzip/zlib where the format allows it (.nii.gz always is)
+};
+
+// Every failure to save: the message starts with the file's path.
+struct VolumeSaveError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+// Format from the extension: .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz.
+void saveVolume(const Volume &v, const std::filesystem::path &path, const SaveOptions &options = {});
+
+// One DICOM file per z slice (slice_0000.dcm, ...) in `folder` (created if missing), all in
+// one new series, with image position/orientation so that loading the folder gives back
+// the volume's geometry. `type` must be an integer type.
+void saveDicomSeries(const Volume &v, const std::filesystem::path &folder,
+                     VoxelType type = VoxelType::Int16);
 
 } // namespace volcast
