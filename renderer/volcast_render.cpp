@@ -4,6 +4,7 @@
 
 #include "renderer/error_metrics.hpp"
 #include "renderer/image.hpp"
+#include "renderer/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/volume_source.hpp"
@@ -34,13 +35,15 @@ int main(int argc, char **argv) {
     app.add_option("scene", scenePath, "Scene JSON file")->required()->check(CLI::ExistingFile);
     app.add_option("-o,--output", outPath, "Output image: .exr or .tif (premultiplied float RGBA), .png (8-bit)")
         ->required();
-    app.add_flag("--reference", reference,
-                 "Use the exact double-precision reference integrator (today the only renderer)");
+    std::string device, kernelCache;
+    app.add_flag("--reference", reference, "Use the exact double-precision reference integrator instead of OpenCL");
+    app.add_option("--device", device, "OpenCL device: auto, gpu, cpu or part of its name (default: $VOLCAST_DEVICE or auto)");
+    app.add_option("--kernel-cache", kernelCache, "Folder for PoCL's compiled-kernel cache (default: $VOLCAST_KERNEL_CACHE)");
     app.add_flag("--analytic", analytic,
                  "Reference only: integrate a built-in volume's continuous field instead of its samples");
     app.add_option("--tolerance", tolerance, "Reference only: per-pixel absolute tolerance")
         ->check(CLI::Range(1e-12, 1e-1));
-    app.add_option("--threads", threads, "Render threads (0: all cores)")->check(CLI::NonNegativeNumber);
+    app.add_option("--threads", threads, "Reference only: render threads (0: all cores)")->check(CLI::NonNegativeNumber);
     app.add_option("--compare", comparePath, "Print RMSE, PSNR and max error against this image")
         ->check(CLI::ExistingFile);
     app.add_option("--error-image", errorImagePath, "With --compare: write the per-pixel error here");
@@ -48,6 +51,7 @@ int main(int argc, char **argv) {
 
     try {
         nlohmann::json report;
+        if (analytic) reference = true;
         const volcast::Scene scene = volcast::loadSceneFile(scenePath);
 
         auto t = Clock::now();
@@ -58,35 +62,57 @@ int main(int argc, char **argv) {
                                         " has no continuous field");
         const volcast::TransferFunction tf = volcast::resolvedTransferFunction(scene, loaded.volume.range);
 
-        t = Clock::now();
-        const auto reconstruction = analytic ? volcast::Reconstruction::Analytic
-                                    : scene.quality.interpolation == volcast::Interpolation::Cubic
-                                        ? volcast::Reconstruction::Cubic
-                                        : volcast::Reconstruction::Linear;
-        const volcast::ReferenceRenderer renderer =
-            analytic ? volcast::ReferenceRenderer(loaded.volume, tf, loaded.analyticField)
-                     : volcast::ReferenceRenderer(loaded.volume, tf, reconstruction);
-        const double preprocessMs = msSince(t);
-
-        volcast::ReferenceStats stats;
-        volcast::ReferenceOptions options;
-        options.tolerance = tolerance;
-        options.threads = threads;
-        const volcast::Image image =
-            renderer.render(scene.camera, scene.width, scene.height, scene.clipPlanes, options, &stats);
-        volcast::writeImage(outPath, image);
-
         report["volume"] = scene.volume;
         report["dims"] = {loaded.volume.dims.x, loaded.volume.dims.y, loaded.volume.dims.z};
         report["image"] = {{"width", scene.width}, {"height", scene.height}};
-        report["renderer"] = "reference";
-        report["reconstruction"] = reconstruction == volcast::Reconstruction::Analytic ? "analytic"
-                                   : reconstruction == volcast::Reconstruction::Cubic  ? "cubic"
-                                                                                       : "linear";
-        report["timings_ms"] = {{"load", loadMs}, {"preprocess", preprocessMs}, {"render", stats.renderSeconds * 1e3}};
-        report["tolerance_requested"] = stats.toleranceRequested;
-        report["tolerance_reached"] = stats.toleranceReached;
-        if (analytic) report["analytic_fit_error"] = stats.analyticFitError;
+        volcast::Image image;
+        if (reference || analytic) {
+            t = Clock::now();
+            const auto reconstruction = analytic ? volcast::Reconstruction::Analytic
+                                        : scene.quality.interpolation == volcast::Interpolation::Cubic
+                                            ? volcast::Reconstruction::Cubic
+                                            : volcast::Reconstruction::Linear;
+            const volcast::ReferenceRenderer renderer =
+                analytic ? volcast::ReferenceRenderer(loaded.volume, tf, loaded.analyticField)
+                         : volcast::ReferenceRenderer(loaded.volume, tf, reconstruction);
+            const double preprocessMs = msSince(t);
+            volcast::ReferenceStats stats;
+            volcast::ReferenceOptions options;
+            options.tolerance = tolerance;
+            options.threads = threads;
+            image = renderer.render(scene.camera, scene.width, scene.height, scene.clipPlanes, options, &stats);
+            report["renderer"] = "reference";
+            report["reconstruction"] = reconstruction == volcast::Reconstruction::Analytic ? "analytic"
+                                       : reconstruction == volcast::Reconstruction::Cubic  ? "cubic"
+                                                                                           : "linear";
+            report["timings_ms"] = {{"load", loadMs}, {"preprocess", preprocessMs}, {"render", stats.renderSeconds * 1e3}};
+            report["tolerance_requested"] = stats.toleranceRequested;
+            report["tolerance_reached"] = stats.toleranceReached;
+            if (analytic) report["analytic_fit_error"] = stats.analyticFitError;
+        } else {
+            if (scene.quality.interpolation == volcast::Interpolation::Cubic)
+                throw std::invalid_argument("quality.interpolation: cubic is not in the OpenCL renderer yet; "
+                                            "use --reference for it");
+            t = Clock::now();
+            volcast::OpenClContext cl({device, kernelCache});
+            volcast::OpenClRenderer renderer(cl, loaded.volume);
+            const double uploadMs = msSince(t);
+            volcast::RenderStats stats;
+            image = renderer.render(tf, scene.camera, scene.width, scene.height, scene.quality, scene.clipPlanes, &stats);
+            report["renderer"] = "opencl";
+            report["device"] = cl.deviceName();
+            report["build_options"] = stats.buildOptions;
+            report["timings_ms"] = {{"load", loadMs},
+                                    {"upload", uploadMs},
+                                    {"kernel_build", stats.kernelBuildSeconds * 1e3},
+                                    {"preprocess", {{"tf_table", stats.tfTableSeconds * 1e3}}},
+                                    {"render", stats.renderSeconds * 1e3}};
+            report["tf_table"] = {{"entries", stats.tfTableEntries}, {"max_error", stats.tfTableError}};
+            report["mean_samples_per_ray"] = stats.meanSamplesPerRay;
+            report["early_terminated_fraction"] = stats.earlyTerminatedFraction;
+            if (stats.raysTruncated > 0) report["rays_truncated"] = stats.raysTruncated;
+        }
+        volcast::writeImage(outPath, image);
         report["output"] = outPath;
 
         if (!comparePath.empty()) {

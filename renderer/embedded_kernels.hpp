@@ -1,0 +1,6 @@
+#pragma once
+// Kernel sources compiled into the library from renderer/kernels/*.cl at build time.
+
+namespace volcast {
+extern const char *const kRaycastKernelSource;
+}

@@ -1,0 +1,55 @@
+/* Parameters shared by the host (C++) and the ray-casting kernel (OpenCL C): one layout,
+ * explicit padding, its size checked on the host. */
+#ifndef VOLCAST_RAYCAST_SHARED_H
+#define VOLCAST_RAYCAST_SHARED_H
+
+#ifdef __OPENCL_VERSION__
+typedef float4 vc_float4;
+typedef float vc_float;
+typedef int vc_int;
+typedef uint vc_uint;
+#else
+#ifndef CL_TARGET_OPENCL_VERSION
+#define CL_TARGET_OPENCL_VERSION 120
+#endif
+#include <CL/cl_platform.h>
+typedef cl_float4 vc_float4;
+typedef cl_float vc_float;
+typedef cl_int vc_int;
+typedef cl_uint vc_uint;
+#endif
+
+#define VC_MAX_CLIP_PLANES 6
+
+typedef struct {
+    vc_float4 eye;                  /* world; orthographic: the centre of the image plane */
+    vc_float4 forward;              /* unit view direction */
+    vc_float4 right;                /* image x axis scaled by the half-width of the view */
+    vc_float4 up;                   /* image y axis scaled by the half-height of the view */
+    vc_float4 indexFromWorld[3];    /* rows of the affine map world -> index space */
+    vc_float4 clipPlanes[VC_MAX_CLIP_PLANES]; /* (n, w): keeps dot(n, x) + w >= 0, world */
+    vc_int dims[4];                 /* samples per axis */
+    vc_float tfMin;                 /* transfer-function table: value of entry 0 */
+    vc_float tfScale;               /* entries per data unit */
+    vc_int tfEntries;
+    vc_int clipPlaneCount;
+    vc_int width, height;
+    vc_int orthographic;
+    vc_int maxSamples;              /* per ray; beyond it the ray stops and is counted */
+    vc_float step;                  /* segment length, world units */
+    vc_float opacityUnit;           /* world units */
+    vc_float terminationTransmittance; /* early termination when T falls to this */
+    vc_float pad0;
+    vc_uint seed;
+    vc_uint pass;
+    vc_uint pad1, pad2;
+} RayCastParams;
+
+/* stats[]: counters the kernel accumulates, read back by the host. */
+#define VC_STAT_SAMPLES 0
+#define VC_STAT_TERMINATED_EARLY 1
+#define VC_STAT_TRUNCATED 2
+#define VC_STAT_RAYS_HIT 3
+#define VC_STAT_COUNT 4
+
+#endif

@@ -1,0 +1,63 @@
+#pragma once
+// The OpenCL device volcast renders on, and the programs built for it. Programs are built
+// per feature set (a string of -D options) and cached for the life of the process; PoCL's
+// own on-disk cache makes a restart cheap (its folder is set by kernelCacheDir).
+
+#ifndef CL_HPP_TARGET_OPENCL_VERSION
+#define CL_HPP_TARGET_OPENCL_VERSION 120
+#define CL_HPP_MINIMUM_OPENCL_VERSION 120
+#endif
+#define CL_HPP_ENABLE_EXCEPTIONS
+#include <CL/opencl.hpp>
+
+#include <map>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+
+namespace volcast {
+
+struct OpenClError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+struct DeviceOptions {
+    // "auto" (a GPU if there is one, else a CPU device), "gpu", "cpu", or a part of the
+    // device's name. Empty: the VOLCAST_DEVICE environment variable, else "auto".
+    std::string device;
+    // Folder for PoCL's compiled-kernel cache. Empty: VOLCAST_KERNEL_CACHE, else PoCL's default.
+    std::string kernelCacheDir;
+};
+
+class OpenClContext {
+  public:
+    explicit OpenClContext(const DeviceOptions &options = {});
+
+    const cl::Context &context() const { return context_; }
+    const cl::Device &device() const { return device_; }
+    cl::CommandQueue &queue() { return queue_; }
+    std::string deviceName() const;
+    bool isGpu() const;
+
+    struct BuiltProgram {
+        cl::Program program;
+        double buildSeconds = 0; // 0 when it came from this process's cache
+    };
+    // Build `source` with `options` (e.g. "-DCUBIC=1"), or return the cached program.
+    // A failure becomes an OpenClError carrying every device's build log.
+    BuiltProgram program(const std::string &source, const std::string &options);
+    size_t programsBuilt() const { return programsBuilt_; }
+
+  private:
+    cl::Context context_;
+    cl::Device device_;
+    cl::CommandQueue queue_;
+    std::mutex mutex_;
+    std::map<std::string, cl::Program> programs_;
+    size_t programsBuilt_ = 0;
+};
+
+// Turn a cl::Error into a message naming the call and the error code.
+std::string describe(const cl::Error &e);
+
+} // namespace volcast
