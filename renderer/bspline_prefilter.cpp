@@ -1,7 +1,10 @@
 #include "renderer/bspline_prefilter.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <thread>
+#include <vector>
 
 namespace volcast {
 
@@ -48,6 +51,39 @@ void bsplinePrefilterSimple(Real *data, Vec3i dims) {
         for (size_t i = 0; i < nx; ++i) bsplinePrefilterLine(data + k * ny * nx + i, ny, ptrdiff_t(nx));
     for (size_t j = 0; j < ny; ++j)
         for (size_t i = 0; i < nx; ++i) bsplinePrefilterLine(data + j * nx + i, nz, ptrdiff_t(nx * ny));
+}
+
+void bsplinePrefilterMultithreaded(float *data, Vec3i dims, int threads) {
+    const auto nx = size_t(dims.x), ny = size_t(dims.y), nz = size_t(dims.z);
+    if (nx == 0 || ny == 0 || nz == 0) return;
+    const size_t wanted = threads > 0 ? size_t(threads) : size_t(std::max(1u, std::thread::hardware_concurrency()));
+
+    // Line l of an axis starts at (l / inner)·outerStride + (l % inner)·innerStride.
+    struct Axis {
+        size_t n;
+        ptrdiff_t stride;
+        size_t lines, inner, innerStride, outerStride;
+    };
+    const Axis axes[3] = {
+        {nx, 1, ny * nz, ny, nx, nx * ny},
+        {ny, ptrdiff_t(nx), nx * nz, nx, 1, nx * ny},
+        {nz, ptrdiff_t(nx * ny), nx * ny, nx, 1, nx},
+    };
+    for (const Axis &a : axes) {
+        if (a.n < 2) continue; // a one-sample axis is its own coefficient
+        // Contiguous ranges of lines, so neighbouring threads rarely share cache lines.
+        const size_t count = std::min(wanted, a.lines);
+        auto work = [&a, data, count](size_t t) {
+            const size_t begin = a.lines * t / count, end = a.lines * (t + 1) / count;
+            for (size_t l = begin; l < end; ++l)
+                bsplinePrefilterLine(data + (l / a.inner) * a.outerStride + (l % a.inner) * a.innerStride, a.n, a.stride);
+        };
+        std::vector<std::thread> pool;
+        pool.reserve(count - 1);
+        for (size_t t = 1; t < count; ++t) pool.emplace_back(work, t);
+        work(0); // the calling thread takes the first share
+        for (std::thread &th : pool) th.join();
+    }
 }
 
 template void bsplinePrefilterLine<float>(float *, size_t, ptrdiff_t);

@@ -20,6 +20,10 @@ void bsplinePrefilterLine(Real *data, size_t n, ptrdiff_t stride);
 template <typename Real>
 void bsplinePrefilterSimple(Real *data, Vec3i dims);
 
+// The same result on several threads: each axis's lines are split among them, and all of an
+// axis finishes before the next starts. threads = 0: std::thread::hardware_concurrency().
+void bsplinePrefilterMultithreaded(float *data, Vec3i dims, int threads = 0);
+
 // Index of coefficient k under mirror boundaries on an axis of n samples.
 inline int64_t mirrorIndex(int64_t k, int64_t n) {
     if (n == 1) return 0;

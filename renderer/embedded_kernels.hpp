@@ -3,4 +3,5 @@
 
 namespace volcast {
 extern const char *const kRaycastKernelSource;
+extern const char *const kBSplinePrefilterKernelSource;
 }

@@ -1,12 +1,15 @@
-# Writes a C++ file holding the ray-casting kernel source: the shared header, then the .cl
-# file, so the program builds from memory with no include path. Run at build time.
-file(READ "${SHARED}" shared)
-file(READ "${KERNEL}" kernel)
+# Writes a C++ file defining the string constant NAME: the FILES (a list, concatenated in
+# order, e.g. a shared header then the .cl file), so a program builds from memory with no
+# include path. Run at build time.
+set(source "")
+foreach(file IN LISTS FILES)
+  file(READ "${file}" text)
+  string(APPEND source "${text}\n")
+endforeach()
 file(WRITE "${OUT}" "// Generated from renderer/kernels by embed.cmake; do not edit.
 #include \"renderer/embedded_kernels.hpp\"
 namespace volcast {
-const char *const kRaycastKernelSource = R\"volcast_cl(#define VOLCAST_EMBEDDED 1
-${shared}
-${kernel})volcast_cl\";
+const char *const ${NAME} = R\"volcast_cl(#define VOLCAST_EMBEDDED 1
+${source})volcast_cl\";
 }
 ")

@@ -1,10 +1,13 @@
 #include "renderer/bspline_prefilter.hpp"
+#include "renderer/bspline_prefilter_opencl.hpp"
 #include "renderer/reconstruction.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace volcast {
@@ -82,6 +85,75 @@ TEST(BSplinePrefilter, FloatAgreesWithDoubleToFloatPrecision) {
     // Float keeps ~1.2e-7 relative per operation; the recursion's gain is bounded by
     // 1 / (1 − |z|)² ≈ 1.9, so a few 1e-7 on unit-size values; 1e-5 relative is the bound.
     for (size_t k = 0; k < d.size(); ++k) EXPECT_NEAR(f[k], d[k], 1e-5 * std::max(1.0, std::fabs(d[k])));
+}
+
+OpenClContext &sharedContext() {
+    static OpenClContext cl;
+    return cl;
+}
+
+// Axes shorter than the filter's 4 taps included, and one-sample axes in every position.
+const Vec3i kAgreementDims[] = {{37, 5, 3}, {1, 2, 17}, {3, 1, 2}, {16, 9, 11}};
+
+std::vector<float> randomVolume(Vec3i dims, unsigned seed) {
+    std::vector<float> v(size_t(dims.x * dims.y * dims.z));
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(-100, 100);
+    for (float &x : v) x = u(rng);
+    return v;
+}
+
+// Every coefficient of `got` within 1e-5 (the bound) relative to the volume's largest
+// coefficient, of the simple float result and of the double one. Relative to the volume, not
+// to each coefficient: a coefficient near 0 is a difference of values ~100, so float rounding
+// of those values (~1e-5 absolute) is all it can be held to.
+void expectAgreesWithSimple(const std::vector<float> &got, const std::vector<float> &samples, Vec3i dims,
+                            const std::string &what) {
+    std::vector<float> single = samples;
+    bsplinePrefilterSimple(single.data(), dims);
+    std::vector<double> reference(samples.begin(), samples.end());
+    bsplinePrefilterSimple(reference.data(), dims);
+    double scale = 1;
+    for (double c : reference) scale = std::max(scale, std::fabs(c));
+    const double tolerance = 1e-5 * scale;
+    ASSERT_EQ(got.size(), samples.size()) << what;
+    for (size_t k = 0; k < got.size(); ++k) {
+        EXPECT_NEAR(got[k], single[k], tolerance) << what << " k=" << k;
+        EXPECT_NEAR(got[k], reference[k], tolerance) << what << " k=" << k;
+    }
+}
+
+std::string name(Vec3i d) {
+    return std::to_string(d.x) + "x" + std::to_string(d.y) + "x" + std::to_string(d.z);
+}
+
+TEST(BSplinePrefilter, MultithreadedAgreesWithSimple) {
+    for (const Vec3i &dims : kAgreementDims)
+        for (int threads : {1, 2, 3, 0}) {
+            const std::vector<float> samples = randomVolume(dims, 3);
+            std::vector<float> got = samples;
+            bsplinePrefilterMultithreaded(got.data(), dims, threads);
+            expectAgreesWithSimple(got, samples, dims, name(dims) + " threads=" + std::to_string(threads));
+        }
+}
+
+TEST(BSplinePrefilter, MultithreadedMatchesSimpleBitForBit) {
+    // Same line filter on the same lines: only the order of lines differs, never the arithmetic.
+    const Vec3i dims{37, 5, 3};
+    const std::vector<float> samples = randomVolume(dims, 4);
+    std::vector<float> simple = samples, threaded = samples;
+    bsplinePrefilterSimple(simple.data(), dims);
+    bsplinePrefilterMultithreaded(threaded.data(), dims, 3);
+    EXPECT_EQ(simple, threaded);
+}
+
+TEST(BSplinePrefilter, OpenClAgreesWithSimple) {
+    OpenClContext &cl = sharedContext();
+    for (const Vec3i &dims : kAgreementDims) {
+        const std::vector<float> samples = randomVolume(dims, 5);
+        expectAgreesWithSimple(bsplinePrefilterOpenCl(cl, samples.data(), dims), samples, dims,
+                               name(dims) + " on " + cl.deviceName());
+    }
 }
 
 TEST(BSplinePrefilter, MirrorIndexFoldsAtBothEnds) {
