@@ -36,6 +36,10 @@ class RayGenerator {
     Ray rayThrough(double px, double py) const;
     Ray pixelRay(int x, int y) const { return rayThrough(x + 0.5, y + 0.5); }
 
+    // Half the image plane's extent: at distance 1 (perspective) or in world units (orthographic).
+    double halfWidth() const { return halfWidth_; }
+    double halfHeight() const { return halfHeight_; }
+
     Vec3d forward, right, up;
 
   private:

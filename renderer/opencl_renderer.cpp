@@ -7,7 +7,6 @@
 
 #include <chrono>
 #include <cmath>
-#include <numbers>
 
 namespace volcast {
 
@@ -60,18 +59,14 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     st.tfTableEntries = table.entries();
     st.tfTableError = table.maxError;
 
-    // Camera frame exactly as RayGenerator builds it.
+    // Camera frame exactly as RayGenerator builds it, so both renderers cast the same rays.
     const RayGenerator rays(camera, width, height);
-    const double halfHeight = camera.projection == Projection::Perspective
-                                  ? std::tan(camera.fovYDeg * std::numbers::pi / 360.0)
-                                  : camera.height / 2;
-    const double halfWidth = halfHeight * width / height;
 
     RayCastParams p{};
     p.eye = f4(camera.eye);
     p.forward = f4(rays.forward);
-    p.right = f4(rays.right * halfWidth);
-    p.up = f4(rays.up * halfHeight);
+    p.right = f4(rays.right * rays.halfWidth());
+    p.up = f4(rays.up * rays.halfHeight());
     // indexFromWorld(x) = Dᵀ(x − origin) / s, written as rows (linear part, translation).
     const Mat3d dt = direction_.transposed();
     for (int r = 0; r < 3; ++r) {

@@ -66,7 +66,7 @@ int main(int argc, char **argv) {
         report["dims"] = {loaded.volume.dims.x, loaded.volume.dims.y, loaded.volume.dims.z};
         report["image"] = {{"width", scene.width}, {"height", scene.height}};
         volcast::Image image;
-        if (reference || analytic) {
+        if (reference) {
             t = Clock::now();
             const auto reconstruction = analytic ? volcast::Reconstruction::Analytic
                                         : scene.quality.interpolation == volcast::Interpolation::Cubic

@@ -6,6 +6,7 @@
 #include "renderer/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/synthetic.hpp"
+#include "test_scenes.hpp"
 
 #include <gtest/gtest.h>
 
@@ -20,21 +21,8 @@ OpenClContext &sharedContext() {
     return cl;
 }
 
-TransferFunction constantTf(double a) {
-    TransferFunction tf;
-    tf.points = {{-1e6, 0.9, 0.5, 0.2, a}, {1e6, 0.9, 0.5, 0.2, a}};
-    tf.opacityUnit = 1.0;
-    return tf;
-}
-
-Camera obliqueCamera(const Volume &v) {
-    Camera c;
-    c.eye = v.center() + Vec3d{41, 27, 55};
-    c.target = v.center() + Vec3d{0.3, -0.2, 0.1};
-    c.up = {0.1, 1, 0.2};
-    c.fovYDeg = 30;
-    return c;
-}
+TransferFunction constantTf(double a) { return test::constantTf(0.9, 0.5, 0.2, a, 1.0); }
+Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 30); }
 
 Quality plain(double step) {
     Quality q;

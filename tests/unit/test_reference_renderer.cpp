@@ -4,6 +4,7 @@
 #include "renderer/reconstruction.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/synthetic.hpp"
+#include "test_scenes.hpp"
 
 #include <gtest/gtest.h>
 
@@ -16,13 +17,6 @@
 
 namespace volcast {
 namespace {
-
-TransferFunction constantTf(double r, double g, double b, double a, double unit) {
-    TransferFunction tf;
-    tf.points = {{-1e6, r, g, b, a}, {1e6, r, g, b, a}};
-    tf.opacityUnit = unit;
-    return tf;
-}
 
 // Chord of a ray through the axis-aligned cell-extent box, computed independently of the
 // renderer: the textbook slab test in world space.
@@ -43,14 +37,8 @@ double chordLength(const Volume &v, const Ray &ray) {
     return std::max(0.0, t1 - t0);
 }
 
-Camera obliqueCamera(const Volume &v) {
-    Camera c;
-    c.eye = v.center() + Vec3d{41, 27, 55};
-    c.target = v.center() + Vec3d{0.3, -0.2, 0.1};
-    c.up = {0.1, 1, 0.2};
-    c.fovYDeg = 28;
-    return c;
-}
+using test::constantTf;
+Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 28); }
 
 TEST(ReferenceRenderer, ConstantBoxObliqueMatchesClosedForm) {
     const SyntheticVolume box = makeConstantBox({12, 9, 15}, {1.0, 1.5, 0.8}, 100);

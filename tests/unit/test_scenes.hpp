@@ -1,0 +1,28 @@
+#pragma once
+// Small scene pieces several test files use.
+
+#include "renderer/camera.hpp"
+#include "renderer/transfer_function.hpp"
+#include "renderer/volume.hpp"
+
+namespace volcast::test {
+
+// The same colour and opacity at every data value.
+inline TransferFunction constantTf(double r, double g, double b, double a, double unit) {
+    TransferFunction tf;
+    tf.points = {{-1e6, r, g, b, a}, {1e6, r, g, b, a}};
+    tf.opacityUnit = unit;
+    return tf;
+}
+
+// A perspective camera looking at the volume from an oblique direction, with a tilted up.
+inline Camera obliqueCamera(const Volume &v, double fovYDeg) {
+    Camera c;
+    c.eye = v.center() + Vec3d{41, 27, 55};
+    c.target = v.center() + Vec3d{0.3, -0.2, 0.1};
+    c.up = {0.1, 1, 0.2};
+    c.fovYDeg = fovYDeg;
+    return c;
+}
+
+} // namespace volcast::test
