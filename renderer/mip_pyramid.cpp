@@ -1,0 +1,102 @@
+#include "renderer/mip_pyramid.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+#include <thread>
+
+namespace volcast {
+
+Vec3i mipLevelDims(Vec3i dims0, int level) {
+    Vec3i d = dims0;
+    for (int L = 0; L < level; ++L)
+        for (int a = 0; a < 3; ++a) d[a] = std::max<int64_t>((d[a] + 1) / 2, 1);
+    return d;
+}
+
+std::vector<float> downsampleMip(const std::vector<float> &fine, Vec3i fineDims) {
+    const Vec3i n = fineDims;
+    const Vec3i m = mipLevelDims(n, 1);
+    std::vector<float> coarse(size_t(m.x) * size_t(m.y) * size_t(m.z));
+    auto row = [&](int64_t j, int64_t k) { return &fine[size_t((k * n.y + j) * n.x)]; };
+    // Average the 2×2×2 block of each coarse sample; an odd axis repeats its edge sample.
+    auto slices = [&](int64_t kBegin, int64_t kEnd) {
+        for (int64_t K = kBegin; K < kEnd; ++K) {
+            const int64_t k0 = 2 * K, k1 = std::min(2 * K + 1, n.z - 1);
+            for (int64_t J = 0; J < m.y; ++J) {
+                const int64_t j0 = 2 * J, j1 = std::min(2 * J + 1, n.y - 1);
+                const float *r00 = row(j0, k0), *r10 = row(j1, k0), *r01 = row(j0, k1), *r11 = row(j1, k1);
+                float *out = &coarse[size_t((K * m.y + J) * m.x)];
+                for (int64_t I = 0; I < m.x; ++I) {
+                    const int64_t i0 = 2 * I, i1 = std::min(2 * I + 1, n.x - 1);
+                    // Sum in double, pairwise: exact for a constant block, so constants stay constant.
+                    const double sum = ((double(r00[i0]) + double(r00[i1])) + (double(r10[i0]) + double(r10[i1]))) +
+                                       ((double(r01[i0]) + double(r01[i1])) + (double(r11[i0]) + double(r11[i1])));
+                    out[I] = float(sum * 0.125);
+                }
+            }
+        }
+    };
+    // Two halves of the coarse slices on two threads when there is enough work to share.
+    if (m.z >= 2 && size_t(m.x * m.y * m.z) >= (size_t(1) << 16) && std::thread::hardware_concurrency() > 1) {
+        std::thread other(slices, m.z / 2, m.z);
+        slices(0, m.z / 2);
+        other.join();
+    } else {
+        slices(0, m.z);
+    }
+    return coarse;
+}
+
+MipPyramid::MipPyramid(const Volume &level0) : volume_(level0) {
+    if (level0.dims.x < 1 || level0.dims.y < 1 || level0.dims.z < 1 || level0.voxels.size() != level0.voxelCount())
+        throw std::invalid_argument("mip pyramid: volume '" + level0.name + "' has no samples or mismatched dims");
+    for (Vec3i d = level0.dims; d.x > 1 || d.y > 1 || d.z > 1; d = mipLevelDims(d, 1)) ++maxLevel_;
+    levels_.resize(size_t(maxLevel_) + 1);
+}
+
+void MipPyramid::check(int L) const {
+    if (L < 0 || L > maxLevel_)
+        throw std::out_of_range("mip level " + std::to_string(L) + " is outside [0, " + std::to_string(maxLevel_) +
+                                 "] for volume '" + volume_.name + "'");
+}
+
+const std::vector<float> &MipPyramid::level(int L) {
+    check(L);
+    if (L == 0) return volume_.voxels;
+    std::lock_guard lock(mutex_);
+    // Build the missing levels in order, each from the one below; levels_ never reallocates.
+    for (int l = built_ + 1; l <= L; ++l) {
+        levels_[size_t(l)] = downsampleMip(l == 1 ? volume_.voxels : levels_[size_t(l) - 1], dims(l - 1));
+        built_ = l;
+    }
+    return levels_[size_t(L)];
+}
+
+Vec3i MipPyramid::dims(int L) const {
+    check(L);
+    return mipLevelDims(volume_.dims, L);
+}
+
+int MipPyramid::levelsBuilt() const {
+    std::lock_guard lock(mutex_);
+    return built_;
+}
+
+Volume MipPyramid::levelVolume(int L) {
+    const std::vector<float> &samples = level(L);
+    Volume v;
+    v.name = volume_.name + " (mip level " + std::to_string(L) + ")";
+    v.dims = dims(L);
+    const double scale = std::ldexp(1.0, L);
+    v.spacing = volume_.spacing * scale;
+    const double first = (scale - 1) / 2; // level-0 index of level-L voxel 0 on every axis
+    v.origin = volume_.worldFromIndex({first, first, first});
+    v.direction = volume_.direction;
+    v.sourceType = volume_.sourceType;
+    v.voxels = samples;
+    computeStatistics(v);
+    return v;
+}
+
+} // namespace volcast
