@@ -19,6 +19,10 @@ struct Image {
     const float *pixel(int x, int y) const { return &rgba[(size_t(y) * size_t(width) + size_t(x)) * 4]; }
 };
 
+// Bilinear resampling with pixel centres aligned ((x + ½)/W in both) and edges clamped:
+// how image_scale < 1 brings its fewer rays back to the requested size.
+Image resizeBilinear(const Image &image, int width, int height);
+
 // Throws std::runtime_error naming the file on failure or an unknown extension.
 void writeImage(const std::filesystem::path &path, const Image &image);
 Image readImage(const std::filesystem::path &path);

@@ -1,8 +1,11 @@
 #include "renderer/opencl_renderer.hpp"
 
+#include "renderer/bspline_prefilter.hpp"
+#include "renderer/bspline_prefilter_opencl.hpp"
 #include "renderer/camera.hpp"
 #include "renderer/embedded_kernels.hpp"
 #include "renderer/kernels/raycast_shared.h"
+#include "renderer/preintegration.hpp"
 #include "renderer/tf_table.hpp"
 
 #include <chrono>
@@ -10,7 +13,7 @@
 
 namespace volcast {
 
-static_assert(sizeof(RayCastParams) == 288, "RayCastParams must match the kernel's layout");
+static_assert(sizeof(RayCastParams) == 352, "RayCastParams must match the kernel's layout");
 
 namespace {
 
@@ -19,19 +22,62 @@ double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(
 
 cl_float4 f4(const Vec3d &v, double w = 0) { return {{float(v.x), float(v.y), float(v.z), float(w)}}; }
 
-} // namespace
+// Work-group edge: one fixed size, so PoCL compiles one launch configuration per program
+// (a new size costs it 0.25–2 s, PLATFORM.md) and the global size is rounded up to it.
+constexpr size_t kGroupEdge = 8;
+size_t roundUp(int n) { return (size_t(n) + kGroupEdge - 1) / kGroupEdge * kGroupEdge; }
 
-OpenClRenderer::OpenClRenderer(OpenClContext &cl, const Volume &volume)
-    : cl_(cl), dims_(volume.dims), spacing_(volume.spacing), origin_(volume.origin), direction_(volume.direction) {
+// Coefficients padded by one before and two after on each axis with the mirror boundary,
+// so the kernel's 4×4×4 footprint around any clamped position stays inside.
+std::vector<float> padMirror(const std::vector<float> &c, Vec3i n) {
+    const Vec3i p{n.x + 3, n.y + 3, n.z + 3};
+    std::vector<float> out(size_t(p.x) * size_t(p.y) * size_t(p.z));
+    for (int k = 0; k < p.z; ++k)
+        for (int j = 0; j < p.y; ++j)
+            for (int i = 0; i < p.x; ++i) {
+                const int64_t si = mirrorIndex(i - 1, n.x), sj = mirrorIndex(j - 1, n.y), sk = mirrorIndex(k - 1, n.z);
+                out[(size_t(k) * size_t(p.y) + size_t(j)) * size_t(p.x) + size_t(i)] =
+                    c[(size_t(sk) * size_t(n.y) + size_t(sj)) * size_t(n.x) + size_t(si)];
+            }
+    return out;
+}
+
+cl::Buffer upload(OpenClContext &cl, const std::vector<float> &data, const std::string &what) {
     try {
-        volume_ = cl::Buffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
-                             volume.voxels.size() * sizeof(float), const_cast<float *>(volume.voxels.data()));
+        return cl::Buffer(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, data.size() * sizeof(float),
+                          const_cast<float *>(data.data()));
     } catch (const cl::Error &e) {
-        throw OpenClError("cannot upload volume " + volume.name + " to " + cl_.deviceName() + ": " + describe(e));
+        throw OpenClError("cannot upload " + what + " to " + cl.deviceName() + ": " + describe(e));
     }
 }
 
-std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) {
+} // namespace
+
+struct OpenClRenderer::PreintegrationCache {
+    TransferFunction tf;
+    double step = 0, opacityUnit = 0;
+    PreintegrationTable table;
+    cl::Buffer rgba, nodes, locator;
+};
+
+OpenClRenderer::OpenClRenderer(OpenClContext &cl, std::shared_ptr<const Volume> volume, OpenClRendererOptions options)
+    : cl_(cl), volume_(std::move(volume)), options_(options), pyramid_(*volume_) {
+    if (options_.brickSize < 1) throw std::invalid_argument("brick size must be at least 1");
+    // Level 0's voxels go to the device now: every frame needs them unless it asks for
+    // cubic or a coarser level, and an upload failure is best reported when a volume opens.
+    RenderStats unused;
+    dataSet(0, false, unused);
+}
+
+OpenClRenderer::OpenClRenderer(OpenClContext &cl, const Volume &volume, OpenClRendererOptions options)
+    : OpenClRenderer(cl, std::make_shared<const Volume>(volume), options) {}
+
+bool OpenClRenderer::cubicFromImage() const {
+    if (options_.cubicFetch == CubicFetch::Auto) return cl_.isGpu();
+    return options_.cubicFetch == CubicFetch::Trilinear8;
+}
+
+std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) const {
     // No -cl-fast-relaxed-math: it would break the opacity correction's exactness for tiny
     // steps and opacities (expm1/log1p), which the stability cases rely on.
     std::string o;
@@ -39,26 +85,199 @@ std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) {
     if (q.boundarySegment) o += " -DBOUNDARY_SEGMENT";
     if (q.earlyTermination < 1) o += " -DEARLY_TERMINATION";
     if (hasClipPlanes) o += " -DCLIP_PLANES";
+    if (q.interpolation == Interpolation::Cubic) o += cubicFromImage() ? " -DCUBIC_IMAGE" : " -DCUBIC";
+    if (q.preintegrated) o += " -DPREINTEGRATED";
+    if (q.emptySpaceSkipping) o += " -DEMPTY_SPACE_SKIPPING";
+    if (q.shading) o += " -DSHADING";
     return o.empty() ? o : o.substr(1);
+}
+
+PreprocessCounts OpenClRenderer::preprocessCounts() const {
+    std::lock_guard lock(countsMutex_);
+    return counts_;
+}
+
+OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderStats &st) {
+    const auto key = std::make_pair(level, cubic);
+    if (auto it = dataSets_.find(key); it != dataSets_.end()) return it->second;
+
+    auto t = Clock::now();
+    const int levelsBefore = pyramid_.levelsBuilt();
+    const std::vector<float> &voxels = pyramid_.level(level);
+    const Vec3i dims = pyramid_.dims(level);
+    if (pyramid_.levelsBuilt() != levelsBefore) {
+        st.mipSeconds = secondsSince(t);
+        std::lock_guard lock(countsMutex_);
+        counts_.mipLevels += pyramid_.levelsBuilt() - levelsBefore;
+    }
+
+    DataSet data;
+    data.level = level;
+    data.cubic = cubic;
+    data.dims = dims;
+    if (!cubic) {
+        data.buffer = upload(cl_, voxels, "volume " + volume_->name);
+    } else {
+        // Prefilter on the device (the paper's Table 2), pad on the host, upload.
+        t = Clock::now();
+        const std::vector<float> coefficients = bsplinePrefilterOpenCl(cl_, voxels.data(), dims);
+        const std::vector<float> padded = padMirror(coefficients, dims);
+        if (cubicFromImage()) {
+            try {
+                data.image = cl::Image3D(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
+                                         cl::ImageFormat(CL_R, CL_FLOAT), size_t(dims.x + 3), size_t(dims.y + 3),
+                                         size_t(dims.z + 3), 0, 0, const_cast<float *>(padded.data()));
+            } catch (const cl::Error &e) {
+                throw OpenClError("cannot upload B-spline coefficients of " + volume_->name + " as a 3-D image to " +
+                                  cl_.deviceName() + ": " + describe(e));
+            }
+        } else {
+            data.buffer = upload(cl_, padded, "B-spline coefficients of " + volume_->name);
+        }
+        st.coefficientSeconds = secondsSince(t);
+        std::lock_guard lock(countsMutex_);
+        ++counts_.coefficientVolumes;
+    }
+    return dataSets_.emplace(key, std::move(data)).first->second;
+}
+
+std::vector<float> OpenClRenderer::readBackCoefficients(const DataSet &data) {
+    const Vec3i n = data.dims, p{n.x + 3, n.y + 3, n.z + 3};
+    std::vector<float> padded(size_t(p.x) * size_t(p.y) * size_t(p.z));
+    try {
+        if (cubicFromImage())
+            cl_.queue().enqueueReadImage(data.image, CL_TRUE, {0, 0, 0}, {size_t(p.x), size_t(p.y), size_t(p.z)}, 0, 0,
+                                         padded.data());
+        else
+            cl_.queue().enqueueReadBuffer(data.buffer, CL_TRUE, 0, padded.size() * sizeof(float), padded.data());
+    } catch (const cl::Error &e) {
+        throw OpenClError("cannot read back the B-spline coefficients: " + describe(e));
+    }
+    std::vector<float> c(size_t(n.x) * size_t(n.y) * size_t(n.z));
+    for (int k = 0; k < n.z; ++k)
+        for (int j = 0; j < n.y; ++j)
+            for (int i = 0; i < n.x; ++i)
+                c[(size_t(k) * size_t(n.y) + size_t(j)) * size_t(n.x) + size_t(i)] =
+                    padded[(size_t(k + 1) * size_t(p.y) + size_t(j + 1)) * size_t(p.x) + size_t(i + 1)];
+    return c;
+}
+
+void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderStats &st) {
+    if (!data.bricks) {
+        // Built the first time skipping is asked for: trilinear values are bounded by the
+        // voxels around a brick, spline values by the coefficients (minmax_bricks.hpp), which
+        // live on the device only, so they are read back once for this.
+        const auto t = Clock::now();
+        if (data.cubic)
+            data.bricks = buildMinMaxBricks(readBackCoefficients(data).data(), data.dims, options_.brickSize, 2);
+        else
+            data.bricks = buildMinMaxBricks(pyramid_.level(data.level).data(), data.dims, options_.brickSize, 1);
+        st.brickGridSeconds = secondsSince(t);
+        std::lock_guard lock(countsMutex_);
+        ++counts_.brickGrids;
+    }
+    if (data.classifiedFor && *data.classifiedFor == tf) {
+        st.emptyBrickFraction = data.emptyFraction;
+        return;
+    }
+    const auto t = Clock::now();
+    const std::vector<uint8_t> visible = classifyBricks(*data.bricks, tf);
+    size_t empty = 0;
+    for (uint8_t v : visible) empty += v == 0;
+    data.emptyFraction = visible.empty() ? 0 : double(empty) / double(visible.size());
+    try {
+        data.brickVisible = cl::Buffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, visible.size(),
+                                       const_cast<uint8_t *>(visible.data()));
+    } catch (const cl::Error &e) {
+        throw OpenClError("cannot upload the brick classification to " + cl_.deviceName() + ": " + describe(e));
+    }
+    data.classifiedFor = tf;
+    st.brickClassifySeconds = secondsSince(t);
+    st.emptyBrickFraction = data.emptyFraction;
+    std::lock_guard lock(countsMutex_);
+    ++counts_.brickClassifications;
 }
 
 Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                              const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
     camera.validate();
     tf.validate();
+    if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide ||
+        int64_t(width) * height > kMaxImagePixels)
+        throw std::invalid_argument("image: " + std::to_string(width) + "×" + std::to_string(height) +
+                                    " is outside 1…" + std::to_string(kMaxImageSide) + " per side");
     if (clipPlanes.size() > VC_MAX_CLIP_PLANES)
         throw std::invalid_argument("clip_planes: at most " + std::to_string(VC_MAX_CLIP_PLANES) + " are supported");
+    for (size_t c = 0; c < clipPlanes.size(); ++c)
+        if (!(length(clipPlanes[c].normal) > 0))
+            throw std::invalid_argument("clip_planes[" + std::to_string(c) + "].normal: zero length");
+    if (quality.mipLevel < 0 || quality.mipLevel > pyramid_.maxLevel())
+        throw std::invalid_argument("quality.mip_level: " + std::to_string(quality.mipLevel) + " is outside 0…" +
+                                    std::to_string(pyramid_.maxLevel()) + " for volume " + volume_->name);
+    if (!(quality.imageScale > 0 && quality.imageScale <= 1))
+        throw std::invalid_argument("quality.image_scale: must be in (0, 1]");
+
+    std::lock_guard frameLock(mutex_);
     RenderStats st;
     st.buildOptions = buildOptions(quality, !clipPlanes.empty());
     const auto built = cl_.program(kRaycastKernelSource, st.buildOptions);
     st.kernelBuildSeconds = built.buildSeconds;
 
-    auto t = Clock::now();
-    const TfTable table = buildTfTable(tf);
-    st.tfTableSeconds = secondsSince(t);
-    st.tfTableEntries = table.entries();
-    st.tfTableError = table.maxError;
+    const bool cubic = quality.interpolation == Interpolation::Cubic;
+    DataSet &data = dataSet(quality.mipLevel, cubic, st);
+    if (quality.emptySpaceSkipping) classify(data, tf, st);
 
+    const double smallest = minComponent(volume_->spacing);
+    const double step = quality.step * smallest;
+    const double opacityUnit = tf.opacityUnit ? *tf.opacityUnit : smallest;
+    if (quality.preintegrated) {
+        if (!preintegration_ || !(preintegration_->tf == tf) || preintegration_->step != step ||
+            preintegration_->opacityUnit != opacityUnit) {
+            auto t = Clock::now();
+            auto cache = std::make_shared<PreintegrationCache>();
+            cache->tf = tf;
+            cache->step = step;
+            cache->opacityUnit = opacityUnit;
+            cache->table = buildPreintegrationTable(tf, step, opacityUnit, volume_->range.min, volume_->range.max);
+            cache->rgba = upload(cl_, cache->table.rgba, "the pre-integration table");
+            cache->nodes = upload(cl_, cache->table.nodes, "the pre-integration nodes");
+            try {
+                cache->locator = cl::Buffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
+                                            cache->table.locator.size() * sizeof(int),
+                                            const_cast<int *>(cache->table.locator.data()));
+            } catch (const cl::Error &e) {
+                throw OpenClError("cannot upload the pre-integration locator: " + describe(e));
+            }
+            preintegration_ = cache;
+            st.preintegrationSeconds = secondsSince(t);
+            std::lock_guard lock(countsMutex_);
+            ++counts_.preintegrationTables;
+        }
+        st.preintegrationNodes = int(preintegration_->table.nodes.size());
+        st.preintegrationError = preintegration_->table.maxError;
+    } else if (!tfTableFor_ || !(*tfTableFor_ == tf)) {
+        const auto t = Clock::now();
+        const TfTable table = buildTfTable(tf);
+        tfTable_ = upload(cl_, table.rgba, "the transfer-function table");
+        tfMin_ = table.minValue;
+        tfScale_ = table.scale;
+        tfEntries_ = table.entries();
+        tfError_ = table.maxError;
+        tfTableFor_ = tf;
+        st.tfTableSeconds = secondsSince(t);
+        std::lock_guard lock(countsMutex_);
+        ++counts_.tfTables;
+    }
+    if (!quality.preintegrated) {
+        st.tfTableEntries = tfEntries_;
+        st.tfTableError = tfError_;
+    }
+
+    // Fewer rays for image_scale < 1, on the full image's plane, then upsampled.
+    const int raysWide = std::max(1, int(std::lround(width * quality.imageScale)));
+    const int raysHigh = std::max(1, int(std::lround(height * quality.imageScale)));
+    st.raysWide = raysWide;
+    st.raysHigh = raysHigh;
     // Camera frame exactly as RayGenerator builds it, so both renderers cast the same rays.
     const RayGenerator rays(camera, width, height);
 
@@ -68,60 +287,80 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     p.right = f4(rays.right * rays.halfWidth());
     p.up = f4(rays.up * rays.halfHeight());
     // indexFromWorld(x) = Dᵀ(x − origin) / s, written as rows (linear part, translation).
-    const Mat3d dt = direction_.transposed();
+    const Mat3d dt = volume_->direction.transposed();
     for (int r = 0; r < 3; ++r) {
-        const Vec3d row{dt(r, 0) / spacing_[r], dt(r, 1) / spacing_[r], dt(r, 2) / spacing_[r]};
-        p.indexFromWorld[r] = f4(row, -dot(row, origin_));
+        const Vec3d row{dt(r, 0) / volume_->spacing[r], dt(r, 1) / volume_->spacing[r],
+                        dt(r, 2) / volume_->spacing[r]};
+        p.indexFromWorld[r] = f4(row, -dot(row, volume_->origin));
     }
     for (size_t c = 0; c < clipPlanes.size(); ++c) {
         const Vec3d nrm = clipPlanes[c].normal;
-        if (!(length(nrm) > 0)) throw std::invalid_argument("clip_planes[" + std::to_string(c) + "].normal: zero length");
         p.clipPlanes[c] = f4(nrm, -dot(nrm, clipPlanes[c].point));
     }
     p.clipPlaneCount = int(clipPlanes.size());
-    p.dims[0] = int(dims_.x);
-    p.dims[1] = int(dims_.y);
-    p.dims[2] = int(dims_.z);
-    p.tfMin = float(table.minValue);
-    p.tfScale = float(table.scale);
-    p.tfEntries = table.entries();
-    p.width = width;
-    p.height = height;
+    for (int a = 0; a < 3; ++a) {
+        p.dims[a] = int(volume_->dims[a]);
+        p.levelDims[a] = int(data.dims[a]);
+        p.bricks[a] = data.bricks ? int(data.bricks->bricks[a]) : 0;
+    }
+    p.levelScale = float(std::ldexp(1.0, -quality.mipLevel));
+    p.brickSize = options_.brickSize;
+    p.tfMin = float(tfMin_);
+    p.tfScale = float(tfScale_);
+    p.tfEntries = tfEntries_;
+    p.width = raysWide;
+    p.height = raysHigh;
     p.orthographic = camera.projection == Projection::Orthographic;
     p.maxSamples = kMaxSamplesPerRay;
-    const double smallest = minComponent(spacing_);
-    p.step = float(quality.step * smallest);
-    p.opacityUnit = float(tf.opacityUnit ? *tf.opacityUnit : smallest);
-    p.terminationTransmittance = float(1 - quality.earlyTermination);
+    p.step = float(step);
+    p.opacityUnit = float(opacityUnit);
+    // Early termination compares optical depths: no exp per sample.
+    p.terminationDepth = quality.earlyTermination < 1 ? float(-std::log1p(-quality.earlyTermination)) : INFINITY;
     p.seed = uint32_t(quality.seed ^ (quality.seed >> 32));
+    if (quality.preintegrated) {
+        const PreintegrationTable &table = preintegration_->table;
+        p.preNodes = int(table.nodes.size());
+        p.preLocatorSize = table.locatorBuckets;
+        p.preLocatorMin = float(table.locatorMin);
+        p.preLocatorScale = float(table.locatorScale);
+    }
 
-    t = Clock::now();
-    Image image(width, height);
+    const auto t = Clock::now();
+    Image cast(raysWide, raysHigh);
     try {
         auto &queue = cl_.queue();
-        cl::Buffer tfBuffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, table.rgba.size() * sizeof(float),
-                            const_cast<float *>(table.rgba.data()));
         cl::Buffer params(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof p, &p);
-        cl::Buffer out(cl_.context(), CL_MEM_WRITE_ONLY, image.rgba.size() * sizeof(float));
+        cl::Buffer out(cl_.context(), CL_MEM_WRITE_ONLY, cast.rgba.size() * sizeof(float));
         cl_uint zeros[VC_STAT_COUNT] = {};
         cl::Buffer counters(cl_.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, sizeof zeros, zeros);
+        // Arguments in the order of the kernel's signature for this feature set.
         cl::Kernel kernel(built.program, "raycast");
-        kernel.setArg(0, volume_);
-        kernel.setArg(1, tfBuffer);
-        kernel.setArg(2, params);
-        kernel.setArg(3, out);
-        kernel.setArg(4, counters);
-        queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(size_t(width), size_t(height)));
-        queue.enqueueReadBuffer(out, CL_FALSE, 0, image.rgba.size() * sizeof(float), image.rgba.data());
+        cl_uint arg = 0;
+        if (cubic && cubicFromImage()) kernel.setArg(arg++, data.image);
+        else kernel.setArg(arg++, data.buffer);
+        kernel.setArg(arg++, quality.preintegrated ? preintegration_->rgba : tfTable_);
+        if (quality.preintegrated) {
+            kernel.setArg(arg++, preintegration_->nodes);
+            kernel.setArg(arg++, preintegration_->locator);
+        }
+        if (quality.emptySpaceSkipping) kernel.setArg(arg++, data.brickVisible);
+        kernel.setArg(arg++, params);
+        kernel.setArg(arg++, out);
+        kernel.setArg(arg++, counters);
+        queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(roundUp(raysWide), roundUp(raysHigh)),
+                                   cl::NDRange(kGroupEdge, kGroupEdge));
+        queue.enqueueReadBuffer(out, CL_FALSE, 0, cast.rgba.size() * sizeof(float), cast.rgba.data());
         cl_uint counts[VC_STAT_COUNT];
         queue.enqueueReadBuffer(counters, CL_TRUE, 0, sizeof counts, counts);
         const double hit = std::max<double>(counts[VC_STAT_RAYS_HIT], 1);
         st.meanSamplesPerRay = counts[VC_STAT_SAMPLES] / hit;
+        st.skippedSegmentsPerRay = counts[VC_STAT_SEGMENTS_SKIPPED] / hit;
         st.earlyTerminatedFraction = counts[VC_STAT_TERMINATED_EARLY] / hit;
         st.raysTruncated = counts[VC_STAT_TRUNCATED];
     } catch (const cl::Error &e) {
         throw OpenClError("rendering on " + cl_.deviceName() + " failed: " + describe(e));
     }
+    Image image = raysWide == width && raysHigh == height ? std::move(cast) : resizeBilinear(cast, width, height);
     st.renderSeconds = secondsSince(t);
     if (stats) *stats = st;
     return image;

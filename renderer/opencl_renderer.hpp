@@ -1,47 +1,121 @@
 #pragma once
 // The fast path: ray casting in OpenCL with the paper's remedies as switches. Each scene
-// builds (or reuses) a program with only the features it uses.
+// builds (or reuses) a program with only the features it uses, and preprocessing happens on
+// first need only: B-spline coefficients for cubic interpolation, mip levels below 0, the
+// min-max brick grid for empty-space skipping (re-classified, not rebuilt, when the transfer
+// function changes), the pre-integration table (rebuilt when the transfer function or the
+// step changes). Everything is cached for the renderer's life.
 
 #include "renderer/image.hpp"
+#include "renderer/minmax_bricks.hpp"
+#include "renderer/mip_pyramid.hpp"
 #include "renderer/opencl_context.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/volume.hpp"
 
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
 #include <string>
 
 namespace volcast {
 
+// Seconds of preprocessing a frame caused (0: it was cached) and what the kernel did.
 struct RenderStats {
     std::string buildOptions;       // the feature set the program was built with
     double kernelBuildSeconds = 0;  // 0 when the program was already built
     double tfTableSeconds = 0;
     int tfTableEntries = 0;
     double tfTableError = 0;
-    double renderSeconds = 0;       // kernel and read-back
+    double mipSeconds = 0;          // building the mip level(s) this frame needed
+    double coefficientSeconds = 0;  // B-spline prefilter (on the device) and upload
+    double brickGridSeconds = 0;    // min-max grid of the sampled data
+    double brickClassifySeconds = 0;
+    double emptyBrickFraction = 0;  // under the current transfer function
+    double preintegrationSeconds = 0;
+    int preintegrationNodes = 0;
+    double preintegrationError = 0; // the table's own measured error
+    double renderSeconds = 0;       // kernel, read-back and upsampling
+    int raysWide = 0, raysHigh = 0; // rays cast (image_scale < 1 casts fewer, then upsamples)
     double meanSamplesPerRay = 0;   // over rays that hit the volume
+    double skippedSegmentsPerRay = 0; // empty-space skipping, over rays that hit
     double earlyTerminatedFraction = 0;
     uint64_t raysTruncated = 0;     // rays that hit the per-ray sample bound
 };
 
+// How often each kind of preprocessing has run: the evidence that it is lazy.
+struct PreprocessCounts {
+    int tfTables = 0;
+    int mipLevels = 0;            // levels below 0 built
+    int coefficientVolumes = 0;   // B-spline prefilter runs
+    int brickGrids = 0;
+    int brickClassifications = 0;
+    int preintegrationTables = 0;
+};
+
+// Where the tricubic B-spline reads its 64 coefficients from: a buffer, tap by tap, or a
+// 3-D image, as 8 trilinear fetches (Sigg and Hadwiger). Auto: images on GPUs, whose
+// texture units filter for free (with ~8-bit weights), buffers elsewhere (PLATFORM.md).
+enum class CubicFetch { Auto, Taps64, Trilinear8 };
+
+struct OpenClRendererOptions {
+    CubicFetch cubicFetch = CubicFetch::Auto;
+    int brickSize = 8; // level voxels per min-max brick edge
+};
+
 class OpenClRenderer {
   public:
-    // Uploads the volume; it is not kept on the host side.
-    OpenClRenderer(OpenClContext &cl, const Volume &volume);
+    // Shares the volume: mip levels, bricks and coefficients are computed from it on demand.
+    OpenClRenderer(OpenClContext &cl, std::shared_ptr<const Volume> volume, OpenClRendererOptions options = {});
+    // Convenience for tools and tests: keeps a copy.
+    OpenClRenderer(OpenClContext &cl, const Volume &volume, OpenClRendererOptions options = {});
 
+    // Thread-safe; frames are rendered one at a time.
     Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
                  const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr);
 
     // The -D options a scene's program is built with: only the features it uses.
-    static std::string buildOptions(const Quality &quality, bool hasClipPlanes);
+    std::string buildOptions(const Quality &quality, bool hasClipPlanes) const;
+    PreprocessCounts preprocessCounts() const;
+    const Volume &volume() const { return *volume_; }
     // Samples a ray may take at most; rays past it stop and are counted.
     static constexpr int kMaxSamplesPerRay = 1 << 20;
 
   private:
+    // The data a frame samples: a mip level's voxels, or its B-spline coefficients.
+    struct DataSet {
+        int level = 0;
+        bool cubic = false;
+        Vec3i dims;
+        cl::Buffer buffer;           // voxels, or coefficients padded for the 64-tap path
+        cl::Image3D image;           // padded coefficients for the 8-fetch path
+        std::optional<MinMaxBricks> bricks;
+        std::optional<TransferFunction> classifiedFor;
+        cl::Buffer brickVisible;
+        double emptyFraction = 0;
+    };
+    struct PreintegrationCache;
+
+    bool cubicFromImage() const;
+    DataSet &dataSet(int level, bool cubic, RenderStats &st);
+    void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
+    std::vector<float> readBackCoefficients(const DataSet &data);
+
     OpenClContext &cl_;
-    Vec3i dims_;
-    Vec3d spacing_, origin_;
-    Mat3d direction_;
-    cl::Buffer volume_;
+    std::shared_ptr<const Volume> volume_;
+    OpenClRendererOptions options_;
+    MipPyramid pyramid_;
+    std::mutex mutex_;
+    std::map<std::pair<int, bool>, DataSet> dataSets_; // by (mip level, cubic)
+    std::optional<TransferFunction> tfTableFor_;
+    cl::Buffer tfTable_;
+    double tfMin_ = 0, tfScale_ = 0;
+    int tfEntries_ = 0;
+    double tfError_ = 0;
+    std::shared_ptr<PreintegrationCache> preintegration_;
+    PreprocessCounts counts_;
+    mutable std::mutex countsMutex_;
 };
 
 } // namespace volcast

@@ -1,5 +1,7 @@
 #include "renderer/reference_renderer.hpp"
 
+#include "renderer/shading.hpp"
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -197,7 +199,8 @@ class RayIntegrator {
         // Opaque material (a = 1 across the sub-piece): the ray ends at its entry.
         const Rgba mid = tf_.evaluate(valueAt(0.5 * (sa + sb)));
         if (mid.a >= 1) {
-            const Rgba entry = tf_.evaluate(valueAt(sa));
+            Rgba entry = tf_.evaluate(valueAt(sa));
+            lit(sa, entry);
             const double t = transmittance();
             color_[0] += t * entry.r;
             color_[1] += t * entry.g;
@@ -211,6 +214,8 @@ class RayIntegrator {
     }
 
     void setRayLength(double length) { tolDensity_ = tolerance_ / std::max(length, 1e-300); }
+    // Shading: (diffuse factor, specular term) at piece parameter s, or none for unlit colour.
+    void setLight(const std::function<void(double s, double &diffuse, double &specular)> *light) { light_ = light; }
     bool done() const { return done_; }
     double transmittance() const { return std::exp(-od_); }
     RayIntegral result() const {
@@ -227,7 +232,9 @@ class RayIntegrator {
         const double h = (sb - sa) * worldPerS;
         double tau[5], rgb[5][3];
         for (int i = 0; i < 5; ++i) {
-            const Rgba q = tf_.evaluate(valueAt(sa + kNodes[size_t(i)] * (sb - sa)));
+            const double s = sa + kNodes[size_t(i)] * (sb - sa);
+            Rgba q = tf_.evaluate(valueAt(s));
+            if (q.a > 0) lit(s, q);
             tau[i] = std::min(extinction(q.a, unit_), kTauMax);
             rgb[i][0] = q.r;
             rgb[i][1] = q.g;
@@ -277,7 +284,17 @@ class RayIntegrator {
         }
     }
 
+    void lit(double s, Rgba &c) const {
+        if (!light_) return;
+        double diffuse, specular;
+        (*light_)(s, diffuse, specular);
+        c.r = phongShade(c.r, diffuse, specular);
+        c.g = phongShade(c.g, diffuse, specular);
+        c.b = phongShade(c.b, diffuse, specular);
+    }
+
     const TransferFunction &tf_;
+    const std::function<void(double, double &, double &)> *light_ = nullptr;
     double unit_;
     double tolerance_;
     double tolDensity_ = 0;
@@ -422,6 +439,27 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
         roots.push_back(0);
         roots.push_back(1);
         std::sort(roots.begin(), roots.end());
+
+        // Headlight Phong on the central-difference gradient (shading.hpp), world space.
+        const std::function<void(double, double &, double &)> light = [&](double s, double &diffuse,
+                                                                          double &specular) {
+            const Vec3d q = indexAt(s);
+            Vec3d g;
+            for (int a = 0; a < 3; ++a) {
+                Vec3d e{0, 0, 0};
+                e[a] = 1;
+                g[a] = (valueAtIndex(q + e) - valueAtIndex(q - e)) / volume_.spacing[a];
+            }
+            const Vec3d gWorld = volume_.direction * g;
+            const double gLength = length(gWorld);
+            if (!(gLength > 0)) {
+                diffuse = 1;
+                specular = 0;
+                return;
+            }
+            phongLight(std::min(std::fabs(dot(gWorld, ray.dir)) / gLength, 1.0), diffuse, specular);
+        };
+        integrator.setLight(shading_ ? &light : nullptr);
 
         if (reconstruction_ == Reconstruction::Analytic) {
             auto valueAt = [&](double s) { return analytic_(ray.origin + ray.dir * (ta + s * len)); };

@@ -59,6 +59,9 @@ class ReferenceRenderer {
     Image render(const Camera &camera, int width, int height, std::span<const ClipPlane> clipPlanes,
                  const ReferenceOptions &options, ReferenceStats *stats = nullptr) const;
 
+    // Gradient Phong shading (quality.shading), off by default.
+    void setShading(bool on) { shading_ = on; }
+
     double preprocessSeconds() const { return preprocessSeconds_; }
     // The ray's parameter interval inside the volume and all clip half-spaces; false if empty.
     bool clipRay(const Ray &ray, std::span<const ClipPlane> clipPlanes, double &t0, double &t1) const;
@@ -73,6 +76,7 @@ class ReferenceRenderer {
     std::unique_ptr<CubicBSplineField> cubic_;
     std::function<double(const Vec3d &)> analytic_;
     double preprocessSeconds_ = 0;
+    bool shading_ = false;
 };
 
 } // namespace volcast

@@ -18,7 +18,7 @@ TfTable sampleTable(const TransferFunction &tf, int entries) {
         t.rgba[size_t(i) * 4 + 0] = float(c.r);
         t.rgba[size_t(i) * 4 + 1] = float(c.g);
         t.rgba[size_t(i) * 4 + 2] = float(c.b);
-        t.rgba[size_t(i) * 4 + 3] = float(c.a);
+        t.rgba[size_t(i) * 4 + 3] = c.a >= 1 ? kOpaqueSigma : float(std::min(-std::log1p(-c.a), double(kOpaqueSigma)));
     }
     return t;
 }
@@ -28,11 +28,13 @@ Rgba lookup(const TfTable &t, double v) {
     const int i = std::min(int(x), t.entries() - 2);
     const double f = x - i;
     const float *a = &t.rgba[size_t(i) * 4], *b = a + 4;
-    return {a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]), a[3] + f * (b[3] - a[3])};
+    const double sigma = a[3] + f * (double(b[3]) - a[3]);
+    return {a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]), -std::expm1(-sigma)};
 }
 
-// The table is exact at its entries and linear between, like the function away from its
-// control points, so the worst error sits at control points and between entries: check both.
+// Colour is exact at the entries and linear between, like the function away from its control
+// points; sigma is exact at the entries and convex where a is linear, so both channels' worst
+// errors sit at control points and between entries: check there, in opacity.
 double measureError(const TransferFunction &tf, const TfTable &t) {
     double worst = 0;
     auto check = [&](double v) {

@@ -21,28 +21,44 @@ typedef cl_uint vc_uint;
 
 #define VC_MAX_CLIP_PLANES 6
 
+/* Gradient Phong shading (quality.shading) with a headlight: the same constants in the
+ * kernel and in the reference integrator (shading.hpp). */
+#define VC_PHONG_AMBIENT 0.3f
+#define VC_PHONG_DIFFUSE 0.7f
+#define VC_PHONG_SPECULAR 0.2f
+#define VC_PHONG_SHININESS 20.0f
+
 typedef struct {
     vc_float4 eye;                  /* world; orthographic: the centre of the image plane */
     vc_float4 forward;              /* unit view direction */
     vc_float4 right;                /* image x axis scaled by the half-width of the view */
     vc_float4 up;                   /* image y axis scaled by the half-height of the view */
-    vc_float4 indexFromWorld[3];    /* rows of the affine map world -> index space */
+    vc_float4 indexFromWorld[3];    /* rows of the affine map world -> level-0 index space */
     vc_float4 clipPlanes[VC_MAX_CLIP_PLANES]; /* (n, w): keeps dot(n, x) + w >= 0, world */
-    vc_int dims[4];                 /* samples per axis */
+    vc_int dims[4];                 /* level-0 samples per axis: the box rays are clipped to */
+    vc_int levelDims[4];            /* samples per axis of the data sampled (mip level) */
+    vc_int bricks[4];               /* min-max bricks per axis (empty-space skipping) */
+    vc_float levelScale;            /* 2^-mip_level: level index = (index + 1/2)·scale − 1/2 */
+    vc_int brickSize;               /* level voxels per brick edge */
     vc_float tfMin;                 /* transfer-function table: value of entry 0 */
     vc_float tfScale;               /* entries per data unit */
     vc_int tfEntries;
     vc_int clipPlaneCount;
-    vc_int width, height;
+    vc_int width, height;           /* rays cast (after image_scale) */
     vc_int orthographic;
     vc_int maxSamples;              /* per ray; beyond it the ray stops and is counted */
     vc_float step;                  /* segment length, world units */
     vc_float opacityUnit;           /* world units */
-    vc_float terminationTransmittance; /* early termination when T falls to this */
+    vc_float terminationDepth;      /* early termination once the optical depth reaches it */
     vc_float pad0;
     vc_uint seed;
     vc_uint pass;
-    vc_uint pad1, pad2;
+    /* Pre-integration table: nodes over the value range, a uniform locator into them. */
+    vc_int preNodes;
+    vc_int preLocatorSize;
+    vc_float preLocatorMin;
+    vc_float preLocatorScale;       /* locator buckets per data unit */
+    vc_int pad1, pad2, pad3, pad4;
 } RayCastParams;
 
 /* stats[]: counters the kernel accumulates, read back by the host. */
@@ -50,6 +66,7 @@ typedef struct {
 #define VC_STAT_TERMINATED_EARLY 1
 #define VC_STAT_TRUNCATED 2
 #define VC_STAT_RAYS_HIT 3
-#define VC_STAT_COUNT 4
+#define VC_STAT_SEGMENTS_SKIPPED 4
+#define VC_STAT_COUNT 5
 
 #endif

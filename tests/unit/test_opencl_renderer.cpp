@@ -16,10 +16,7 @@
 namespace volcast {
 namespace {
 
-OpenClContext &sharedContext() {
-    static OpenClContext cl;
-    return cl;
-}
+OpenClContext &sharedContext() { return test::sharedOpenClContext(); }
 
 TransferFunction constantTf(double a) { return test::constantTf(0.9, 0.5, 0.2, a, 1.0); }
 Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 30); }
@@ -115,16 +112,23 @@ TEST(OpenClRenderer, ConvergesToTheReferenceAsTheStepShrinks) {
 }
 
 TEST(OpenClRenderer, ProgramsHoldOnlyTheFeaturesInUseAndAreBuiltOnce) {
+    const SyntheticVolume box = makeConstantBox({4, 4, 4}, {1, 1, 1}, 1);
+    OpenClRenderer r(sharedContext(), box.volume);
     Quality q = plain(1);
     q.boundarySegment = false;
-    EXPECT_EQ(OpenClRenderer::buildOptions(q, false), "");
+    EXPECT_EQ(r.buildOptions(q, false), "");
     q.jitter = true;
     q.earlyTermination = 0.95;
     q.boundarySegment = true;
-    EXPECT_EQ(OpenClRenderer::buildOptions(q, true), "-DJITTER -DBOUNDARY_SEGMENT -DEARLY_TERMINATION -DCLIP_PLANES");
+    EXPECT_EQ(r.buildOptions(q, true), "-DJITTER -DBOUNDARY_SEGMENT -DEARLY_TERMINATION -DCLIP_PLANES");
+    q.interpolation = Interpolation::Cubic;
+    q.preintegrated = true;
+    q.emptySpaceSkipping = true;
+    q.shading = true;
+    EXPECT_EQ(r.buildOptions(q, false), std::string("-DJITTER -DBOUNDARY_SEGMENT -DEARLY_TERMINATION ") +
+                                            (sharedContext().isGpu() ? "-DCUBIC_IMAGE" : "-DCUBIC") +
+                                            " -DPREINTEGRATED -DEMPTY_SPACE_SKIPPING -DSHADING");
 
-    const SyntheticVolume box = makeConstantBox({4, 4, 4}, {1, 1, 1}, 1);
-    OpenClRenderer r(sharedContext(), box.volume);
     RenderStats first, second;
     r.render(constantTf(0.5), obliqueCamera(box.volume), 8, 8, plain(0.5), {}, &first);
     const size_t built = sharedContext().programsBuilt();

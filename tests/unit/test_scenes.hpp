@@ -2,10 +2,18 @@
 // Small scene pieces several test files use.
 
 #include "renderer/camera.hpp"
+#include "renderer/opencl_context.hpp"
 #include "renderer/transfer_function.hpp"
 #include "renderer/volume.hpp"
 
 namespace volcast::test {
+
+// One OpenCL context for every test file: each new feature set costs PoCL about a second to
+// build, and the program cache lives in the context.
+inline OpenClContext &sharedOpenClContext() {
+    static OpenClContext cl;
+    return cl;
+}
 
 // The same colour and opacity at every data value.
 inline TransferFunction constantTf(double r, double g, double b, double a, double unit) {
