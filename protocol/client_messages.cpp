@@ -1,0 +1,248 @@
+#include "protocol/client_messages.hpp"
+
+#include "protocol/json_reader.hpp"
+#include "protocol/version.hpp"
+
+#include <array>
+#include <utility>
+
+namespace volcast::protocol {
+
+using json = nlohmann::json;
+using detail::badField;
+using detail::fail;
+using detail::Fields;
+using detail::ReadError;
+
+namespace detail {
+
+QualityPolicy readQualityPolicy(const Fields &f) {
+    QualityPolicy policy;
+    const std::string mode = string(f.require("mode"), f.pathOf("mode"), 64);
+    if (mode == "automatic") {
+        policy.mode = QualityMode::Automatic;
+        if (const json *ms = f.find("target_frame_ms")) {
+            policy.targetFrameMs = number(*ms, f.pathOf("target_frame_ms"));
+            if (!(policy.targetFrameMs > 0 && policy.targetFrameMs <= kMaxTargetFrameMs))
+                badField(f.pathOf("target_frame_ms"),
+                         "must be in (0, " + json(kMaxTargetFrameMs).dump() + "] ms, got " + ms->dump());
+        }
+        if (const json *q = f.find("quality")) policy.quality = object(*q, f.pathOf("quality"));
+    } else if (mode == "explicit") {
+        policy.mode = QualityMode::Explicit;
+        // An explicit policy renders every frame alike, so a frame-time target means nothing.
+        if (f.find("target_frame_ms"))
+            badField(f.pathOf("target_frame_ms"), "is only for mode \"automatic\"");
+        policy.quality = object(f.require("quality"), f.pathOf("quality"));
+    } else {
+        badField(f.pathOf("mode"), "must be \"automatic\" or \"explicit\", got " + json(mode).dump());
+    }
+    return policy;
+}
+
+} // namespace detail
+
+namespace {
+
+// Each reader gets the whole message object; the id is already read. The known fields of
+// each list "type" and "id" too, so that any other key is refused as unknown.
+using Reader = ClientMessage (*)(const json &root, const RequestId &id, const Limits &limits);
+
+ClientMessage readHello(const json &root, const RequestId &id, const Limits &limits) {
+    const Fields f(root, "", {"type", "id", "protocol", "token", "client"});
+    HelloRequest m;
+    m.id = id;
+    // Any integer is read first, so that "protocol": 2 gets unsupported_version, not bad_field.
+    const int64_t version = detail::integer(f.require("protocol"), "protocol", 0, 1 << 30);
+    if (version < kMinProtocolVersion || version > kProtocolVersion)
+        fail(ErrorCode::UnsupportedVersion,
+             "protocol version " + std::to_string(version) + " is not supported; this server speaks " +
+                 (kMinProtocolVersion == kProtocolVersion
+                      ? std::to_string(kProtocolVersion)
+                      : std::to_string(kMinProtocolVersion) + " to " + std::to_string(kProtocolVersion)));
+    m.protocol = int(version);
+    if (const json *token = f.find("token")) m.token = detail::string(*token, "token", limits.maxTokenBytes);
+    if (const json *client = f.find("client")) m.client = detail::string(*client, "client", 256);
+    return m;
+}
+
+template <class Request>
+ClientMessage readBare(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id"});
+    Request m;
+    m.id = id;
+    return m;
+}
+
+ClientMessage readOpenVolume(const json &root, const RequestId &id, const Limits &limits) {
+    const Fields f(root, "", {"type", "id", "name"});
+    OpenVolumeRequest m;
+    m.id = id;
+    // The length is judged by validateVolumeName, with its own code; the bound here only
+    // keeps an absurd string out of the error message.
+    m.name = detail::string(f.require("name"), "name", std::string::npos);
+    if (const auto problem = validateVolumeName(m.name, limits.maxVolumeNameBytes)) {
+        const std::string shown = m.name.size() <= 200 ? json(m.name).dump() : "the name";
+        fail(ErrorCode::BadVolumeName, "volume name " + shown + " " + *problem);
+    }
+    return m;
+}
+
+ClientMessage readCamera(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "camera"});
+    return CameraRequest{id, detail::object(f.require("camera"), "camera")};
+}
+
+ClientMessage readViewport(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "image"});
+    return ViewportRequest{id, detail::object(f.require("image"), "image")};
+}
+
+ClientMessage readTransferFunction(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "transfer_function"});
+    return TransferFunctionRequest{id, detail::object(f.require("transfer_function"), "transfer_function")};
+}
+
+ClientMessage readQualityPolicyRequest(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "mode", "target_frame_ms", "quality"});
+    return QualityPolicyRequest{id, detail::readQualityPolicy(f)};
+}
+
+ClientMessage readClipPlanes(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "clip_planes"});
+    return ClipPlanesRequest{id, detail::array(f.require("clip_planes"), "clip_planes")};
+}
+
+ClientMessage readStill(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "image"});
+    StillRequest m;
+    m.id = id;
+    if (const json *image = f.find("image")) m.image = detail::object(*image, "image");
+    return m;
+}
+
+struct ReaderEntry {
+    std::string_view type;
+    Reader read;
+};
+
+constexpr std::array<ReaderEntry, std::variant_size_v<ClientMessage>> kReaders{{
+    {HelloRequest::kType, readHello},
+    {ListVolumesRequest::kType, readBare<ListVolumesRequest>},
+    {OpenVolumeRequest::kType, readOpenVolume},
+    {CameraRequest::kType, readCamera},
+    {InteractionStartRequest::kType, readBare<InteractionStartRequest>},
+    {InteractionEndRequest::kType, readBare<InteractionEndRequest>},
+    {ViewportRequest::kType, readViewport},
+    {TransferFunctionRequest::kType, readTransferFunction},
+    {QualityPolicyRequest::kType, readQualityPolicyRequest},
+    {ClipPlanesRequest::kType, readClipPlanes},
+    {StillRequest::kType, readStill},
+    {GetStateRequest::kType, readBare<GetStateRequest>},
+    {CloseRequest::kType, readBare<CloseRequest>},
+}};
+
+std::string knownTypes() {
+    std::string list;
+    for (const ReaderEntry &entry : kReaders) list += (list.empty() ? "" : ", ") + std::string(entry.type);
+    return list;
+}
+
+// The fields of each request besides "type" and "id".
+json fieldsOf(const HelloRequest &m) {
+    json j{{"protocol", m.protocol}};
+    if (m.token) j["token"] = *m.token;
+    if (!m.client.empty()) j["client"] = m.client;
+    return j;
+}
+json fieldsOf(const OpenVolumeRequest &m) { return {{"name", m.name}}; }
+json fieldsOf(const CameraRequest &m) { return {{"camera", m.camera}}; }
+json fieldsOf(const ViewportRequest &m) { return {{"image", m.image}}; }
+json fieldsOf(const TransferFunctionRequest &m) { return {{"transfer_function", m.transferFunction}}; }
+json fieldsOf(const QualityPolicyRequest &m) { return qualityPolicyToJson(m.policy); }
+json fieldsOf(const ClipPlanesRequest &m) { return {{"clip_planes", m.clipPlanes}}; }
+json fieldsOf(const StillRequest &m) {
+    json j = json::object();
+    if (!m.image.is_null()) j["image"] = m.image;
+    return j;
+}
+// The requests with no fields of their own.
+template <class Request>
+json fieldsOf(const Request &) {
+    return json::object();
+}
+
+} // namespace
+
+std::string_view messageType(const ClientMessage &message) {
+    return std::visit([](const auto &m) { return m.kType; }, message);
+}
+
+const RequestId &requestIdOf(const ClientMessage &message) {
+    return std::visit([](const auto &m) -> const RequestId & { return m.id; }, message);
+}
+
+ParsedClientMessage parseClientMessage(std::string_view text, const Limits &limits) {
+    RequestId id;
+    std::string type;
+    try {
+        // Before parsing: an oversized message costs nothing but this comparison.
+        if (text.size() > limits.maxMessageBytes)
+            fail(ErrorCode::TooLarge, "message is " + std::to_string(text.size()) +
+                                          " bytes; the limit is " + std::to_string(limits.maxMessageBytes));
+        const detail::ParsedText parsed = detail::parseText(text, limits.maxDepth);
+        const json &root = parsed.value;
+        if (!root.is_object())
+            fail(ErrorCode::BadMessage, "a message must be a JSON object, got " + detail::kindOf(root));
+        // The id first, so that every later error can echo it.
+        if (const auto it = root.find("id"); it != root.end())
+            id = detail::requestId(*it, "id", limits.maxIdBytes);
+        const auto typeIt = root.find("type");
+        if (typeIt == root.end()) fail(ErrorCode::BadMessage, "a message needs a \"type\"");
+        if (!typeIt->is_string())
+            fail(ErrorCode::BadMessage, "\"type\" must be a string, got " + detail::kindOf(*typeIt));
+        const std::string name = typeIt->get<std::string>();
+        const ReaderEntry *entry = nullptr;
+        for (const ReaderEntry &e : kReaders)
+            if (e.type == name) entry = &e;
+        if (!entry) {
+            const std::string shown = name.size() <= 64 ? json(name).dump() : "of " + std::to_string(name.size()) + " bytes";
+            fail(ErrorCode::UnknownType, "unknown message type " + shown + " (known: " + knownTypes() + ")");
+        }
+        type = name;
+        if (!parsed.duplicateKey.empty()) badField(parsed.duplicateKey, "duplicate key");
+        return entry->read(root, id, limits);
+    } catch (const ReadError &e) {
+        return ProtocolError{e.code, e.what(), id, type};
+    } catch (const std::exception &e) {
+        // Out of memory or a bug in this file; still an answer, never a dropped connection.
+        return ProtocolError{ErrorCode::Internal, std::string("reading the message failed: ") + e.what(), id, type};
+    }
+}
+
+ProtocolError binaryMessageError(size_t bytes) {
+    return ProtocolError{ErrorCode::BadMessage,
+                         "a binary message (" + std::to_string(bytes) +
+                             " bytes) was sent; clients send JSON text messages only",
+                         nullptr, ""};
+}
+
+std::string toJsonText(const ClientMessage &message) {
+    json j = std::visit([](const auto &m) { return fieldsOf(m); }, message);
+    j["type"] = messageType(message);
+    if (const RequestId &id = requestIdOf(message); !id.is_null()) j["id"] = id;
+    return j.dump();
+}
+
+std::string_view qualityModeName(QualityMode mode) {
+    return mode == QualityMode::Explicit ? "explicit" : "automatic";
+}
+
+json qualityPolicyToJson(const QualityPolicy &policy) {
+    json j{{"mode", qualityModeName(policy.mode)}};
+    if (policy.mode == QualityMode::Automatic) j["target_frame_ms"] = policy.targetFrameMs;
+    if (!policy.quality.is_null()) j["quality"] = policy.quality;
+    return j;
+}
+
+} // namespace volcast::protocol

@@ -1,0 +1,232 @@
+#include "protocol/server_messages.hpp"
+
+#include "protocol/json_reader.hpp"
+
+#include <limits>
+#include <utility>
+
+namespace volcast::protocol {
+
+using json = nlohmann::json;
+using detail::Fields;
+
+namespace {
+
+constexpr auto kIgnore = Fields::Unknown::Ignore;
+// Server-sent strings are not bounded by the client's limits; the message size is.
+constexpr size_t kAnyLength = std::numeric_limits<size_t>::max();
+
+constexpr std::array<std::pair<ProgressStage, std::string_view>, 3> kStages{{
+    {ProgressStage::Loading, "loading"},
+    {ProgressStage::Preprocessing, "preprocessing"},
+    {ProgressStage::Uploading, "uploading"},
+}};
+
+json volumeToJson(const VolumeInfo &v) {
+    json j{{"name", v.name}, {"loaded", v.loaded}};
+    if (v.dims) j["dims"] = *v.dims;
+    if (v.spacing) j["spacing"] = *v.spacing;
+    if (v.origin) j["origin"] = *v.origin;
+    if (!v.voxelType.empty()) j["voxel_type"] = v.voxelType;
+    if (v.valueRange) j["value_range"] = *v.valueRange;
+    if (v.histogram) j["histogram"] = {{"range", v.histogram->range}, {"counts", v.histogram->counts}};
+    return j;
+}
+
+// The fields of each message besides "type" and "id".
+json fieldsOf(const ServerHello &m) {
+    return {{"protocol", m.protocol},
+            {"server", m.server},
+            {"device", {{"name", m.device.name}, {"type", m.device.type}}},
+            {"limits",
+             {{"max_message_bytes", m.limits.maxMessageBytes},
+              {"max_image_side", m.limits.maxImageSide},
+              {"max_image_pixels", m.limits.maxImagePixels},
+              {"max_volume_name_bytes", m.limits.maxVolumeNameBytes}}}};
+}
+
+json fieldsOf(const VolumesMessage &m) {
+    json list = json::array();
+    for (const VolumeInfo &v : m.volumes) list.push_back(volumeToJson(v));
+    return {{"volumes", std::move(list)}};
+}
+
+json fieldsOf(const ProgressMessage &m) {
+    json j{{"volume", m.volume}, {"stage", progressStageName(m.stage)}, {"fraction", m.fraction}};
+    if (!m.task.empty()) j["task"] = m.task;
+    return j;
+}
+
+json fieldsOf(const StateMessage &m) {
+    return {{"volume", m.volume ? volumeToJson(*m.volume) : json(nullptr)},
+            {"scene", m.scene},
+            {"quality_policy", qualityPolicyToJson(m.qualityPolicy)},
+            {"interacting", m.interacting}};
+}
+
+json fieldsOf(const ProtocolError &m) {
+    return {{"code", errorCodeName(m.code)},
+            {"message", m.message},
+            {"request_type", m.requestType.empty() ? json(nullptr) : json(m.requestType)}};
+}
+
+const RequestId &idOf(const ServerMessage &message) {
+    return std::visit(
+        [](const auto &m) -> const RequestId & {
+            if constexpr (std::is_same_v<std::decay_t<decltype(m)>, ProtocolError>)
+                return m.requestId;
+            else
+                return m.id;
+        },
+        message);
+}
+
+// Readers for clients: unknown fields are ignored, known ones must have the right kind.
+template <size_t N>
+std::array<double, N> numbers(const json &j, const std::string &path) {
+    detail::array(j, path);
+    if (j.size() != N) detail::badField(path, "must have " + std::to_string(N) + " numbers, got " + std::to_string(j.size()));
+    std::array<double, N> out{};
+    for (size_t i = 0; i < N; ++i) out[i] = detail::number(j[i], detail::element(path, i));
+    return out;
+}
+
+VolumeInfo readVolume(const json &j, const std::string &path) {
+    const Fields f(j, path, {}, kIgnore);
+    VolumeInfo v;
+    v.name = detail::string(f.require("name"), f.pathOf("name"), kAnyLength);
+    if (const json *loaded = f.find("loaded")) v.loaded = detail::boolean(*loaded, f.pathOf("loaded"));
+    if (const json *dims = f.find("dims")) {
+        const std::string at = f.pathOf("dims");
+        detail::array(*dims, at);
+        if (dims->size() != 3) detail::badField(at, "must have 3 integers");
+        std::array<int64_t, 3> d{};
+        for (size_t i = 0; i < 3; ++i)
+            d[i] = detail::integer((*dims)[i], detail::element(at, i), 1, std::numeric_limits<int64_t>::max());
+        v.dims = d;
+    }
+    if (const json *s = f.find("spacing")) v.spacing = numbers<3>(*s, f.pathOf("spacing"));
+    if (const json *o = f.find("origin")) v.origin = numbers<3>(*o, f.pathOf("origin"));
+    if (const json *t = f.find("voxel_type")) v.voxelType = detail::string(*t, f.pathOf("voxel_type"), kAnyLength);
+    if (const json *r = f.find("value_range")) v.valueRange = numbers<2>(*r, f.pathOf("value_range"));
+    if (const json *h = f.find("histogram")) {
+        const Fields hf(*h, f.pathOf("histogram"), {}, kIgnore);
+        HistogramInfo histogram;
+        histogram.range = numbers<2>(hf.require("range"), hf.pathOf("range"));
+        const json &counts = detail::array(hf.require("counts"), hf.pathOf("counts"));
+        for (size_t i = 0; i < counts.size(); ++i)
+            histogram.counts.push_back(detail::unsignedInteger(counts[i], detail::element(hf.pathOf("counts"), i)));
+        v.histogram = std::move(histogram);
+    }
+    return v;
+}
+
+ServerMessage readHello(const Fields &f, RequestId id) {
+    ServerHello m;
+    m.id = std::move(id);
+    m.protocol = int(detail::integer(f.require("protocol"), "protocol", 0, 1 << 30));
+    m.server = detail::string(f.require("server"), "server", kAnyLength);
+    const Fields device(f.require("device"), "device", {}, kIgnore);
+    m.device.name = detail::string(device.require("name"), device.pathOf("name"), kAnyLength);
+    m.device.type = detail::string(device.require("type"), device.pathOf("type"), kAnyLength);
+    const Fields limits(f.require("limits"), "limits", {}, kIgnore);
+    const auto count = [&](std::string_view key) {
+        return detail::integer(limits.require(key), limits.pathOf(key), 0, std::numeric_limits<int64_t>::max());
+    };
+    m.limits.maxMessageBytes = size_t(count("max_message_bytes"));
+    m.limits.maxImageSide = int(detail::integer(limits.require("max_image_side"),
+                                                limits.pathOf("max_image_side"), 0, 1 << 30));
+    m.limits.maxImagePixels = count("max_image_pixels");
+    m.limits.maxVolumeNameBytes = size_t(count("max_volume_name_bytes"));
+    return m;
+}
+
+ServerMessage readVolumes(const Fields &f, RequestId id) {
+    VolumesMessage m;
+    m.id = std::move(id);
+    const json &list = detail::array(f.require("volumes"), "volumes");
+    for (size_t i = 0; i < list.size(); ++i) m.volumes.push_back(readVolume(list[i], detail::element("volumes", i)));
+    return m;
+}
+
+ServerMessage readProgress(const Fields &f, RequestId id) {
+    ProgressMessage m;
+    m.id = std::move(id);
+    m.volume = detail::string(f.require("volume"), "volume", kAnyLength);
+    const std::string stage = detail::string(f.require("stage"), "stage", kAnyLength);
+    bool known = false;
+    for (const auto &[s, name] : kStages)
+        if (name == stage) m.stage = s, known = true;
+    if (!known) detail::badField("stage", "unknown stage " + json(stage).dump());
+    if (const json *task = f.find("task")) m.task = detail::string(*task, "task", kAnyLength);
+    m.fraction = detail::number(f.require("fraction"), "fraction");
+    if (m.fraction < 0 || m.fraction > 1) detail::badField("fraction", "must be in [0, 1]");
+    return m;
+}
+
+ServerMessage readState(const Fields &f, RequestId id) {
+    StateMessage m;
+    m.id = std::move(id);
+    if (const json *volume = f.find("volume"); volume && !volume->is_null()) m.volume = readVolume(*volume, "volume");
+    m.scene = detail::object(f.require("scene"), "scene");
+    const Fields policy(f.require("quality_policy"), "quality_policy", {}, kIgnore);
+    m.qualityPolicy = detail::readQualityPolicy(policy);
+    m.interacting = detail::boolean(f.require("interacting"), "interacting");
+    return m;
+}
+
+ServerMessage readError(const Fields &f, RequestId id) {
+    ProtocolError m;
+    m.requestId = std::move(id);
+    const std::string code = detail::string(f.require("code"), "code", kAnyLength);
+    // A code this client does not know yet is still an error; it reads as internal.
+    m.code = errorCodeFromName(code).value_or(ErrorCode::Internal);
+    m.message = detail::string(f.require("message"), "message", kAnyLength);
+    if (const json *type = f.find("request_type"); type && !type->is_null())
+        m.requestType = detail::string(*type, "request_type", kAnyLength);
+    return m;
+}
+
+} // namespace
+
+std::string_view progressStageName(ProgressStage stage) {
+    for (const auto &[s, name] : kStages)
+        if (s == stage) return name;
+    return "loading";
+}
+
+std::string_view messageType(const ServerMessage &message) {
+    return std::visit([](const auto &m) { return m.kType; }, message);
+}
+
+std::string toJsonText(const ServerMessage &message) {
+    json j = std::visit([](const auto &m) { return fieldsOf(m); }, message);
+    j["type"] = messageType(message);
+    // Always present, null when the message answers no request, so clients can rely on it.
+    j["id"] = idOf(message);
+    return j.dump();
+}
+
+ServerMessage parseServerMessage(std::string_view text) {
+    try {
+        // No size limit or depth limit to speak of: the server is trusted to be sane, but
+        // the depth bound costs nothing and keeps a broken one from exhausting the stack.
+        const detail::ParsedText parsed = detail::parseText(text, 64);
+        const json &root = parsed.value;
+        if (!root.is_object()) detail::fail(ErrorCode::BadMessage, "a message must be a JSON object, got " + detail::kindOf(root));
+        const Fields f(root, "", {}, kIgnore);
+        RequestId id;
+        if (const json *i = f.find("id")) id = detail::requestId(*i, "id", kAnyLength);
+        const std::string type = detail::string(f.require("type"), "type", kAnyLength);
+        if (type == ServerHello::kType) return readHello(f, std::move(id));
+        if (type == VolumesMessage::kType) return readVolumes(f, std::move(id));
+        if (type == ProgressMessage::kType) return readProgress(f, std::move(id));
+        if (type == StateMessage::kType) return readState(f, std::move(id));
+        if (type == ProtocolError::kType) return readError(f, std::move(id));
+        detail::fail(ErrorCode::UnknownType, "unknown message type " + json(type).dump());
+    } catch (const detail::ReadError &e) {
+        throw DecodeError(std::string("server message: ") + e.what());
+    }
+}
+
+} // namespace volcast::protocol

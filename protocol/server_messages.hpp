@@ -1,0 +1,121 @@
+#pragma once
+// Server -> client JSON text messages: hello, volumes, progress, state and error. Frames
+// are binary messages (frame.hpp). A reply echoes the "id" of the request it answers.
+// protocol/README.md documents every field.
+
+#include "protocol/client_messages.hpp"
+#include "protocol/errors.hpp"
+#include "protocol/version.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+namespace volcast::protocol {
+
+struct DeviceInfo {
+    std::string name;   // e.g. "NVIDIA H100 80GB HBM3", "cpu-haswell-Intel(R) Xeon(R) ..."
+    std::string type;   // "gpu", "cpu", "accelerator" or "other" (OpenCL's device types)
+    bool operator==(const DeviceInfo &) const = default;
+};
+
+// The limits a client must stay within, so it can check before sending.
+struct ServerLimits {
+    size_t maxMessageBytes = Limits{}.maxMessageBytes;   // bytes of one text message
+    int maxImageSide = 0;                                // pixels, width or height
+    int64_t maxImagePixels = 0;                          // width x height
+    size_t maxVolumeNameBytes = kMaxVolumeNameBytes;
+    bool operator==(const ServerLimits &) const = default;
+};
+
+struct ServerHello {
+    static constexpr std::string_view kType = "hello";
+    RequestId id;
+    int protocol = kProtocolVersion;
+    std::string server;   // name and version, e.g. "volcast 0.1.0"
+    DeviceInfo device;
+    ServerLimits limits;
+    bool operator==(const ServerHello &) const = default;
+};
+
+struct HistogramInfo {
+    std::array<double, 2> range{0, 0};   // data units; the bins split it evenly
+    std::vector<uint64_t> counts;        // voxels per bin (256 bins from the server's loader)
+    bool operator==(const HistogramInfo &) const = default;
+};
+
+// What is known of one volume. Everything but the name may be missing for a volume not
+// loaded yet: the server lists its data folders without reading every scan.
+struct VolumeInfo {
+    std::string name;                              // what open_volume takes
+    bool loaded = false;                           // in the server's memory now
+    std::optional<std::array<int64_t, 3>> dims;    // samples per axis
+    std::optional<std::array<double, 3>> spacing;  // world units between samples
+    std::optional<std::array<double, 3>> origin;   // world position of voxel (0, 0, 0)
+    std::string voxelType;                         // in the file: "uint8", "int16", "float32", ...
+    std::optional<std::array<double, 2>> valueRange;   // [min, max] of the finite voxels
+    std::optional<HistogramInfo> histogram;
+    bool operator==(const VolumeInfo &) const = default;
+};
+
+struct VolumesMessage {
+    static constexpr std::string_view kType = "volumes";
+    RequestId id;
+    std::vector<VolumeInfo> volumes;
+    bool operator==(const VolumesMessage &) const = default;
+};
+
+enum class ProgressStage {
+    Loading,         // reading and converting the file
+    Preprocessing,   // statistics, min-max bricks, mipmaps, B-spline coefficients, tables
+    Uploading,       // copying to the device
+};
+std::string_view progressStageName(ProgressStage stage);
+
+// Sent while an open_volume (its id echoed) or a render's preprocessing is under way.
+struct ProgressMessage {
+    static constexpr std::string_view kType = "progress";
+    RequestId id;
+    std::string volume;      // the volume's name
+    ProgressStage stage = ProgressStage::Loading;
+    std::string task;        // within the stage, e.g. "bspline_coefficients"; may be empty
+    double fraction = 0;     // of the stage done, in [0, 1]
+    bool operator==(const ProgressMessage &) const = default;
+};
+
+// The session as the server holds it; answers get_state and open_volume, and follows any
+// change the server made on its own (a default camera and transfer function on open).
+struct StateMessage {
+    static constexpr std::string_view kType = "state";
+    RequestId id;
+    std::optional<VolumeInfo> volume;   // the open volume, nullopt before open_volume
+    // DESIGN.md's scene-file form ("volume", "transfer_function", "camera", "image",
+    // "quality", "clip_planes"); keys not set yet are absent. Saved as is, it is a scene file
+    // for volcast-render (with "volume" the name in the server's data folders).
+    nlohmann::json scene = nlohmann::json::object();
+    QualityPolicy qualityPolicy;
+    bool interacting = false;   // between interaction_start and interaction_end
+    bool operator==(const StateMessage &) const = default;
+};
+
+using ServerMessage =
+    std::variant<ServerHello, VolumesMessage, ProgressMessage, StateMessage, ProtocolError>;
+
+std::string_view messageType(const ServerMessage &message);
+
+// Compact JSON text of a server message. An error is {"type": "error", "code", "message",
+// "id", "request_type"}.
+std::string toJsonText(const ServerMessage &message);
+
+// For clients: read one server text message. Fields a client does not know are ignored
+// (a newer server may add them); an unknown type, a missing field or one of the wrong kind
+// throws DecodeError.
+ServerMessage parseServerMessage(std::string_view text);
+
+} // namespace volcast::protocol
