@@ -19,7 +19,7 @@ packages=(
   # zlib: tests write gzip-encoded NRRD files of their own
   zlib1g-dev
   # Tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev python3
+  libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
 )
 
 missing=()
