@@ -18,7 +18,11 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kQuadratureRelTolerance = 1e-12;
 // Absolute floor for the transmittance form (its integral is in [0, 1] and enters the colour
 // added to terms of order 1).
-constexpr double kQuadratureAbsFloor = 1e-15;
+constexpr double kQuadratureAbsFloor = 1e-13;
+// An interval whose error estimate is at rounding level is accepted whatever the tolerance:
+// halving the tolerance at each split would otherwise push it below rounding deep in a
+// refinement (near a = 1) and split forever. Costs at most ~1e-14 relative in all.
+constexpr double kRoundingFloor = 64 * std::numeric_limits<double>::epsilon();
 constexpr int kMaxQuadratureDepth = 40;
 
 // ---- Closed forms -----------------------------------------------------------------------
@@ -104,34 +108,84 @@ RuleResult kronrod15(const F &f, double a, double b) {
     return {kronrod * half, error};
 }
 
-// Adaptive quadrature of a monotone integrand f on [a, b], with fa = f(a), fb = f(b).
-// A monotone integrand lies between its end values, so an interval whose bracket
-// |fb − fa|·(b − a) is within tolerance is done without a rule. `steep(fa, fb)` forces a
-// split before any rule is trusted: a rule whose nodes all miss a thin boundary layer
-// agrees with itself and would be accepted.
-template <typename F, typename Steep>
-double adaptMonotone(const F &f, const Steep &steep, double a, double b, double fa, double fb, double tol,
-                     int depth, const RuleResult *rule = nullptr) {
-    if (std::fabs(fb - fa) * (b - a) <= 2 * tol) return 0.5 * (fa + fb) * (b - a);
-    if (depth >= kMaxQuadratureDepth) return rule ? rule->value : kronrod15(f, a, b).value;
-    if (!steep(fa, fb)) {
-        const RuleResult r = rule ? *rule : kronrod15(f, a, b);
-        if (r.error <= tol) return r.value;
+// Where a piece reaches a = 1 (or nearly) at one end, −ln(1 − a) makes the integrand behave
+// like x·ln x there; the half of [0, 1] next to that end is mapped by s = s₀ ± w·σ⁴, which
+// turns it into σ⁷·ln σ, smooth enough for a 15-point rule after a few splits.
+enum class Cluster { none, front, back };
+
+struct UnitMap {
+    double s0 = 0, width = 1; // s = s0 + width·m(σ), σ ∈ [0, 1]
+    Cluster cluster = Cluster::none;
+    double s(double sigma) const {
+        if (cluster == Cluster::front) return s0 + width * (sigma * sigma) * (sigma * sigma);
+        if (cluster == Cluster::back) {
+            const double r = 1 - sigma;
+            return s0 + width * (1 - (r * r) * (r * r));
+        }
+        return s0 + width * sigma;
     }
-    const double mid = 0.5 * (a + b), fmid = f(mid);
-    return adaptMonotone(f, steep, a, mid, fa, fmid, 0.5 * tol, depth + 1) +
-           adaptMonotone(f, steep, mid, b, fmid, fb, 0.5 * tol, depth + 1);
+    double ds(double sigma) const {
+        if (cluster == Cluster::front) return width * 4 * sigma * sigma * sigma;
+        if (cluster == Cluster::back) return width * 4 * (1 - sigma) * (1 - sigma) * (1 - sigma);
+        return width;
+    }
+};
+
+// Adaptive quadrature of an integrand f, monotone in s, over σ ∈ [a, b] of a map, with
+// fa, fb = f at the mapped ends. A monotone integrand lies between its end values, so an
+// interval whose bracket |fb − fa|·(s(b) − s(a)) is within tolerance is done without a rule.
+// `steep(fa, fb)` forces a split before any rule is trusted: a rule whose nodes all miss a
+// thin boundary layer agrees with itself and would be accepted.
+template <typename F, typename Steep>
+double adaptMonotone(const F &f, const Steep &steep, const UnitMap &map, double a, double b, double fa, double fb,
+                     double tol, int depth, const RuleResult *rule = nullptr) {
+    const double length = map.s(b) - map.s(a);
+    const double bracket = 0.5 * (fa + fb) * length;
+    if (std::fabs(fb - fa) * length <= std::max(2 * tol, kRoundingFloor * std::fabs(bracket))) return bracket;
+    auto mapped = [&](double sigma) { return f(map.s(sigma)) * map.ds(sigma); };
+    if (depth >= kMaxQuadratureDepth) return rule ? rule->value : kronrod15(mapped, a, b).value;
+    if (!steep(fa, fb)) {
+        const RuleResult r = rule ? *rule : kronrod15(mapped, a, b);
+        if (r.error <= std::max(tol, kRoundingFloor * std::fabs(r.value))) return r.value;
+    }
+    const double mid = 0.5 * (a + b), fmid = f(map.s(mid));
+    return adaptMonotone(f, steep, map, a, mid, fa, fmid, 0.5 * tol, depth + 1) +
+           adaptMonotone(f, steep, map, mid, b, fmid, fb, 0.5 * tol, depth + 1);
 }
 
-// ∫₀¹ f for a monotone f, to kQuadratureRelTolerance relative or absFloor absolute.
+// ∫₀¹ f ds for an f monotone in s, to kQuadratureRelTolerance relative or absFloor absolute.
 template <typename F, typename Steep>
-double integrateUnit(const F &f, const Steep &steep, double absFloor) {
-    const double f0 = f(0.0), f1 = f(1.0);
-    if (steep(f0, f1)) return adaptMonotone(f, steep, 0.0, 1.0, f0, f1, absFloor, 0);
-    // The whole-interval rule sets the scale of the relative tolerance and is reused.
-    const RuleResult whole = kronrod15(f, 0, 1);
-    const double tol = std::max({kQuadratureRelTolerance * std::fabs(whole.value), absFloor, 1e-300});
-    return adaptMonotone(f, steep, 0.0, 1.0, f0, f1, tol, 0, &whole);
+double integrateUnit(const F &f, const Steep &steep, double absFloor, Cluster cluster) {
+    // Split in halves when one end is singular, the map clustering σ-points at that end.
+    UnitMap maps[2];
+    int count = 1;
+    if (cluster == Cluster::front) {
+        maps[0] = {0, 0.5, Cluster::front};
+        maps[1] = {0.5, 0.5, Cluster::none};
+        count = 2;
+    } else if (cluster == Cluster::back) {
+        maps[0] = {0, 0.5, Cluster::none};
+        maps[1] = {0.5, 0.5, Cluster::back};
+        count = 2;
+    }
+    double f0[2], f1[2], scale = 0;
+    RuleResult rules[2];
+    bool ruled[2] = {false, false};
+    for (int m = 0; m < count; ++m) {
+        f0[m] = f(maps[m].s(0));
+        f1[m] = f(maps[m].s(1));
+        // The whole-interval rule sets the scale of the relative tolerance and is reused.
+        if (!steep(f0[m], f1[m])) {
+            rules[m] = kronrod15([&](double sigma) { return f(maps[m].s(sigma)) * maps[m].ds(sigma); }, 0, 1);
+            ruled[m] = true;
+            scale += std::fabs(rules[m].value);
+        }
+    }
+    const double tol = std::max({kQuadratureRelTolerance * scale, absFloor, 1e-300}) / count;
+    double sum = 0;
+    for (int m = 0; m < count; ++m)
+        sum += adaptMonotone(f, steep, maps[m], 0.0, 1.0, f0[m], f1[m], tol, 0, ruled[m] ? &rules[m] : nullptr);
+    return sum;
 }
 
 // ---- One piece (transfer function linear along it) -------------------------------------
@@ -172,22 +226,25 @@ PieceIntegral integratePiece(const Rgba &p0, const Rgba &p1, double lengthInUnit
         // G(s) = (h/u)·s·(−ln x₀ − ∫₀¹ ln(1 + q u) du), x = 1 − a, q = (x(s) − x₀)/x₀: one
         // logarithm per point with −ln x₀ hoisted. Both terms have the same sign unless a
         // falls from near 1, where the subtraction loses at most a digit. An opaque front
-        // (x₀ = 0) takes the general form.
-        const double base = a0 < 1 ? -std::log1p(-a0) : 0.0, x0 = 1 - a0;
+        // (x₀ = 0) has G(s) = (h/u)·s·(1 − ln x(s)) with x(s) = s·x₁, taken from x₁ directly:
+        // 1 − a(s) would cancel to noise that no quadrature converges on.
+        const double base = a0 < 1 ? -std::log1p(-a0) : 0.0, x0 = 1 - a0, x1 = 1 - p1.a;
         auto depthAt = [&](double s) {
             if (s <= 0) return 0.0;
-            if (a0 >= 1) return lengthInUnits * s * meanExtinctionLog(a0, a0 + s * da);
+            if (a0 >= 1) return lengthInUnits * s * (1 - std::log(s * x1));
             return lengthInUnits * s * (base - meanLog1p(-s * da / x0));
         };
+        // An end where 1 − a is below 1% of the other end's is (nearly) singular.
+        const Cluster cluster = x0 < 0.01 * x1 ? Cluster::front : (x1 < 0.01 * x0 ? Cluster::back : Cluster::none);
         if (thin) {
             // A < 1/2 on the whole piece: no boundary layer, relative accuracy.
             meanA = integrateUnit([&](double s) { return -std::expm1(-depthAt(s)); },
-                                  [](double, double) { return false; }, 0.0);
+                                  [](double, double) { return false; }, 0.0, cluster);
         } else {
             // T falls by e^−G: split until each interval's optical depth is below ln 30, so
             // a layer of thickness 1/G at the front is resolved before a rule is trusted.
             meanT = integrateUnit([&](double s) { return std::exp(-depthAt(s)); },
-                                  [](double fa, double fb) { return fa > 30 * fb; }, kQuadratureAbsFloor);
+                                  [](double fa, double fb) { return fa > 30 * fb; }, kQuadratureAbsFloor, cluster);
         }
     }
     for (int k = 0; k < 3; ++k) {
@@ -203,7 +260,8 @@ PieceIntegral integratePiece(const Rgba &p0, const Rgba &p1, double lengthInUnit
 SegmentIntegral integrateSegment(const TransferFunction &tf, double sf, double sb, double length,
                                  double opacityUnit) {
     SegmentIntegral seg;
-    if (!(length > 0) || tf.points.empty() || std::isnan(sf) || std::isnan(sb)) return seg;
+    if (!(length > 0) || !(opacityUnit > 0) || tf.points.empty() || !std::isfinite(sf) || !std::isfinite(sb))
+        return seg;
     const double lengthInUnits = length / opacityUnit;
     // Constant value: opacity correction of a single value (Eq. 3), C = c·alpha.
     if (sf == sb) {
@@ -215,17 +273,22 @@ SegmentIntegral integrateSegment(const TransferFunction &tf, double sf, double s
         seg.b = q.b * alpha;
         return seg;
     }
-    // Split at every control point strictly between sf and sb, front to back.
+    // Split at every control point strictly between sf and sb (indices first … last), front
+    // to back; on each piece the transfer function is linear in t.
+    const auto &points = tf.points;
     const double lo = std::min(sf, sb), hi = std::max(sf, sb), span = hi - lo;
-    std::vector<double> cuts;
-    for (const auto &p : tf.points)
-        if (p.value > lo && p.value < hi) cuts.push_back(p.value);
-    if (sb < sf) std::reverse(cuts.begin(), cuts.end());
-    cuts.push_back(sb);
+    const int first = int(std::upper_bound(points.begin(), points.end(), lo,
+                                           [](double v, const ControlPoint &p) { return v < p.value; }) -
+                          points.begin());
+    const int last = int(std::lower_bound(points.begin(), points.end(), hi,
+                                          [](const ControlPoint &p, double v) { return p.value < v; }) -
+                         points.begin()) - 1;
+    const int cuts = std::max(last - first + 1, 0);
     double v0 = sf;
     Rgba p0 = tf.evaluate(v0);
     double trans = 1;
-    for (double v1 : cuts) {
+    for (int k = 0; k <= cuts; ++k) {
+        const double v1 = k == cuts ? sb : points[size_t(sb > sf ? first + k : last - k)].value;
         const Rgba p1 = tf.evaluate(v1);
         const PieceIntegral piece = integratePiece(p0, p1, lengthInUnits * (std::fabs(v1 - v0) / span));
         // Composite front to back: this piece is seen through the optical depth in front.
@@ -258,12 +321,12 @@ Sample sampleSegment(const TransferFunction &tf, double sf, double sb, double st
 
 double snapToFloat(double v) { return double(float(v)); }
 
-// An interval is split only while its float midpoint lies well inside it.
+// An interval can be split while a float lies strictly inside it. Splitting down to adjacent
+// floats is what resolves the log singularity where a reaches 1 at a single value: float
+// data cannot fall between two adjacent float nodes, so such a cell has no error to show.
 bool splittable(double a, double b) {
-    const float fa = float(a), fb = float(b);
-    const float ulp = std::nextafter(std::max(std::fabs(fa), std::fabs(fb)), std::numeric_limits<float>::infinity()) -
-                      std::max(std::fabs(fa), std::fabs(fb));
-    return double(fb) - double(fa) >= 32.0 * double(ulp);
+    const double mid = snapToFloat(0.5 * (a + b));
+    return mid > a && mid < b;
 }
 
 void parallelFor(int count, int threads, const auto &body) {
@@ -314,8 +377,8 @@ PreintegrationTable buildPreintegrationTable(const TransferFunction &tf, double 
     if (tf.points.empty()) throw std::invalid_argument("pre-integration: the transfer function has no points");
     if (!(step > 0) || !(opacityUnit > 0))
         throw std::invalid_argument("pre-integration: step and opacity unit must be positive");
-    if (!(valueMax > valueMin) || !std::isfinite(valueMin) || !std::isfinite(valueMax))
-        throw std::invalid_argument("pre-integration: needs a finite value range with max > min");
+    if (!(float(valueMax) > float(valueMin)) || !std::isfinite(float(valueMin)) || !std::isfinite(float(valueMax)))
+        throw std::invalid_argument("pre-integration: needs a finite value range with max > min (as floats)");
     if (!(tolerance > 0)) throw std::invalid_argument("pre-integration: tolerance must be positive");
     if (threads <= 0) threads = int(std::max(1u, std::thread::hardware_concurrency()));
     maxNodes = std::max(maxNodes, 2);
@@ -340,15 +403,25 @@ PreintegrationTable buildPreintegrationTable(const TransferFunction &tf, double 
     // while one ending at its edge is not (−ln(1 − a) is integrable up to a single a = 1
     // value): a jump no bilinear cell can follow. A node one float beyond the edge, on the
     // plateau side, puts the jump between two adjacent floats, where no data value can fall.
+    // The pair is the last float outside the plateau and the first inside, both as nodes.
+    constexpr float kUp = std::numeric_limits<float>::infinity();
     const auto &cp = tf.points;
     for (size_t k = 0; k < cp.size(); ++k) {
         const bool opaqueLeft = cp[k].a >= 1 && (k == 0 || cp[k - 1].a >= 1);
         const bool opaqueRight = cp[k].a >= 1 && (k + 1 == cp.size() || cp[k + 1].a >= 1);
         if (opaqueLeft == opaqueRight) continue;
-        const float edge = float(cp[k].value);
-        const double beyond = std::nextafter(edge, opaqueRight ? std::numeric_limits<float>::infinity()
-                                                               : -std::numeric_limits<float>::infinity());
-        if (beyond > valueMin && beyond < valueMax) nodes.push_back(beyond);
+        float below = float(cp[k].value), above = below;
+        if (opaqueRight) {
+            // Opaque above the edge: last float ≤ edge, first float > edge.
+            if (double(below) > cp[k].value) below = std::nextafter(below, -kUp);
+            above = std::nextafter(below, kUp);
+        } else {
+            // Opaque below the edge: last float < edge, first float ≥ edge.
+            if (double(above) < cp[k].value) above = std::nextafter(above, kUp);
+            below = std::nextafter(above, -kUp);
+        }
+        for (const double v : {double(below), double(above)})
+            if (v > valueMin && v < valueMax) nodes.push_back(v);
     }
     std::sort(nodes.begin(), nodes.end());
     nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());

@@ -277,6 +277,16 @@ TEST(PreintegrationSegment, OpticalDepthIsSymmetricAndZeroLengthIsEmpty) {
 
 // ---- The table ---------------------------------------------------------------------------
 
+// The two tables several tests read, built once (step 0.5, opacity unit 1, CT range, 2 threads).
+const PreintegrationTable &spikeTable() {
+    static const PreintegrationTable t = buildPreintegrationTable(spikeTf(), 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    return t;
+}
+const PreintegrationTable &ctTable() {
+    static const PreintegrationTable t = buildPreintegrationTable(ctTf(), 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    return t;
+}
+
 void expectAllFinite(const PreintegrationTable &t) {
     size_t bad = 0;
     for (size_t k = 0; k < t.rgba.size(); ++k) {
@@ -308,7 +318,9 @@ double randomPairError(const PreintegrationTable &t, const TransferFunction &tf,
             case 2: sf = near(rng); sb = near(rng); break;
             default: sf = near(rng); sb = sf + tiny(rng); break;
             }
-            const float fsf = float(sf), fsb = float(sb);
+            // The table clamps values to its range by design; compare inside it.
+            const float fsf = float(std::clamp(sf, t.valueMin, t.valueMax));
+            const float fsb = float(std::clamp(sb, t.valueMin, t.valueMax));
             const Rgba got = t.lookup(fsf, fsb);
             const SegmentIntegral want = integrateSegment(tf, fsf, fsb, t.step, t.opacityUnit);
             worst = std::max({worst, std::fabs(got.r - want.r), std::fabs(got.g - want.g),
@@ -319,7 +331,7 @@ double randomPairError(const PreintegrationTable &t, const TransferFunction &tf,
 
 TEST(PreintegrationTable, SpikeOnCtRangeStaysWithinTolerance) {
     const TransferFunction tf = spikeTf();
-    const PreintegrationTable t = buildPreintegrationTable(tf, 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    const PreintegrationTable &t = spikeTable();
     printRecord("spike", t);
     EXPECT_TRUE(t.converged);
     EXPECT_FALSE(t.hitNodeLimit);
@@ -334,7 +346,7 @@ TEST(PreintegrationTable, SpikeOnCtRangeStaysWithinTolerance) {
 
 TEST(PreintegrationTable, CtPresetStaysWithinTolerance) {
     const TransferFunction tf = ctTf();
-    const PreintegrationTable t = buildPreintegrationTable(tf, 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    const PreintegrationTable &t = ctTable();
     printRecord("ct_soft_tissue", t);
     EXPECT_TRUE(t.converged);
     EXPECT_LT(t.nodeCount(), 512);
@@ -344,7 +356,7 @@ TEST(PreintegrationTable, CtPresetStaysWithinTolerance) {
 
 TEST(PreintegrationTable, ControlPointsAreNodesAndNodesAreExact) {
     const TransferFunction tf = spikeTf();
-    const PreintegrationTable t = buildPreintegrationTable(tf, 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    const PreintegrationTable &t = spikeTable();
     ASSERT_GE(t.nodeCount(), 2);
     EXPECT_EQ(t.nodes.front(), -1024.0f);
     EXPECT_EQ(t.nodes.back(), 3071.0f);
@@ -363,7 +375,7 @@ TEST(PreintegrationTable, ControlPointsAreNodesAndNodesAreExact) {
 }
 
 TEST(PreintegrationTable, LocatorFindsTheInterval) {
-    const PreintegrationTable t = buildPreintegrationTable(spikeTf(), 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    const PreintegrationTable &t = spikeTable();
     ASSERT_EQ(int(t.locator.size()), t.locatorBuckets + 1);
     std::mt19937 rng(7);
     std::uniform_real_distribution<float> any(-1024, 3071), near(298, 302);
@@ -381,7 +393,7 @@ TEST(PreintegrationTable, LocatorFindsTheInterval) {
 }
 
 TEST(PreintegrationTable, ValuesOutsideTheRangeClampToTheEndNodes) {
-    const PreintegrationTable t = buildPreintegrationTable(ctTf(), 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    const PreintegrationTable &t = ctTable();
     for (float other : {-1024.0f, 0.0f, 200.0f, 3071.0f}) {
         const Rgba inLo = t.lookup(-1024, other), outLo = t.lookup(-5000, other);
         const Rgba inHi = t.lookup(other, 3071), outHi = t.lookup(other, 1e6f);
@@ -404,6 +416,28 @@ TEST(PreintegrationTable, OpaqueTransferFunctionGivesAFiniteTable) {
     EXPECT_LE(randomPairError(t, tf, 10, 3000), 1e-3);
     EXPECT_EQ(t.lookup(15, 15).a, 1.0);
     EXPECT_NEAR(t.lookup(15, 5).b, 0.5, 1e-6); // the entry colour of the plateau at 15
+    // Plateau edges that are not floats (0.1, 0.3): the jump still falls between two nodes.
+    TransferFunction odd;
+    odd.points = {{0, 1, 0, 0, 0}, {0.1, 0, 1, 0, 1}, {0.3, 0, 0, 1, 1}, {1, 1, 1, 1, 0.5}};
+    const PreintegrationTable u = buildPreintegrationTable(odd, 0.01, 0.01, 0, 1, 1e-3, 1024, 2);
+    printRecord("plateau 0.1..0.3", u);
+    expectAllFinite(u);
+    EXPECT_TRUE(u.converged);
+    EXPECT_LE(randomPairError(u, odd, 0.2, 3000), 1e-3);
+}
+
+TEST(PreintegrationTable, OpacityReachingOneAtASingleValueConverges) {
+    // a → 1 linearly at 1500 (the last control point, clamped beyond: a = 1 plateau above).
+    // Near 1500 the optical depth of a short segment grows like −ln(1 − a): alpha approaches 1
+    // like a power of the distance, which only nodes down to adjacent floats can follow.
+    TransferFunction tf;
+    tf.points = {{-1024, 0, 0, 0, 0}, {100, 0.8, 0.3, 0.2, 0}, {400, 0.9, 0.7, 0.5, 0.5}, {1500, 1, 1, 1, 1}};
+    const PreintegrationTable t = buildPreintegrationTable(tf, 0.25, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    printRecord("a = 1 at 1500", t);
+    EXPECT_TRUE(t.converged);
+    EXPECT_LT(t.nodeCount(), 512);
+    expectAllFinite(t);
+    EXPECT_LE(randomPairError(t, tf, 1500, 3000), 1e-3);
 }
 
 TEST(PreintegrationTable, NodeLimitIsReportedNotLoopedOn) {
@@ -425,7 +459,7 @@ TEST(PreintegrationTable, RejectsBadArguments) {
 
 TEST(PreintegrationPartialSegment, ConstantValueMatchesExact) {
     const TransferFunction tf = ctTf();
-    const PreintegrationTable t = buildPreintegrationTable(tf, 0.5, 1.0, -1024, 3071, 1e-3, 1024, 2);
+    const PreintegrationTable &t = ctTable();
     // At a node pair (v, v) the table holds the exact full step, so the partial helper must
     // reproduce the exact partial segment to float rounding (relative 1e-5 through log1p/expm1).
     for (int i = 0; i < t.nodeCount(); i += 3) {
