@@ -1,8 +1,11 @@
 #include "renderer/camera.hpp"
 
+#include "renderer/scene.hpp"
+
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
+#include <string>
 
 namespace volcast {
 
@@ -27,10 +30,20 @@ void Camera::validate() const {
         throw std::invalid_argument("camera.height: must be a positive number");
 }
 
+void validateImageSize(int width, int height) {
+    const std::string size = std::to_string(width) + "×" + std::to_string(height);
+    if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide)
+        throw std::invalid_argument("image: " + size + " is outside 1…" + std::to_string(kMaxImageSide) +
+                                    " pixels per side");
+    if (int64_t(width) * height > kMaxImagePixels)
+        throw std::invalid_argument("image: " + size + " is " + std::to_string(int64_t(width) * height) +
+                                    " pixels, more than the limit of " + std::to_string(kMaxImagePixels));
+}
+
 RayGenerator::RayGenerator(const Camera &camera, int width, int height)
     : camera_(camera), width_(width), height_(height) {
     camera.validate();
-    if (width <= 0 || height <= 0) throw std::invalid_argument("image size must be positive");
+    validateImageSize(width, height);
     forward = normalize(camera.target - camera.eye);
     right = normalize(cross(forward, camera.up));
     up = cross(right, forward);

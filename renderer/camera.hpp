@@ -27,6 +27,10 @@ struct Ray {
     Vec3d dir; // unit length; t is distance in world units, rays start at t = 0
 };
 
+// Throws std::invalid_argument naming "image" unless 1 ≤ width, height ≤ kMaxImageSide and
+// width·height ≤ kMaxImagePixels (scene.hpp): renderers call it before allocating anything.
+void validateImageSize(int width, int height);
+
 // Orthonormal view frame and per-pixel rays for one image size.
 class RayGenerator {
   public:

@@ -8,6 +8,8 @@
 #include "renderer/preintegration.hpp"
 #include "renderer/tf_table.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <chrono>
 #include <cmath>
 
@@ -202,10 +204,7 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
                              const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
     camera.validate();
     tf.validate();
-    if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide ||
-        int64_t(width) * height > kMaxImagePixels)
-        throw std::invalid_argument("image: " + std::to_string(width) + "×" + std::to_string(height) +
-                                    " is outside 1…" + std::to_string(kMaxImageSide) + " per side");
+    validateImageSize(width, height); // before anything is allocated
     if (clipPlanes.size() > VC_MAX_CLIP_PLANES)
         throw std::invalid_argument("clip_planes: at most " + std::to_string(VC_MAX_CLIP_PLANES) + " are supported");
     for (size_t c = 0; c < clipPlanes.size(); ++c)
@@ -228,7 +227,21 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     if (quality.emptySpaceSkipping) classify(data, tf, st);
 
     const double smallest = minComponent(volume_->spacing);
-    const double step = quality.step * smallest;
+    double step = quality.step * smallest;
+    // A step so short that a ray across the whole volume would take more than
+    // kMaxSamplesPerRay segments is raised to the shortest that does not (the 16 spare cover
+    // a jittered first segment and rounding). Rays are then never cut off by the kernel's
+    // bound, which would drop the back of the volume from the image, and a frame costs at most
+    // rays × kMaxSamplesPerRay samples; the step used is reported and logged.
+    const double shortestStep = length(volume_->extent()) / (kMaxSamplesPerRay - 16);
+    if (step < shortestStep) {
+        spdlog::warn("{}: quality.step {:g} voxels would take more than {} samples per ray across the volume; "
+                     "using {:g} voxels",
+                     volume_->name, quality.step, kMaxSamplesPerRay, shortestStep / smallest);
+        step = shortestStep;
+        st.stepRaised = true;
+    }
+    st.stepUsed = step / smallest;
     const double opacityUnit = tf.opacityUnit ? *tf.opacityUnit : smallest;
     if (quality.preintegrated) {
         if (!preintegration_ || !(preintegration_->tf == tf) || preintegration_->step != step ||
@@ -238,7 +251,12 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
             cache->tf = tf;
             cache->step = step;
             cache->opacityUnit = opacityUnit;
-            cache->table = buildPreintegrationTable(tf, step, opacityUnit, volume_->range.min, volume_->range.max);
+            // A constant volume has no range to tabulate; any range starting at its value
+            // serves, with that value exactly on the first node.
+            const double lo = volume_->range.min;
+            const double hi = volume_->range.max > lo ? double(volume_->range.max)
+                                                      : lo + std::max(1.0, std::fabs(lo)) * 1e-3;
+            cache->table = buildPreintegrationTable(tf, step, opacityUnit, lo, hi);
             cache->rgba = upload(cl_, cache->table.rgba, "the pre-integration table");
             cache->nodes = upload(cl_, cache->table.nodes, "the pre-integration nodes");
             try {
@@ -255,7 +273,10 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
         }
         st.preintegrationNodes = int(preintegration_->table.nodes.size());
         st.preintegrationError = preintegration_->table.maxError;
-    } else if (!tfTableFor_ || !(*tfTableFor_ == tf)) {
+    }
+    // The 1-D table: every segment without pre-integration, and with it the partial segments
+    // whose full step is too opaque for its alpha to hold its depth (raycast.cl).
+    if (!tfTableFor_ || !(*tfTableFor_ == tf)) {
         const auto t = Clock::now();
         const TfTable table = buildTfTable(tf);
         tfTable_ = upload(cl_, table.rgba, "the transfer-function table");
@@ -338,8 +359,9 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
         cl_uint arg = 0;
         if (cubic && cubicFromImage()) kernel.setArg(arg++, data.image);
         else kernel.setArg(arg++, data.buffer);
-        kernel.setArg(arg++, quality.preintegrated ? preintegration_->rgba : tfTable_);
+        kernel.setArg(arg++, tfTable_);
         if (quality.preintegrated) {
+            kernel.setArg(arg++, preintegration_->rgba);
             kernel.setArg(arg++, preintegration_->nodes);
             kernel.setArg(arg++, preintegration_->locator);
         }

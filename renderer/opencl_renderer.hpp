@@ -42,6 +42,8 @@ struct RenderStats {
     double skippedSegmentsPerRay = 0; // empty-space skipping, over rays that hit
     double earlyTerminatedFraction = 0;
     uint64_t raysTruncated = 0;     // rays that hit the per-ray sample bound
+    double stepUsed = 0;            // voxels: quality.step, or the shortest step that keeps a ray
+    bool stepRaised = false;        // across the volume within kMaxSamplesPerRay (then true)
 };
 
 // How often each kind of preprocessing has run: the evidence that it is lazy.
@@ -79,7 +81,8 @@ class OpenClRenderer {
     std::string buildOptions(const Quality &quality, bool hasClipPlanes) const;
     PreprocessCounts preprocessCounts() const;
     const Volume &volume() const { return *volume_; }
-    // Samples a ray may take at most; rays past it stop and are counted.
+    // Samples a ray may take at most: shorter steps are raised to keep every ray within it
+    // (RenderStats::stepRaised); rays past it, should any be, stop and are counted.
     static constexpr int kMaxSamplesPerRay = 1 << 20;
 
   private:

@@ -22,6 +22,10 @@ constexpr int kMaxDegree = 9;
 // Extinction cap: a = 1 gives τ = ∞; capping keeps 0·∞ out of the quadrature while any
 // cap this large still makes the segment opaque to double precision.
 constexpr double kTauMax = 1e30;
+// A rule is trusted only on intervals of optical depth below ln 30: across a thicker one the
+// transmittance falls in a boundary layer its five nodes can all miss, and the coarse and fine
+// rules then agree on a colour near 0 (the check preintegration.cpp makes with its "steep").
+constexpr double kMaxRuleDepth = 3.4011973816621555; // ln 30
 // Subdivision limits: past these an interval is accepted and its estimate kept.
 constexpr int kMaxDepth = 48;
 constexpr int kMaxRootDepth = 52;
@@ -263,7 +267,7 @@ class RayIntegrator {
         for (int k = 0; k < 3; ++k) err = std::max(err, std::fabs(fine.c[k] - coarse.c[k]));
         const double t = transmittance();
         const double h = (sb - sa) * worldPerS;
-        if (t * err <= tolDensity_ * h || depth >= kMaxDepth) {
+        if ((t * err <= tolDensity_ * h && coarse.od <= kMaxRuleDepth) || depth >= kMaxDepth) {
             apply(fine, t * err);
             return;
         }

@@ -10,6 +10,8 @@
 #include "renderer/volume_source.hpp"
 
 #include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -51,6 +53,8 @@ int main(int argc, char **argv) {
         ->check(CLI::ExistingFile);
     app.add_option("--error-image", errorImagePath, "With --compare: write the per-pixel error here");
     CLI11_PARSE(app, argc, argv);
+    // Warnings (non-finite voxels replaced, a step raised) go to stderr: stdout is the JSON line.
+    spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-render"));
 
     try {
         nlohmann::json report;
@@ -134,6 +138,7 @@ int main(int argc, char **argv) {
             else
                 report["tf_table"] = {{"entries", stats.tfTableEntries}, {"max_error", stats.tfTableError}};
             report["rays"] = {stats.raysWide, stats.raysHigh};
+            if (stats.stepRaised) report["step_used"] = stats.stepUsed;
             report["mean_samples_per_ray"] = stats.meanSamplesPerRay;
             if (scene.quality.emptySpaceSkipping) {
                 report["skipped_segments_per_ray"] = stats.skippedSegmentsPerRay;

@@ -1,0 +1,49 @@
+#pragma once
+// The numerical-stability cases of issue 4: stiff scenes (optical depth per step far above 1)
+// and extreme ones (the other ends of every range). Each case renders through the OpenCL ray
+// caster and the double-precision reference where both apply, compares with a closed form
+// where one exists and with the reference otherwise, and counts NaN and Inf in every output.
+//
+// The unit tests (tests/unit/test_stability.cpp) and volcast-stability, the command that
+// prints the README's "Numerical stability" table, run this same code, so the table shows
+// what the tests check.
+
+#include "renderer/opencl_context.hpp"
+
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace volcast::stability {
+
+// One row of the table: one case on one path.
+struct Row {
+    std::string caseName;     // what was rendered, e.g. "opaque media, a = 1, steps 0.01–10"
+    std::string path;         // "OpenCL", "reference", "pre-integration table", …
+    std::string comparedWith; // the truth and the error measure, e.g. "closed form, |ΔA|, |Δrgb|"
+    double worst = 0;         // the worst error seen
+    std::string worstAt;      // the variant it was seen in
+    double bound = 0;         // the case's bound on it (each derived where the case is defined)
+    size_t values = 0;        // output values checked for NaN and Inf
+    size_t nonFinite = 0;     // NaN or Inf among them
+    bool clearError = false;  // the right answer is a clear error (worst, bound unused)
+    std::string outcome;      // the error messages seen, or a note on what the row measured
+    std::vector<std::string> failures; // checks that are not a number against a bound
+
+    bool passed() const { return nonFinite == 0 && worst <= bound && failures.empty(); }
+};
+
+// One bullet of the issue: its rows, run on the given OpenCL context.
+struct Case {
+    std::string id; // a test name: OpacityCorrection, FaintMedia, …
+    std::function<std::vector<Row>(OpenClContext &)> run;
+};
+
+// Every case of issue 4, in the issue's order.
+const std::vector<Case> &cases();
+
+// The README table: case, path, compared with, worst error seen, bound, NaN/Inf count.
+std::string markdownTable(const std::vector<Row> &rows);
+
+} // namespace volcast::stability
