@@ -1,0 +1,82 @@
+#include "server/config.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <cstdlib>
+#include <iostream>
+
+namespace volcast::server {
+
+#ifndef VOLCAST_DEFAULT_WEB_ROOT
+#define VOLCAST_DEFAULT_WEB_ROOT "web"
+#endif
+
+std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
+    ServerConfig c;
+    c.webRoot = VOLCAST_DEFAULT_WEB_ROOT;
+    CLI::App app{"volcast-server: remote volume rendering over HTTP and WebSocket (see server/README.md)."};
+    std::vector<std::string> dataDirs;
+    double budgetMiB = double(c.memoryBudgetBytes >> 20);
+    std::string webRoot = c.webRoot.string(), portFile;
+    // Each option also reads its environment variable; a flag given on the command line wins.
+    app.add_option("--bind", c.bindAddress, "Address to listen on (127.0.0.1: this machine only)")
+        ->envname("VOLCAST_BIND");
+    app.add_option("--port", c.port, "TCP port for HTTP and WebSocket (0: any free port)")->envname("VOLCAST_PORT");
+    app.add_option("--data", dataDirs, "Data folder holding volumes; repeat for several (env: ':'-separated)")
+        ->envname("VOLCAST_DATA")
+        ->delimiter(':');
+    app.add_option("--web-root", webRoot, "Folder of static files served over HTTP")->envname("VOLCAST_WEB_ROOT");
+    app.add_option("--device", c.device, "OpenCL device: auto, gpu, cpu or part of its name")
+        ->envname("VOLCAST_DEVICE");
+    app.add_option("--kernel-cache", c.kernelCacheDir, "Folder for PoCL's compiled-kernel cache")
+        ->envname("VOLCAST_KERNEL_CACHE");
+    app.add_option("--memory-budget-mib", budgetMiB, "Host memory for loaded volumes, MiB")
+        ->envname("VOLCAST_MEMORY_BUDGET_MIB")
+        ->check(CLI::Range(1.0, 1e9));
+    app.add_option("--max-sessions", c.maxSessions, "WebSocket sessions at once")
+        ->envname("VOLCAST_MAX_SESSIONS")
+        ->check(CLI::Range(1, 100000));
+    app.add_option("--allowed-origin", c.allowedOrigins,
+                   "Browser Origin allowed to open a session; repeat, or '*' for any (default: loopback "
+                   "origins on this port; env: ','-separated)")
+        ->envname("VOLCAST_ALLOWED_ORIGINS")
+        ->delimiter(',');
+    app.add_option("--default-volume", c.defaultVolume, "Volume loaded at start; /readyz waits for it ('' for none)")
+        ->envname("VOLCAST_DEFAULT_VOLUME");
+    app.add_option("--token", c.token, "Access token clients must give in hello (default: none)")
+        ->envname("VOLCAST_TOKEN");
+    app.add_option("--io-threads", c.ioThreads, "Threads running the network")
+        ->envname("VOLCAST_IO_THREADS")
+        ->check(CLI::Range(1, 64));
+    app.add_option("--idle-ms", c.idleMs, "ms without input before refinement starts")
+        ->envname("VOLCAST_IDLE_MS")
+        ->check(CLI::Range(0.0, 60000.0));
+    app.add_option("--target-frame-ms", c.defaultTargetFrameMs, "Default frame-time target while interacting, ms")
+        ->envname("VOLCAST_TARGET_FRAME_MS")
+        ->check(CLI::Range(1.0, 10000.0));
+    app.add_option("--jitter-passes", c.jitterPasses, "Jittered passes a final level with jitter accumulates")
+        ->envname("VOLCAST_JITTER_PASSES")
+        ->check(CLI::Range(1, 64));
+    app.add_option("--error-calibration", c.errorCalibration,
+                   "Calibrate each level's error against the reference integrator (true/false)")
+        ->envname("VOLCAST_ERROR_CALIBRATION");
+    app.add_option("--max-message-bytes", c.maxMessageBytes, "Largest text message accepted, bytes")
+        ->envname("VOLCAST_MAX_MESSAGE_BYTES")
+        ->check(CLI::Range(1024, 16 << 20));
+    app.add_option("--port-file", portFile, "Write the bound port to this file once listening (for scripts)");
+    app.add_option("--log-level", c.logLevel, "trace, debug, info, warn, error")->envname("VOLCAST_LOG_LEVEL");
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError &e) {
+        exitCode = app.exit(e);
+        return std::nullopt;
+    }
+    for (const auto &d : dataDirs)
+        if (!d.empty()) c.dataDirs.emplace_back(d);
+    c.webRoot = webRoot;
+    c.portFile = portFile;
+    c.memoryBudgetBytes = uint64_t(budgetMiB * 1024.0 * 1024.0);
+    return c;
+}
+
+} // namespace volcast::server

@@ -1,0 +1,39 @@
+#pragma once
+// Everything the server can be told, from flags or environment (flags win). server/README.md
+// lists each one; parseConfig fills this from argv and the VOLCAST_* variables.
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace volcast::server {
+
+struct ServerConfig {
+    std::string bindAddress = "127.0.0.1";   // loopback: nothing outside this machine by default
+    uint16_t port = 8080;                     // 0: any free port (tests)
+    std::vector<std::filesystem::path> dataDirs;   // empty: only the built-in volumes
+    std::filesystem::path webRoot;            // static files (the browser client)
+    std::string device;                       // OpenCL device: auto, gpu, cpu or part of a name
+    std::string kernelCacheDir;               // PoCL's kernel cache folder
+    uint64_t memoryBudgetBytes = uint64_t(4096) << 20;   // loaded volumes, host side
+    int maxSessions = 16;
+    std::vector<std::string> allowedOrigins;  // empty: loopback origins on our port only; "*": any
+    std::string defaultVolume = "builtin:demo";   // loaded at start; /readyz waits for it
+    std::string token;                        // empty: no token needed in hello
+    int ioThreads = 2;                        // threads running the network
+    double idleMs = 150;                      // ms without input before refinement starts
+    double defaultTargetFrameMs = 40;         // ms, the automatic policy's target
+    int jitterPasses = 4;                     // passes accumulated by a jittered final level
+    bool errorCalibration = true;             // calibrate error estimates against the reference
+    size_t maxMessageBytes = 64 * 1024;       // one text message
+    std::filesystem::path portFile;           // write the bound port here once listening
+    std::string logLevel = "info";
+};
+
+// Parse flags and environment. Returns nullopt after printing help or an error (exitCode set).
+std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode);
+
+} // namespace volcast::server

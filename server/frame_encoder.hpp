@@ -1,0 +1,27 @@
+#pragma once
+// Frames encoded in memory with OpenImageIO (PLATFORM.md: ImageOutput::create with an
+// IOVecOutput proxy, no disk). The renderer's images are premultiplied float RGBA.
+//  - JPEG has no alpha: the premultiplied colour is the image composited over black, as
+//    volcast-render's .png writer does (renderer/image.cpp).
+//  - PNG (the final frame) is lossless RGBA: protocol/README.md's "premultiplied RGBA as 8-bit
+//    straight RGBA", so a client can composite it over any background. toStraightRgba8 is the
+//    conversion, exposed so tests can reproduce it byte for byte.
+
+#include "renderer/image.hpp"
+
+#include <cstdint>
+#include <vector>
+
+namespace volcast::server {
+
+// 8-bit RGB over black: round(clamp(c) · 255), as renderer/image.cpp writes .png files.
+std::vector<uint8_t> toRgb8OverBlack(const Image &image);
+// 8-bit straight RGBA: A = round(a · 255), C = round(min(c / a, 1) · 255) (0 where a = 0).
+std::vector<uint8_t> toStraightRgba8(const Image &image);
+
+// Throws std::runtime_error with OIIO's message on failure.
+std::vector<uint8_t> encodeJpeg(const Image &image, int quality);
+// zlib level 1: ~5x faster than the default for ~20 % more bytes (PLATFORM.md).
+std::vector<uint8_t> encodePng(const Image &image, int compressionLevel = 1);
+
+} // namespace volcast::server

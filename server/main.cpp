@@ -1,0 +1,45 @@
+// volcast-server: the rendering service. Flags and environment in server/README.md.
+
+#include "server/config.hpp"
+#include "server/server.hpp"
+
+#include <boost/asio/signal_set.hpp>
+#include <spdlog/spdlog.h>
+
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+
+int main(int argc, char **argv) {
+    int exitCode = 0;
+    auto config = volcast::server::parseConfig(argc, argv, exitCode);
+    if (!config) return exitCode;
+    spdlog::set_level(spdlog::level::from_str(config->logLevel));
+    try {
+        volcast::server::Server server(*config);
+        // Signals are waited for on a context of their own, so that stopping the server's
+        // network from the handler cannot deadlock on it. As PID 1 in a container nothing
+        // else would handle SIGTERM (PLATFORM.md).
+        boost::asio::io_context signals;
+        boost::asio::signal_set set(signals, SIGINT, SIGTERM);
+        set.async_wait([&](const boost::system::error_code &ec, int signal) {
+            if (ec) return;
+            server.stop(std::string("server shutting down (") + (signal == SIGTERM ? "SIGTERM" : "SIGINT") + ")");
+        });
+        server.start();
+        const std::string host = config->bindAddress == "0.0.0.0" ? "127.0.0.1" : config->bindAddress;
+        if (!config->portFile.empty()) {
+            std::ofstream(config->portFile) << server.port() << '\n';
+        }
+        std::cout << "volcast-server: listening on http://" << host << ':' << server.port() << "/ (WebSocket ws://"
+                  << host << ':' << server.port() << "/ws), device: " << server.state().device().name << std::endl;
+        signals.run();
+        server.wait();
+        spdlog::info("stopped");
+        return 0;
+    } catch (const std::exception &e) {
+        std::cerr << "volcast-server: " << e.what() << std::endl;
+        return 1;
+    }
+}

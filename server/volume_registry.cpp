@@ -1,0 +1,294 @@
+#include "server/volume_registry.hpp"
+
+#include "renderer/synthetic.hpp"
+#include "renderer/volume_io.hpp"
+#include "renderer/volume_source.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
+namespace volcast::server {
+
+namespace fs = std::filesystem;
+using protocol::ErrorCode;
+using protocol::ProtocolError;
+
+namespace {
+constexpr size_t kMaxListed = 10000;   // files listed per request: a huge folder is not a hang
+
+bool isInside(const fs::path &p, const fs::path &folder) {
+    auto [f, pIt] = std::mismatch(folder.begin(), folder.end(), p.begin(), p.end());
+    return f == folder.end();
+}
+std::string lower(std::string s) {
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return s;
+}
+// The in-memory cost of a volume: float32 voxels, plus the mip pyramid (1/7) and slack for
+// bricks and tables the renderer builds on demand.
+uint64_t memoryOf(const Volume &v) { return uint64_t(double(v.voxelCount()) * 4.0 * 1.2); }
+} // namespace
+
+bool hasVolumeExtension(const fs::path &p) {
+    const std::string name = lower(p.filename().string());
+    for (const char *ext : {".nhdr", ".nrrd", ".mha", ".mhd", ".nii", ".nii.gz"})
+        if (name.size() > std::string_view(ext).size() && name.ends_with(ext)) return true;
+    return false;
+}
+
+protocol::VolumeInfo VolumeEntry::info() const {
+    protocol::VolumeInfo i;
+    const Volume &v = *volume;
+    i.name = name;
+    i.loaded = true;
+    i.dims = std::array<int64_t, 3>{v.dims.x, v.dims.y, v.dims.z};
+    i.spacing = std::array<double, 3>{v.spacing.x, v.spacing.y, v.spacing.z};
+    i.origin = std::array<double, 3>{v.origin.x, v.origin.y, v.origin.z};
+    i.voxelType = std::string(voxelTypeName(v.sourceType));
+    i.valueRange = std::array<double, 2>{v.range.min, v.range.max};
+    protocol::HistogramInfo h;
+    h.range = {v.histogram.range.min, v.histogram.range.max};
+    h.counts = v.histogram.counts;
+    i.histogram = h;
+    return i;
+}
+
+VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBytes, OpenClContext &cl,
+                               Metrics &metrics)
+    : budgetBytes_(budgetBytes), cl_(cl), metrics_(metrics) {
+    for (const auto &d : dataDirs) {
+        std::error_code ec;
+        fs::path c = fs::canonical(d, ec);
+        if (ec || !fs::is_directory(c)) throw std::invalid_argument("data folder " + d.string() + ": not a folder");
+        dataDirs_.push_back(c);
+    }
+    loader_ = std::thread([this] { loaderLoop(); });
+}
+
+VolumeRegistry::~VolumeRegistry() { stop(); }
+
+void VolumeRegistry::stop() {
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;
+    }
+    wake_.notify_all();
+    if (loader_.joinable()) loader_.join();
+}
+
+std::variant<fs::path, ProtocolError> VolumeRegistry::resolve(const std::string &name) const {
+    for (const fs::path &folder : dataDirs_) {
+        std::error_code ec;
+        // weakly_canonical follows every symbolic link of the existing part: a link that
+        // points out of the folder lands outside it and is refused below.
+        const fs::path p = fs::weakly_canonical(folder / fs::path(name), ec);
+        if (ec || !fs::exists(p, ec)) continue;
+        if (!isInside(p, folder))
+            return ProtocolError{ErrorCode::NotFound,
+                                 "volume \"" + name + "\" resolves outside the data folders (a symbolic link?)",
+                                 nullptr, "open_volume"};
+        if (!fs::is_regular_file(p, ec) && !fs::is_directory(p, ec)) continue;
+        return p;
+    }
+    return ProtocolError{ErrorCode::NotFound, "no volume named \"" + name + "\" (list_volumes lists them)", nullptr,
+                         "open_volume"};
+}
+
+std::vector<protocol::VolumeInfo> VolumeRegistry::list() const {
+    std::vector<protocol::VolumeInfo> out;
+    std::lock_guard lock(mutex_);
+    auto add = [&](const std::string &name) {
+        if (auto it = loaded_.find(name); it != loaded_.end()) {
+            out.push_back(it->second->info());
+        } else {
+            protocol::VolumeInfo i;
+            i.name = name;
+            out.push_back(i);
+        }
+    };
+    for (const auto &b : builtinVolumeNames()) add(std::string(kBuiltinPrefix) + b);
+    for (const fs::path &folder : dataDirs_) {
+        std::error_code ec;
+        fs::recursive_directory_iterator it(folder, fs::directory_options::skip_permission_denied, ec), end;
+        for (; !ec && it != end && out.size() < kMaxListed; it.increment(ec)) {
+            if (!hasVolumeExtension(it->path()) || !it->is_regular_file(ec)) continue;
+            std::error_code ec2;
+            // Symbolic links are listed only when they stay inside the folder.
+            if (!isInside(fs::weakly_canonical(it->path(), ec2), folder) || ec2) continue;
+            add(it->path().lexically_relative(folder).generic_string());
+        }
+    }
+    return out;
+}
+
+bool VolumeRegistry::isLoaded(const std::string &name) const {
+    std::lock_guard lock(mutex_);
+    return loaded_.count(name) > 0;
+}
+
+void VolumeRegistry::open(const std::string &name, Progress progressFn, Done done) {
+    fs::path path;
+    if (name.starts_with(kBuiltinPrefix)) {
+        const auto names = builtinVolumeNames();
+        if (std::find(names.begin(), names.end(), name.substr(kBuiltinPrefix.size())) == names.end()) {
+            done(ProtocolError{ErrorCode::NotFound, "no built-in volume named \"" + name + "\"", nullptr, "open_volume"});
+            return;
+        }
+    } else {
+        auto resolved = resolve(name);
+        if (auto *e = std::get_if<ProtocolError>(&resolved)) {
+            done(*e);
+            return;
+        }
+        path = std::get<fs::path>(resolved);
+    }
+    std::unique_lock lock(mutex_);
+    if (stopping_) {
+        done(ProtocolError{ErrorCode::Busy, "the server is shutting down", nullptr, "open_volume"});
+        return;
+    }
+    if (auto it = loaded_.find(name); it != loaded_.end()) {
+        lastUse_[name] = ++useClock_;
+        auto entry = it->second;
+        lock.unlock();
+        done(entry);
+        return;
+    }
+    auto &pending = pending_[name];
+    if (!pending) {
+        pending = std::make_shared<Pending>();
+        pending->name = name;
+        pending->path = path;
+        queue_.push_back(pending);
+        wake_.notify_all();
+    }
+    pending->waiters.push_back({std::move(progressFn), std::move(done)});
+}
+
+void VolumeRegistry::progress(const std::string &name, protocol::ProgressStage stage, const std::string &task,
+                              double fraction) {
+    std::vector<Progress> targets;
+    {
+        std::lock_guard lock(mutex_);
+        if (auto it = pending_.find(name); it != pending_.end())
+            for (const auto &w : it->second->waiters) targets.push_back(w.progress);
+    }
+    protocol::ProgressMessage m;
+    m.volume = name;
+    m.stage = stage;
+    m.task = task;
+    m.fraction = fraction;
+    for (auto &t : targets) t(m);
+}
+
+void VolumeRegistry::loaderLoop() {
+    for (;;) {
+        std::shared_ptr<Pending> next;
+        {
+            std::unique_lock lock(mutex_);
+            wake_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+            if (stopping_) {
+                // Every waiter gets an answer, even at shutdown.
+                for (auto &[name, p] : pending_)
+                    for (auto &w : p->waiters)
+                        w.done(ProtocolError{ErrorCode::Busy, "the server is shutting down", nullptr, "open_volume"});
+                pending_.clear();
+                return;
+            }
+            next = queue_.front();
+            queue_.pop_front();
+        }
+        Result result = load(*next);
+        std::vector<Waiter> waiters;
+        {
+            std::lock_guard lock(mutex_);
+            if (auto *entry = std::get_if<std::shared_ptr<VolumeEntry>>(&result)) {
+                loaded_[next->name] = *entry;
+                lastUse_[next->name] = ++useClock_;
+            }
+            waiters = std::move(pending_[next->name]->waiters);
+            pending_.erase(next->name);
+            publishMemory();
+        }
+        for (auto &w : waiters) w.done(result);
+    }
+}
+
+VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
+    using protocol::ProgressStage;
+    const auto failed = [&](ErrorCode code, const std::string &message) -> Result {
+        spdlog::warn("loading {}: {}", p.name, message);
+        return ProtocolError{code, message, nullptr, "open_volume"};
+    };
+    try {
+        progress(p.name, ProgressStage::Loading, "", 0.0);
+        LoadOptions options;
+        {
+            // What the budget can hold at most, even after evicting every unused volume.
+            std::lock_guard lock(mutex_);
+            options.maxBytes = budgetBytes_;
+        }
+        LoadedVolume loaded = p.path.empty() ? loadSceneVolume(p.name, options) : loadSceneVolume(p.path.string(), options);
+        progress(p.name, ProgressStage::Loading, "", 1.0);
+        auto entry = std::make_shared<VolumeEntry>();
+        entry->name = p.name;
+        entry->bytes = memoryOf(loaded.volume);
+        {
+            std::lock_guard lock(mutex_);
+            if (!makeRoom(entry->bytes))
+                return failed(ErrorCode::LoadFailed,
+                              p.name + ": needs " + std::to_string(entry->bytes >> 20) +
+                                  " MiB, over the server's memory budget with the volumes in use");
+        }
+        entry->volume = std::make_shared<const Volume>(std::move(loaded.volume));
+        progress(p.name, ProgressStage::Uploading, "", 0.0);
+        entry->renderer = std::make_unique<OpenClRenderer>(cl_, entry->volume);
+        progress(p.name, ProgressStage::Uploading, "", 1.0);
+        metrics_.volumeLoaded(entry->bytes);
+        spdlog::info("loaded volume {} ({}x{}x{}, {} MiB)", p.name, entry->volume->dims.x, entry->volume->dims.y,
+                     entry->volume->dims.z, entry->bytes >> 20);
+        return entry;
+    } catch (const VolumeLoadError &e) {
+        return failed(ErrorCode::LoadFailed, e.what());
+    } catch (const std::bad_alloc &) {
+        return failed(ErrorCode::LoadFailed, p.name + ": out of memory while loading");
+    } catch (const OpenClError &e) {
+        return failed(ErrorCode::RenderFailed, p.name + ": " + e.what());
+    } catch (const std::exception &e) {
+        return failed(ErrorCode::LoadFailed, p.name + ": " + e.what());
+    }
+}
+
+bool VolumeRegistry::makeRoom(uint64_t bytes) {
+    auto used = [&] {
+        uint64_t total = 0;
+        for (const auto &[n, e] : loaded_) total += e->bytes;
+        return total;
+    };
+    while (used() + bytes > budgetBytes_) {
+        // The least recently opened volume no session holds (use_count 1: only this map).
+        std::string victim;
+        uint64_t oldest = UINT64_MAX;
+        for (const auto &[n, e] : loaded_)
+            if (e.use_count() == 1 && lastUse_[n] < oldest) {
+                oldest = lastUse_[n];
+                victim = n;
+            }
+        if (victim.empty()) return false;
+        spdlog::info("evicting unused volume {} for the memory budget", victim);
+        metrics_.volumeEvicted(loaded_[victim]->bytes);
+        loaded_.erase(victim);
+        lastUse_.erase(victim);
+    }
+    publishMemory();
+    return true;
+}
+
+void VolumeRegistry::publishMemory() {
+    uint64_t total = 0;
+    for (const auto &[n, e] : loaded_) total += e->bytes;
+    metrics_.setVolumeMemory(total, int(loaded_.size()));
+}
+
+} // namespace volcast::server

@@ -1,0 +1,458 @@
+// The server over loopback: an in-process server per test suite, driven by the C++ client
+// library exactly as a script would drive it. Viewports are tiny (64²) and the volumes are
+// built-in ones, so each test takes well under a few seconds on the 2-core PoCL machine.
+
+#include "client/ws_client.hpp"
+#include "renderer/opencl_renderer.hpp"
+#include "renderer/scene.hpp"
+#include "renderer/volume_source.hpp"
+#include "server/frame_encoder.hpp"
+#include "server/server.hpp"
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <gtest/gtest.h>
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using nlohmann::json;
+using volcast::client::Client;
+using volcast::client::Message;
+namespace protocol = volcast::protocol;
+namespace http = boost::beast::http;
+
+constexpr auto kTimeout = 20s;   // generous: a cold PoCL cache builds programs for seconds
+
+// ---- helpers -------------------------------------------------------------------------
+
+struct HttpReply {
+    int status = 0;
+    std::string contentType;
+    std::string body;
+};
+
+HttpReply httpGet(uint16_t port, const std::string &target) {
+    boost::asio::io_context ioc;
+    boost::asio::ip::tcp::resolver resolver(ioc);
+    boost::beast::tcp_stream stream(ioc);
+    stream.connect(resolver.resolve("127.0.0.1", std::to_string(port)));
+    http::request<http::empty_body> req{http::verb::get, target, 11};
+    req.set(http::field::host, "127.0.0.1");
+    http::write(stream, req);
+    boost::beast::flat_buffer buffer;
+    http::response<http::string_body> res;
+    http::read(stream, buffer, res);
+    return {int(res.result_int()), std::string(res[http::field::content_type]), res.body()};
+}
+
+const protocol::ProtocolError *asError(const Message &m) {
+    return m.decoded ? std::get_if<protocol::ProtocolError>(&*m.decoded) : nullptr;
+}
+
+// Send a request and return its reply (text), keeping frames and other messages aside.
+Message request(Client &c, json message, std::vector<Message> *skipped = nullptr) {
+    const json id = message.at("id");
+    c.sendText(message.dump());
+    return volcast::client::waitForReply(c, id, kTimeout, skipped);
+}
+
+// Messages until a final frame; every frame in order. Fails the test on timeout.
+std::vector<volcast::client::Frame> framesUntilFinal(Client &c, std::vector<Message> *texts = nullptr,
+                                                     std::chrono::milliseconds timeout = kTimeout) {
+    std::vector<volcast::client::Frame> frames;
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+        auto m = c.next(100ms);
+        if (!m) continue;
+        if (m->isFrame) {
+            EXPECT_TRUE(m->decodeError.empty()) << m->decodeError;
+            frames.push_back(m->frame);
+            if (m->frame.header.final) return frames;
+        } else if (texts) {
+            texts->push_back(std::move(*m));
+        } else if (auto *e = asError(*m)) {
+            ADD_FAILURE() << "unexpected error: " << e->message;
+        }
+    }
+    ADD_FAILURE() << "no final frame in time (" << frames.size() << " frames)";
+    return frames;
+}
+
+json cameraAt(double angleDeg) {
+    const double a = angleDeg * M_PI / 180.0, r = 420;
+    return {{"eye", {63.5 + r * std::sin(a), 63.5 + 250, 63.5 + r * std::cos(a)}},
+            {"target", {63.5, 63.5, 63.5}},
+            {"up", {0, 1, 0}},
+            {"projection", "perspective"},
+            {"fov_y_deg", 30}};
+}
+
+// Decode a PNG frame to 8-bit RGBA.
+std::vector<uint8_t> decodePng(const std::vector<uint8_t> &png, int &w, int &h, int &channels) {
+    OIIO::Filesystem::IOMemReader reader(png.data(), png.size());
+    // The bytes as stored (straight alpha): by default OIIO would premultiply them.
+    OIIO::ImageSpec config;
+    config.attribute("oiio:UnassociatedAlpha", 1);
+    OIIO::Filesystem::IOProxy *proxy = &reader;
+    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
+    auto in = OIIO::ImageInput::open("frame.png", &config, &reader);
+    if (!in) throw std::runtime_error("png decode: " + OIIO::geterror());
+    const auto &spec = in->spec();
+    w = spec.width;
+    h = spec.height;
+    channels = spec.nchannels;
+    std::vector<uint8_t> pixels(size_t(w) * size_t(h) * size_t(channels));
+    in->read_image(0, 0, 0, channels, OIIO::TypeDesc::UINT8, pixels.data());
+    return pixels;
+}
+
+double metricValue(const std::string &text, const std::string &name) {
+    const auto pos = text.find("\n" + name + " ");
+    if (pos == std::string::npos) return -1;
+    return std::stod(text.substr(pos + name.size() + 2));
+}
+
+// ---- the shared server ---------------------------------------------------------------
+
+class ServerTest : public ::testing::Test {
+  protected:
+    static inline std::unique_ptr<volcast::server::Server> server;
+    static inline fs::path tmp;
+
+    static void SetUpTestSuite() {
+        tmp = fs::temp_directory_path() / ("volcast_server_test_" + std::to_string(::getpid()));
+        fs::remove_all(tmp);
+        fs::create_directories(tmp / "data" / "ct");
+        fs::create_directories(tmp / "outside");
+        fs::create_directories(tmp / "web" / "app");
+        std::ofstream(tmp / "outside" / "secret.nrrd") << "NRRD0004\n";
+        std::ofstream(tmp / "data" / "ct" / "broken.nrrd") << "NRRD0004\ntype: float\n";   // truncated header
+        fs::create_symlink(tmp / "outside" / "secret.nrrd", tmp / "data" / "escape.nrrd");
+        std::ofstream(tmp / "web" / "index.html") << "<!doctype html><title>volcast</title>";
+        std::ofstream(tmp / "web" / "app" / "main.js") << "export const x = 1;";
+        std::ofstream(tmp / "secret.txt") << "not for the web";
+        fs::create_symlink(tmp / "secret.txt", tmp / "web" / "leak.txt");
+
+        volcast::server::ServerConfig config;
+        config.port = 0;
+        config.dataDirs = {tmp / "data"};
+        config.webRoot = tmp / "web";
+        config.idleMs = 100;
+        config.ioThreads = 2;
+        server = std::make_unique<volcast::server::Server>(config);
+        server->start();
+        // Ready once the default (demo) volume is in memory.
+        const auto deadline = std::chrono::steady_clock::now() + kTimeout;
+        while (!server->state().notReadyReason().empty() && std::chrono::steady_clock::now() < deadline)
+            std::this_thread::sleep_for(20ms);
+    }
+    static void TearDownTestSuite() {
+        server.reset();
+        fs::remove_all(tmp);
+    }
+
+    uint16_t port() const { return server->port(); }
+
+    // A client that said hello and opened `volume` with a 64² viewport; returns the state.
+    std::unique_ptr<Client> openSession(const std::string &volume, json *stateOut = nullptr, int side = 64) {
+        auto c = std::make_unique<Client>("127.0.0.1", port());
+        const Message hello = request(*c, {{"type", "hello"}, {"id", 1}, {"protocol", 1}, {"client", "gtest"}});
+        EXPECT_TRUE(hello.decoded && std::holds_alternative<protocol::ServerHello>(*hello.decoded)) << hello.text;
+        c->sendText(json{{"type", "viewport"}, {"id", 2}, {"image", {{"width", side}, {"height", side}}}}.dump());
+        const Message state = request(*c, {{"type", "open_volume"}, {"id", 3}, {"name", volume}});
+        EXPECT_TRUE(state.decoded && std::holds_alternative<protocol::StateMessage>(*state.decoded)) << state.text;
+        if (stateOut) *stateOut = json::parse(state.text);
+        return c;
+    }
+};
+
+// ---- HTTP ---------------------------------------------------------------------------
+
+TEST_F(ServerTest, HealthReadinessAndMetrics) {
+    EXPECT_EQ(httpGet(port(), "/healthz").status, 200);
+    const HttpReply ready = httpGet(port(), "/readyz");
+    EXPECT_EQ(ready.status, 200) << ready.body;
+    const HttpReply metrics = httpGet(port(), "/metrics");
+    EXPECT_EQ(metrics.status, 200);
+    EXPECT_NE(metrics.contentType.find("text/plain"), std::string::npos);
+    for (const char *name : {"volcast_sessions", "volcast_frames_dropped_stale_total", "volcast_render_seconds_bucket",
+                             "volcast_encode_seconds_count", "volcast_volume_memory_bytes"})
+        EXPECT_NE(metrics.body.find(name), std::string::npos) << name;
+    // The demo volume (128³ float32) is in memory and counted.
+    EXPECT_GT(metricValue(metrics.body, "volcast_volume_memory_bytes"), 128.0 * 128 * 128 * 4);
+}
+
+TEST_F(ServerTest, ServesStaticFilesWithTypesAndRefusesTraversal) {
+    const HttpReply index = httpGet(port(), "/");
+    EXPECT_EQ(index.status, 200);
+    EXPECT_EQ(index.contentType, "text/html; charset=utf-8");
+    EXPECT_NE(index.body.find("<title>volcast</title>"), std::string::npos);
+    const HttpReply js = httpGet(port(), "/app/main.js?v=1");
+    EXPECT_EQ(js.status, 200);
+    EXPECT_EQ(js.contentType, "text/javascript; charset=utf-8");
+    // Out of the web root by "..", encoded "..", and a symbolic link: all refused alike.
+    for (const char *target : {"/../secret.txt", "/app/../../secret.txt", "/%2e%2e/secret.txt", "/leak.txt",
+                               "/app/..%2f..%2fsecret.txt", "/missing.html"}) {
+        const HttpReply r = httpGet(port(), target);
+        EXPECT_EQ(r.status, 404) << target;
+        EXPECT_EQ(r.body.find("not for the web"), std::string::npos) << target;
+    }
+}
+
+// ---- sessions -----------------------------------------------------------------------
+
+TEST_F(ServerTest, FinalFrameMatchesTheRendererExactly) {
+    json state;
+    auto c = openSession("builtin:demo", &state);
+    const auto frames = framesUntilFinal(*c);
+    ASSERT_FALSE(frames.empty());
+    // The ladder: levels rising, only the last frame final and PNG, the others JPEG.
+    for (size_t i = 0; i < frames.size(); ++i) {
+        EXPECT_EQ(frames[i].header.seq, frames[0].header.seq + i);
+        EXPECT_EQ(frames[i].header.request, json(3));
+        if (i > 0) {
+            EXPECT_GT(frames[i].header.level, frames[i - 1].header.level);
+        }
+        EXPECT_EQ(frames[i].header.final, i + 1 == frames.size());
+        EXPECT_EQ(frames[i].header.codec, frames[i].header.final ? protocol::Codec::Png : protocol::Codec::Jpeg);
+    }
+    const auto &final = frames.back();
+    ASSERT_EQ(final.header.width, 64);
+
+    // Render the state's scene directly with the same renderer and convert it the same way.
+    const volcast::Scene scene = volcast::parseScene(state.at("scene").dump());
+    const auto loaded = volcast::loadSceneVolume(scene.volume);
+    volcast::OpenClContext cl;
+    volcast::OpenClRenderer renderer(cl, loaded.volume);
+    const volcast::Image image = renderer.render(volcast::resolvedTransferFunction(scene, loaded.volume.range),
+                                                 scene.camera, scene.width, scene.height, scene.quality,
+                                                 scene.clipPlanes);
+    const std::vector<uint8_t> expected = volcast::server::toStraightRgba8(image);
+    int w = 0, h = 0, channels = 0;
+    const std::vector<uint8_t> got = decodePng(final.image, w, h, channels);
+    ASSERT_EQ(w, 64);
+    ASSERT_EQ(h, 64);
+    ASSERT_EQ(channels, 4);
+    // PNG is lossless and the kernel is deterministic for the same scene on the same device,
+    // so the bytes agree exactly; 1/255 is allowed only for a last-bit difference in the
+    // float image should the device ever reorder its arithmetic.
+    int worst = 0;
+    for (size_t i = 0; i < got.size(); ++i) worst = std::max(worst, std::abs(int(got[i]) - int(expected[i])));
+    EXPECT_LE(worst, 1);
+}
+
+TEST_F(ServerTest, DragDropsStaleRequestsThenRefinesToFinal) {
+    auto c = openSession("builtin:demo");
+    framesUntilFinal(*c);   // the opening ladder
+    c->sendText(R"({"type":"interaction_start","id":"drag"})");
+    constexpr int kMoves = 12;
+    for (int i = 0; i < kMoves; ++i)
+        c->sendText(json{{"type", "camera"}, {"id", 100 + i}, {"camera", cameraAt(5.0 * i)}}.dump());
+    std::this_thread::sleep_for(300ms);   // still dragging, pointer at rest longer than idle: refinement may start
+    c->sendText(R"({"type":"interaction_end","id":"drop"})");
+    const auto frames = framesUntilFinal(*c);
+    std::set<int> answered;
+    int lastRequest = 0;
+    uint64_t lastSeq = 0;
+    for (const auto &f : frames) {
+        const int r = f.header.request.get<int>();
+        EXPECT_GE(r, lastRequest) << "frames out of order";
+        EXPECT_GT(f.header.seq, lastSeq);
+        lastRequest = r;
+        lastSeq = f.header.seq;
+        answered.insert(r);
+    }
+    // Latest wins: the burst of moves arrives faster than frames render, so most are skipped.
+    EXPECT_LT(answered.size(), size_t(kMoves));
+    EXPECT_EQ(frames.back().header.request, json(100 + kMoves - 1));
+    EXPECT_TRUE(frames.back().header.final);
+    EXPECT_EQ(frames.back().header.camera, cameraAt(5.0 * (kMoves - 1)));
+}
+
+TEST_F(ServerTest, NewInputCancelsRefinementWithinOneLevel) {
+    auto c = openSession("builtin:demo", nullptr, 160);
+    // A slow final level (fine step) so that refinement is still under way when input comes.
+    request(*c, {{"type", "get_state"}, {"id", 4}});
+    c->sendText(R"({"type":"quality_policy","id":5,"mode":"automatic","quality":{"step":0.1}})");
+    // Wait for the first refined (level >= 1) frame of request 5.
+    int refinedLevel = -1;
+    const auto deadline = std::chrono::steady_clock::now() + kTimeout;
+    while (refinedLevel < 1 && std::chrono::steady_clock::now() < deadline) {
+        auto m = c->next(100ms);
+        if (m && m->isFrame && m->frame.header.request == json(5)) {
+            ASSERT_FALSE(m->frame.header.final) << "the ladder finished before the test could interrupt it";
+            refinedLevel = m->frame.header.level;
+        }
+    }
+    ASSERT_GE(refinedLevel, 1);
+    c->sendText(json{{"type", "camera"}, {"id", 6}, {"camera", cameraAt(40)}}.dump());
+    const auto frames = framesUntilFinal(*c);
+    int oldFrames = 0;
+    for (const auto &f : frames) {
+        if (f.header.request != json(5)) continue;
+        ++oldFrames;
+        EXPECT_FALSE(f.header.final);
+    }
+    // At most the frame that was in flight; it is normally dropped as stale.
+    EXPECT_LE(oldFrames, 1);
+    EXPECT_EQ(frames.back().header.request, json(6));
+}
+
+TEST_F(ServerTest, TwoSessionsOpeningOneVolumeLoadItOnce) {
+    const uint64_t before = server->state().metrics().volumeLoads();
+    Client a("127.0.0.1", port()), b("127.0.0.1", port());
+    for (Client *c : {&a, &b}) request(*c, {{"type", "hello"}, {"id", 1}, {"protocol", 1}});
+    a.sendText(R"({"type":"open_volume","id":2,"name":"builtin:sphere"})");
+    b.sendText(R"({"type":"open_volume","id":2,"name":"builtin:sphere"})");
+    for (Client *c : {&a, &b}) {
+        const Message state = volcast::client::waitForReply(*c, 2, kTimeout);
+        ASSERT_TRUE(state.decoded && std::holds_alternative<protocol::StateMessage>(*state.decoded)) << state.text;
+        EXPECT_EQ(json::parse(state.text).at("volume").at("name"), "builtin:sphere");
+    }
+    EXPECT_EQ(server->state().metrics().volumeLoads(), before + 1);
+}
+
+TEST_F(ServerTest, BadInputGetsItsErrorCodeAndTheSessionCarriesOn) {
+    Client c("127.0.0.1", port());
+    auto expectCode = [&](const std::string &text, const std::string &code, const json &id) {
+        c.sendText(text);
+        const Message reply = volcast::client::waitForReply(c, id, kTimeout);
+        const auto *e = asError(reply);
+        ASSERT_NE(e, nullptr) << text << " -> " << reply.text;
+        EXPECT_EQ(protocol::errorCodeName(e->code), code) << text << " -> " << e->message;
+    };
+    expectCode(R"({"type":"camera","id":1,"camera":{}})", "bad_state", 1);   // before hello
+    request(c, {{"type", "hello"}, {"id", 2}, {"protocol", 1}});
+    expectCode(R"({"type":"hello",)", "malformed_json", nullptr);
+    expectCode(R"({"type":"rotate","id":3})", "unknown_type", 3);
+    expectCode(R"({"type":"camera","id":4,"camera":"front"})", "bad_field", 4);
+    expectCode(R"({"type":"open_volume","id":5,"name":7})", "bad_field", 5);
+    expectCode(json{{"type", "list_volumes"}, {"id", 6}, {"pad", std::string(100000, 'x')}}.dump(), "too_large", nullptr);
+    expectCode(R"({"type":"open_volume","id":7,"name":"no_such_scan.nrrd"})", "not_found", 7);
+    expectCode(R"({"type":"open_volume","id":8,"name":"../outside/secret.nrrd"})", "bad_volume_name", 8);
+    expectCode(R"({"type":"open_volume","id":9,"name":"/etc/passwd"})", "bad_volume_name", 9);
+    expectCode(R"({"type":"open_volume","id":10,"name":"escape.nrrd"})", "not_found", 10);   // link out of the folder
+    expectCode(R"({"type":"open_volume","id":11,"name":"ct/broken.nrrd"})", "load_failed", 11);
+    expectCode(R"({"type":"camera","id":12,"camera":{"eye":[0,0,1],"target":[0,0,0],"up":[0,1,0],"projection":"perspective","fov_y_deg":30}})",
+               "bad_state", 12);   // no volume yet
+    expectCode(R"({"type":"viewport","id":13,"image":{"width":0,"height":64}})", "bad_field", 13);
+
+    // Still usable: the listing hides the escaping link, and a volume opens and renders.
+    const Message list = request(c, {{"type", "list_volumes"}, {"id", 14}});
+    const json volumes = json::parse(list.text).at("volumes");
+    std::set<std::string> names;
+    for (const auto &v : volumes) names.insert(v.at("name").get<std::string>());
+    EXPECT_TRUE(names.count("builtin:demo"));
+    EXPECT_TRUE(names.count("ct/broken.nrrd"));
+    EXPECT_FALSE(names.count("escape.nrrd"));
+    c.sendText(R"({"type":"viewport","id":15,"image":{"width":48,"height":48}})");
+    request(c, {{"type", "open_volume"}, {"id", 16}, {"name", "builtin:demo"}});
+    // A camera the scene parser refuses changes nothing; the next good one renders.
+    expectCode(R"({"type":"camera","id":17,"camera":{"eye":[63.5,600,63.5],"target":[63.5,63.5,63.5],"up":[0,1,0],"projection":"perspective","fov_y_deg":30}})",
+               "bad_field", 17);
+    c.sendText(json{{"type", "camera"}, {"id", 18}, {"camera", cameraAt(10)}}.dump());
+    const auto frames = framesUntilFinal(c);
+    ASSERT_FALSE(frames.empty());
+    EXPECT_EQ(frames.back().header.request, json(18));
+    EXPECT_EQ(frames.back().header.width, 48);
+}
+
+TEST_F(ServerTest, ClientThatStopsReadingStallsNoOneAndHoldsOneFrame) {
+    // A: big frames, then stops reading while its camera keeps moving.
+    auto a = openSession("builtin:demo", nullptr, 512);
+    auto b = openSession("builtin:demo");
+    framesUntilFinal(*b);
+    a->pauseReading();
+    for (int i = 0; i < 40; ++i) {
+        a->sendText(json{{"type", "camera"}, {"id", 100 + i}, {"camera", cameraAt(3.0 * i)}}.dump());
+        std::this_thread::sleep_for(10ms);
+    }
+    // B keeps getting every view to its final frame promptly.
+    double maxQueued = 0;
+    for (int i = 0; i < 4; ++i) {
+        const auto t0 = std::chrono::steady_clock::now();
+        b->sendText(json{{"type", "camera"}, {"id", 200 + i}, {"camera", cameraAt(90.0 + 7 * i)}}.dump());
+        const auto frames = framesUntilFinal(*b, nullptr, 10s);
+        ASSERT_FALSE(frames.empty());
+        EXPECT_EQ(frames.back().header.request, json(200 + i));
+        EXPECT_LT(std::chrono::steady_clock::now() - t0, 8s);
+        maxQueued = std::max(maxQueued, metricValue(httpGet(port(), "/metrics").body, "volcast_outgoing_queue_bytes"));
+    }
+    // The server holds at most one unwritten frame per session (a 512² PNG is < 1.1 MiB).
+    EXPECT_LT(maxQueued, 2.5 * 1024 * 1024);
+    // A, reading again, gets the newest view, not a backlog of 40 stale frames.
+    a->resumeReading();
+    std::vector<volcast::client::Frame> framesA;
+    const auto deadline = std::chrono::steady_clock::now() + kTimeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+        auto m = a->next(100ms);
+        if (!m || !m->isFrame) continue;
+        framesA.push_back(m->frame);
+        if (m->frame.header.final && m->frame.header.request == json(139)) break;
+    }
+    ASSERT_FALSE(framesA.empty());
+    EXPECT_EQ(framesA.back().header.request, json(139));
+    EXPECT_TRUE(framesA.back().header.final);
+    std::set<json> requestsA;
+    for (const auto &f : framesA) requestsA.insert(f.header.request);
+    EXPECT_LT(requestsA.size(), 20u);
+}
+
+// ---- the executable under SIGTERM ----------------------------------------------------
+
+TEST(ServerProcess, SigtermClosesSessionsWithAReasonAndExitsZero) {
+    const fs::path portFile = fs::temp_directory_path() / ("volcast_port_" + std::to_string(::getpid()));
+    fs::remove(portFile);
+    const pid_t pid = ::fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+        ::execl(VOLCAST_SERVER_EXE, VOLCAST_SERVER_EXE, "--port", "0", "--port-file", portFile.c_str(),
+                "--default-volume", "builtin:sphere", "--log-level", "warn", static_cast<char *>(nullptr));
+        ::_exit(127);
+    }
+    uint16_t port = 0;
+    const auto deadline = std::chrono::steady_clock::now() + kTimeout;
+    while (port == 0 && std::chrono::steady_clock::now() < deadline) {
+        std::ifstream in(portFile);
+        int p = 0;
+        if (in >> p) {
+            port = uint16_t(p);
+        } else {
+            std::this_thread::sleep_for(20ms);
+        }
+    }
+    ASSERT_NE(port, 0) << "the server did not start";
+    {
+        Client c("127.0.0.1", port);
+        request(c, {{"type", "hello"}, {"id", 1}, {"protocol", 1}});
+        ASSERT_EQ(::kill(pid, SIGTERM), 0);
+        const auto until = std::chrono::steady_clock::now() + 10s;
+        while (!c.closed() && std::chrono::steady_clock::now() < until) c.next(100ms);
+        ASSERT_TRUE(c.closed());
+        const auto info = c.closeInfo();
+        ASSERT_TRUE(info.has_value());
+        EXPECT_EQ(info->code, 1001);   // going away
+        EXPECT_NE(info->reason.find("SIGTERM"), std::string::npos) << info->reason;
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+    EXPECT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 0);
+    fs::remove(portFile);
+}
+
+} // namespace

@@ -1,0 +1,65 @@
+// The server's small parts on their own: the quality ladder and its policy, MIME types and
+// volume-file extensions.
+
+#include "server/quality_ladder.hpp"
+#include "server/static_files.hpp"
+#include "server/volume_registry.hpp"
+
+#include <gtest/gtest.h>
+
+namespace {
+
+using namespace volcast;
+using namespace volcast::server;
+
+TEST(QualityLadder, RisesFromCheapToTheFinalQualityExactly) {
+    Quality final;
+    final.step = 0.25;
+    final.interpolation = Interpolation::Cubic;
+    final.preintegrated = true;
+    const auto ladder = automaticLadder(final, 4);
+    ASSERT_GE(ladder.size(), 2u);
+    EXPECT_EQ(ladder.back().quality, final);
+    EXPECT_EQ(ladder.back().passes, 1);   // no jitter asked: one exact pass
+    for (size_t i = 0; i + 1 < ladder.size(); ++i) {
+        // Each cheaper level samples no finer and no more rays than the next.
+        EXPECT_GE(ladder[i].quality.step, ladder[i + 1].quality.step);
+        EXPECT_LE(ladder[i].quality.imageScale, ladder[i + 1].quality.imageScale);
+        EXPECT_GE(ladder[i].quality.mipLevel, ladder[i + 1].quality.mipLevel);
+        EXPECT_EQ(ladder[i].quality.interpolation, Interpolation::Linear);
+    }
+    final.jitter = true;
+    EXPECT_EQ(automaticLadder(final, 4).back().passes, 4);
+    EXPECT_EQ(explicitLadder(final, 3).size(), 1u);
+}
+
+TEST(LevelTimer, PicksTheFinestLevelThatFitsAndAdaptsToMeasurements) {
+    LevelTimer timer;
+    timer.reset(3);
+    const std::vector<double> samples{1e5, 1e6, 1e7};
+    // Before measurements: the 50 M samples/s guess, so 1e6 samples = 20 ms fits 40 ms.
+    EXPECT_EQ(timer.choose(3, 40, samples), 1u);
+    // Level 0 measured 10x slower than the guess: every level borrows its cost.
+    timer.record(0, 20, 1e5);
+    EXPECT_EQ(timer.choose(3, 40, samples), 0u);
+    // Level 1 measured fast: it is chosen again.
+    timer.record(1, 10, 1e6);
+    EXPECT_EQ(timer.choose(3, 40, samples), 1u);
+    EXPECT_EQ(timer.choose(3, 1000, samples), 2u);
+}
+
+TEST(StaticFiles, MimeTypes) {
+    EXPECT_EQ(mimeType("a/index.html"), "text/html; charset=utf-8");
+    EXPECT_EQ(mimeType("main.mjs"), "text/javascript; charset=utf-8");
+    EXPECT_EQ(mimeType("x.CSS"), "text/css; charset=utf-8");
+    EXPECT_EQ(mimeType("logo.svg"), "image/svg+xml");
+    EXPECT_EQ(mimeType("blob.bin"), "application/octet-stream");
+}
+
+TEST(VolumeRegistry, KnownExtensions) {
+    for (const char *name : {"a.nrrd", "ct/b.NHDR", "c.mha", "d.mhd", "e.nii", "f.nii.gz"})
+        EXPECT_TRUE(hasVolumeExtension(name)) << name;
+    for (const char *name : {"a.raw", "b.gz", ".nrrd", "c.txt"}) EXPECT_FALSE(hasVolumeExtension(name)) << name;
+}
+
+} // namespace
