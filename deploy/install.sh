@@ -20,6 +20,8 @@ packages=(
   zlib1g-dev
   # Tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
+  # Web client tests: Node's test runner, and Debian's Chromium driven by playwright-core
+  nodejs npm chromium
 )
 
 missing=()
@@ -34,3 +36,11 @@ if [ ${#missing[@]} -gt 0 ]; then
   apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 echo "install.sh: all ${#packages[@]} packages present"
+
+# playwright-core for the browser tests, at the version in tests/web's lockfile (it drives
+# Debian's chromium; no browser download).
+repo="$(cd "$(dirname "$0")/.." && pwd)"
+if [ ! -d "$repo/tests/web/node_modules/playwright-core" ]; then
+  echo "install.sh: npm ci in tests/web"
+  npm ci --prefix "$repo/tests/web" --no-audit --no-fund --loglevel=error
+fi
