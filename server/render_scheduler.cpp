@@ -243,8 +243,20 @@ void RenderScheduler::render(const Work &work) {
         try {
             frame.image = work.final ? encodePng(image) : encodeJpeg(image, level.jpegQuality);
         } catch (const std::exception &e) {
+            // Like a render failure: tell the client once and stop, rather than re-render the
+            // view forever with nothing to show for it.
             spdlog::error("encoding failed: {}", e.what());
-            cancelled = true;
+            Failed failed;
+            {
+                std::lock_guard lock(mutex_);
+                auto it = slots_.find(work.slot);
+                if (it == slots_.end()) return;
+                it->second.inFlight = false;
+                it->second.finalSent = true;
+                failed = it->second.failed;
+            }
+            failed(std::string("encoding the frame failed: ") + e.what());
+            return;
         }
         const double encodeMs = Ms(Clock::now() - t1).count();
         protocol::FrameHeader &h = frame.header;
