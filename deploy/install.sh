@@ -42,5 +42,8 @@ echo "install.sh: all ${#packages[@]} packages present"
 repo="$(cd "$(dirname "$0")/.." && pwd)"
 if [ ! -d "$repo/tests/web/node_modules/playwright-core" ]; then
   echo "install.sh: npm ci in tests/web"
-  npm ci --prefix "$repo/tests/web" --no-audit --no-fund --loglevel=error
+  # Debian's npm trusts only its own CA list; use the system's, which also holds any CA of a
+  # local registry proxy.
+  PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --prefix "$repo/tests/web" --no-audit --no-fund --loglevel=error \
+    --cafile /etc/ssl/certs/ca-certificates.crt
 fi

@@ -16,4 +16,4 @@ if node -e '
   exit 0
 fi
 echo "tests/web: npm ci (playwright-core, no browsers: the tests use Debian's chromium)"
-PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund
+PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --cafile /etc/ssl/certs/ca-certificates.crt
