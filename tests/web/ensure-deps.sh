@@ -16,4 +16,7 @@ if node -e '
   exit 0
 fi
 echo "tests/web: npm ci (playwright-core, no browsers: the tests use Debian's chromium)"
-PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --cafile /etc/ssl/certs/ca-certificates.crt
+if ! PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --cafile /etc/ssl/certs/ca-certificates.crt; then
+  # Not a failure of ours: web.browser then reports itself skipped, with this reason.
+  echo "tests/web: npm ci failed (registry unreachable, or its TLS CA not trusted): browser tests will be skipped" >&2
+fi
