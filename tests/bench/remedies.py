@@ -18,8 +18,9 @@ The script writes its scene files, images, logs, table.md/.json/.csv and picture
 Standard library only. The scans are read in place from the shared data folder (never copied):
 the scene files name them by a path relative to the scene file's folder.
 
-  python3 tests/bench/remedies.py --render-exe build/renderer/volcast-render \
-      --out out/remedies --docs docs/images
+  python3 tests/bench/remedies.py --render-exe build/renderer/volcast-render --docs docs/images
+
+(--out defaults to out/remedies, relative to the current folder; run it from the repository root.)
 """
 
 import argparse
