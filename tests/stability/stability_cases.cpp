@@ -7,6 +7,7 @@
 #include "renderer/scene.hpp"
 #include "renderer/synthetic.hpp"
 #include "renderer/volume_io.hpp"
+#include "tests/unit/test_scenes.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -142,15 +143,7 @@ struct Medium {
     }
 };
 
-// Every switch off but the partial boundary segment: a case turns on what it measures.
-Quality plain(double step) {
-    Quality q;
-    q.step = step;
-    q.earlyTermination = 1;
-    q.emptySpaceSkipping = false;
-    q.boundarySegment = true;
-    return q;
-}
+Quality plain(double step) { return test::plainQuality(step); }
 Quality with(Quality q, bool jitter, bool preintegrated, bool defaults = false) {
     if (defaults) {
         // The defaults of the scene contract: early termination at 0.99, empty-space skipping.

@@ -18,15 +18,7 @@ namespace {
 
 OpenClContext &cl() { return test::sharedOpenClContext(); }
 
-// Every switch off, so a test turns on only the one it measures.
-Quality plain(double step) {
-    Quality q;
-    q.step = step;
-    q.earlyTermination = 1;
-    q.emptySpaceSkipping = false;
-    q.boundarySegment = true;
-    return q;
-}
+Quality plain(double step) { return test::plainQuality(step); }
 
 TransferFunction blobTf() {
     TransferFunction tf;

@@ -21,13 +21,7 @@ OpenClContext &sharedContext() { return test::sharedOpenClContext(); }
 TransferFunction constantTf(double a) { return test::constantTf(0.9, 0.5, 0.2, a, 1.0); }
 Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 30); }
 
-Quality plain(double step) {
-    Quality q;
-    q.step = step;
-    q.earlyTermination = 1;
-    q.emptySpaceSkipping = false;
-    return q;
-}
+Quality plain(double step) { return test::plainQuality(step); }
 
 // Largest per-pixel |A − closed form| over the image, and the count of pixels that hit.
 double constantBoxAlphaError(const Image &img, const Volume &v, const Camera &cam, double a, int *hits = nullptr) {

@@ -3,6 +3,7 @@
 
 #include "renderer/camera.hpp"
 #include "renderer/opencl_context.hpp"
+#include "renderer/scene.hpp"
 #include "renderer/transfer_function.hpp"
 #include "renderer/volume.hpp"
 
@@ -13,6 +14,17 @@ namespace volcast::test {
 inline OpenClContext &sharedOpenClContext() {
     static OpenClContext cl;
     return cl;
+}
+
+// Every quality switch off but the partial boundary segment, at `step`: a test turns on
+// only what it measures.
+inline Quality plainQuality(double step) {
+    Quality q;
+    q.step = step;
+    q.earlyTermination = 1;
+    q.emptySpaceSkipping = false;
+    q.boundarySegment = true;
+    return q;
 }
 
 // The same colour and opacity at every data value.
