@@ -20,9 +20,13 @@ packages=(
   zlib1g-dev
   # Tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
-  # Web client tests: Node's test runner, and Debian's Chromium driven by playwright-core
-  nodejs npm chromium
+  # Web client tests: Debian's Chromium driven by playwright-core
+  chromium
 )
+# Node.js and npm only where the machine has none: a machine may already carry a newer Node.js
+# (NodeSource's, which bundles npm), and Debian's npm package conflicts with it.
+command -v node >/dev/null 2>&1 || packages+=(nodejs)
+command -v npm >/dev/null 2>&1 || packages+=(npm)
 
 missing=()
 for p in "${packages[@]}"; do
