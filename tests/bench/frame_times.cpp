@@ -1,0 +1,277 @@
+// Table 1 (frame time against output resolution) and the peers' side-by-side mode: both
+// orbit the peers' camera over a volume at 1 sample per voxel and time whole frames
+// (kernel, read-back to the host, and any upsampling: what a server pays before encoding).
+
+#include "renderer/opencl_renderer.hpp"
+#include "renderer/volume_io.hpp"
+#include "tests/bench/phantom.hpp"
+#include "tests/bench/studies.hpp"
+#include "tests/bench/svg_plot.hpp"
+
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+namespace volcast::bench {
+
+namespace {
+
+// The paper's Table 1 (NVIDIA Quadro 1000M, 2012), ms per frame.
+const std::map<std::string, std::map<std::string, double>> kPaperTable1 = {
+    {"small", {{"512x512", 31.67}, {"800x600", 34.20}, {"1024x768", 50.83}, {"1280x1024", 97.09}, {"1920x1080", 114.94}}},
+    {"large", {{"512x512", 81.97}, {"800x600", 114.63}, {"1024x768", 163.93}, {"1280x1024", 218.34}, {"1920x1080", 280.90}}},
+};
+
+std::string sizeName(std::pair<int, int> s) { return std::to_string(s.first) + "x" + std::to_string(s.second); }
+
+std::string dtypeName(VoxelType t) {
+    switch (t) {
+    case VoxelType::UInt8: return "uint8";
+    case VoxelType::Int8: return "int8";
+    case VoxelType::UInt16: return "uint16";
+    case VoxelType::Int16: return "int16";
+    case VoxelType::UInt32: return "uint32";
+    case VoxelType::Int32: return "int32";
+    case VoxelType::Float32: return "float32";
+    case VoxelType::Float64: return "float64";
+    }
+    return "?";
+}
+
+// CPUs kept busy by other processes while timing, as the peers' scripts report it (their
+// '*' mark): all CPUs' busy time from /proc/stat minus this process's own CPU time.
+class OtherLoad {
+  public:
+    OtherLoad() : busy0_(machineBusy()), own0_(ownCpu()), t0_(std::chrono::steady_clock::now()) {}
+    double cpus() const {
+        const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count();
+        const double other = (machineBusy() - busy0_) - (ownCpu() - own0_);
+        return wall > 0 ? std::max(0.0, other / wall) : 0.0;
+    }
+
+  private:
+    static double machineBusy() {
+        std::ifstream in("/proc/stat");
+        std::string cpu;
+        double user = 0, nice = 0, system = 0, idle = 0, iowait = 0, irq = 0, softirq = 0, steal = 0;
+        in >> cpu >> user >> nice >> system >> idle >> iowait >> irq >> softirq >> steal;
+        return (user + nice + system + irq + softirq + steal) / double(sysconf(_SC_CLK_TCK));
+    }
+    static double ownCpu() {
+        rusage u{};
+        getrusage(RUSAGE_SELF, &u);
+        return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+    }
+    double busy0_, own0_;
+    std::chrono::steady_clock::time_point t0_;
+};
+
+struct CellResult {
+    Timing timing;
+    double firstFrameMs = 0;
+    double otherCpus = 0;
+    RenderStats stats;
+};
+
+// First frame (program build, bricks, tables) at frame 0, then the camera orbits one step
+// per timed frame, as in the peers' time_frames().
+CellResult timeOrbit(OpenClRenderer &renderer, const TransferFunction &tf, const Quality &quality, int width,
+                     int height, const RepeatOptions &repeat) {
+    CellResult r;
+    const auto t0 = std::chrono::steady_clock::now();
+    renderer.render(tf, peerCamera(renderer.volume(), 0), width, height, quality, {}, &r.stats);
+    r.firstFrameMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    OtherLoad load;
+    RepeatOptions timed = repeat;
+    timed.warmup = 0;
+    r.timing = bench::repeat(timed, [&](int k) {
+        renderer.render(tf, peerCamera(renderer.volume(), k + 1), width, height, quality, {}, &r.stats);
+    });
+    r.otherCpus = load.cpus();
+    return r;
+}
+
+} // namespace
+
+std::vector<std::pair<int, int>> parseSizes(const std::string &text) {
+    std::vector<std::pair<int, int>> sizes;
+    std::stringstream s(text);
+    std::string part;
+    while (std::getline(s, part, ',')) {
+        const auto x = part.find_first_of("xX");
+        try {
+            if (x == std::string::npos) throw std::invalid_argument("no x");
+            size_t used = 0;
+            const int w = std::stoi(part.substr(0, x), &used);
+            const int h = std::stoi(part.substr(x + 1));
+            validateImageSize(w, h);
+            sizes.emplace_back(w, h);
+        } catch (const std::exception &) {
+            throw std::invalid_argument("size '" + part + "' is not WIDTHxHEIGHT within the image limits");
+        }
+    }
+    if (sizes.empty()) throw std::invalid_argument("no sizes in '" + text + "'");
+    return sizes;
+}
+
+Quality table1Quality(double step) {
+    Quality q;
+    q.step = step;
+    q.interpolation = Interpolation::Linear;
+    q.emptySpaceSkipping = true;
+    q.earlyTermination = 0.99;
+    q.boundarySegment = true;
+    return q;
+}
+
+void table1(OpenClContext &cl, const StudyOptions &options) {
+    struct Entry {
+        std::string key, label;
+        std::shared_ptr<const Volume> volume;
+    };
+    const bool quick = options.quick;
+    std::vector<Entry> volumes;
+    std::cerr << "table1: making the phantoms\n";
+    volumes.push_back({"small", "phantom 128×128×256 uint8 (4 MiB)",
+                       std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{32, 32, 64} : Vec3i{128, 128, 256},
+                                                                VoxelType::UInt8))});
+    const auto tooth = options.data / "tooth.nhdr";
+    if (std::filesystem::exists(tooth))
+        volumes.push_back({"tooth", "tooth 103×94×161 uint16 (3 MiB, real micro-CT)",
+                           std::make_shared<Volume>(loadVolume(tooth))});
+    volumes.push_back({"large", "phantom 512×512×400 uint16 (200 MiB)",
+                       std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{64, 64, 50} : Vec3i{512, 512, 400},
+                                                                VoxelType::UInt16))});
+    const auto sizes = quick ? parseSizes("64x64,80x60") : parseSizes("512x512,800x600,1024x768,1280x1024,1920x1080");
+    const Quality quality = table1Quality();
+
+    nlohmann::json j;
+    j["study"] = "table1";
+    j["machine"] = machineInfo(&cl);
+    j["quality"] = {{"step", quality.step}, {"interpolation", "linear"}, {"empty_space_skipping", true},
+                    {"early_termination", quality.earlyTermination}};
+    j["camera"] = "peers' framing: bounding sphere fits a 30° view, 20° elevation, 3° orbit per frame";
+    j["transfer_function"] = "peers' ramp: opacity 0 below 40 % of the nominal range, 0.25 per voxel at 100 %, grey";
+    std::vector<std::vector<std::string>> rows;
+    std::map<std::string, std::map<std::string, CellResult>> cells;
+    for (const Entry &e : volumes) {
+        OpenClRenderer renderer(cl, e.volume);
+        const TransferFunction tf = peerTransferFunction(nominalRange(*e.volume), e.volume->smallestSpacing());
+        for (const auto &s : sizes) {
+            const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, options.repeat);
+            cells[e.key][sizeName(s)] = r;
+            const auto paper = kPaperTable1.count(e.key == "tooth" ? "small" : e.key)
+                                   ? kPaperTable1.at(e.key == "tooth" ? "small" : e.key)
+                                   : std::map<std::string, double>{};
+            const double paperMs = paper.count(sizeName(s)) ? paper.at(sizeName(s)) : 0;
+            std::cerr << "table1: " << e.key << " " << sizeName(s) << " " << fmt(r.timing.median) << " ms (first "
+                      << fmt(r.firstFrameMs) << " ms, other load " << fmt(r.otherCpus, 2) << " CPUs)\n";
+            j["cells"].push_back({{"volume", e.key},
+                                  {"volume_label", e.label},
+                                  {"resolution", {s.first, s.second}},
+                                  {"render_ms", toJson(r.timing)},
+                                  {"first_frame_ms", r.firstFrameMs},
+                                  {"cpus_busy_with_other_processes", r.otherCpus},
+                                  {"mean_samples_per_ray", r.stats.meanSamplesPerRay},
+                                  {"empty_brick_fraction", r.stats.emptyBrickFraction},
+                                  {"paper_ms", paperMs > 0 ? nlohmann::json(paperMs) : nlohmann::json(nullptr)}});
+            rows.push_back({e.key, sizeName(s), fmt(r.timing.median, 2), fmt(r.timing.min, 2), fmt(r.timing.max, 2),
+                            fmt(r.firstFrameMs, 1), paperMs > 0 ? fmt(paperMs, 2) : "", fmt(r.otherCpus, 2)});
+        }
+    }
+    StudyOutput out(options.out, "table1");
+    out.writeJson(j);
+    out.writeCsv({"volume", "resolution", "median_ms", "min_ms", "max_ms", "first_frame_ms", "paper_ms",
+                  "cpus_busy_with_other_processes"},
+                 rows);
+
+    std::ostringstream md;
+    md << "| resolution |";
+    for (const Entry &e : volumes) md << " " << e.label << " |";
+    md << " paper 4 MB | paper 200 MB |\n|---|";
+    for (size_t i = 0; i < volumes.size() + 2; ++i) md << "---|";
+    md << "\n";
+    for (const auto &s : sizes) {
+        md << "| " << sizeName(s) << " |";
+        for (const Entry &e : volumes) {
+            const Timing &t = cells[e.key][sizeName(s)].timing;
+            md << " " << fmt(t.median, 0) << " (" << fmt(t.min, 0) << "–" << fmt(t.max, 0) << ") |";
+        }
+        for (const char *k : {"small", "large"}) {
+            const auto &p = kPaperTable1.at(k);
+            md << " " << (p.count(sizeName(s)) ? fmt(p.at(sizeName(s)), 2) : "") << " |";
+        }
+        md << "\n";
+    }
+    out.writeMarkdown(md.str());
+    std::cout << md.str();
+
+    Plot plot;
+    plot.title = "Table 1: frame time against output resolution";
+    plot.xLabel = "pixels (millions)";
+    plot.yLabel = "ms per frame (median)";
+    plot.logY = true;
+    for (const Entry &e : volumes) {
+        Series s{"volcast " + e.key};
+        for (const auto &sz : sizes) {
+            s.x.push_back(double(sz.first) * sz.second / 1e6);
+            s.y.push_back(cells[e.key][sizeName(sz)].timing.median);
+        }
+        plot.series.push_back(s);
+    }
+    for (const char *k : {"small", "large"}) {
+        Series s{std::string("paper ") + (std::string(k) == "small" ? "4 MB" : "200 MB") + " (GPU 2012)"};
+        s.dashed = true;
+        for (const auto &sz : sizes)
+            if (kPaperTable1.at(k).count(sizeName(sz))) {
+                s.x.push_back(double(sz.first) * sz.second / 1e6);
+                s.y.push_back(kPaperTable1.at(k).at(sizeName(sz)));
+            }
+        plot.series.push_back(s);
+    }
+    out.writeSvg(renderSvg(plot));
+}
+
+void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
+    auto volume = std::make_shared<Volume>(loadVolume(options.volume));
+    OpenClRenderer renderer(cl, volume);
+    const ValueRange nominal = nominalRange(*volume);
+    const TransferFunction tf = peerTransferFunction(nominal, volume->smallestSpacing());
+    const Quality quality = table1Quality(options.sampleDistance);
+    RepeatOptions repeat{0, std::max(1, options.frames - 1), options.maxSeconds};
+    for (const auto &s : options.sizes) {
+        const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, repeat);
+        nlohmann::json line = {
+            {"peer", "volcast"},
+            {"renderer", "volcast OpenCL ray caster"},
+            {"device", cl.deviceName()},
+            {"resolution", {s.first, s.second}},
+            {"render_ms", {{"median", r.timing.median}, {"min", r.timing.min}, {"max", r.timing.max}, {"n", r.timing.n}}},
+            {"first_frame", {{"render_ms", r.firstFrameMs}}},
+            {"frames_rendered", r.timing.n + 1},
+            {"per_frame_render_ms", r.timing.samples},
+            {"threads", {{"cpu_count", std::thread::hardware_concurrency()},
+                         {"cpus_busy_with_other_processes", r.otherCpus}}},
+            {"volume", {{"file", std::filesystem::absolute(options.volume).string()},
+                        {"dims", {volume->dims.x, volume->dims.y, volume->dims.z}},
+                        {"dtype", dtypeName(volume->sourceType)},
+                        {"bytes", volume->voxelCount() * voxelTypeSize(volume->sourceType)},
+                        {"spacing", {volume->spacing.x, volume->spacing.y, volume->spacing.z}}}},
+            {"sample_distance_voxels", options.sampleDistance},
+            {"interpolation", "linear"},
+            {"value_range", {nominal.min, nominal.max}},
+            {"empty_space_skipping", quality.emptySpaceSkipping},
+            {"early_termination", quality.earlyTermination},
+            {"mean_samples_per_ray", r.stats.meanSamplesPerRay},
+            {"timing", "whole frames: kernel, read-back to host memory"}};
+        std::cout << line.dump() << std::endl;
+    }
+}
+
+} // namespace volcast::bench

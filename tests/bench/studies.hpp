@@ -1,0 +1,44 @@
+#pragma once
+// The studies of volcast-bench, one function each (see tests/bench/README.md). Each writes
+// its JSON, CSV, Markdown table and SVG plot into options.out and prints the table.
+
+#include "renderer/opencl_context.hpp"
+#include "renderer/scene.hpp"
+#include "tests/bench/bench.hpp"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace volcast::bench {
+
+struct StudyOptions {
+    std::filesystem::path out = "out/bench";
+    std::filesystem::path data;        // the real scans (../shared/data/volumes)
+    RepeatOptions repeat{0, 5, 20};    // warm-up is a small frame of its own, see warmUp()
+    bool quick = false;                // tiny sizes: checks the command works, times nothing
+};
+
+void table1(OpenClContext &cl, const StudyOptions &options);
+void prefilter(OpenClContext &cl, const StudyOptions &options);
+void figure5(OpenClContext &cl, const StudyOptions &options, int viewport);
+void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, const std::vector<std::string> &scans);
+
+// run_table.py's --extra interface: one JSON line per size on stdout.
+struct PeerModeOptions {
+    std::filesystem::path volume;
+    std::vector<std::pair<int, int>> sizes;
+    int frames = 5;
+    double sampleDistance = 1;
+    double maxSeconds = 30;
+};
+void peerMode(OpenClContext &cl, const PeerModeOptions &options);
+
+// "512x512,800x600" → {{512, 512}, {800, 600}}; throws std::invalid_argument naming the part.
+std::vector<std::pair<int, int>> parseSizes(const std::string &text);
+
+// The quality the Table-1 and peer studies run at: 1 sample per voxel, trilinear, with our
+// interactive accelerations on (empty-space skipping, early termination at 0.99).
+Quality table1Quality(double step = 1.0);
+
+} // namespace volcast::bench

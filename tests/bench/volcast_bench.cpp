@@ -1,0 +1,84 @@
+// volcast-bench: the paper's Table 1, Table 2 and Figure 5, error against run time, and the
+// peers' side-by-side interface. See tests/bench/README.md.
+//
+//   volcast-bench all --out out/bench
+//   volcast-bench peers --volume phantom.nrrd --size 512x512,800x600 --frames 5
+
+#include "tests/bench/studies.hpp"
+
+#include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <iostream>
+
+int main(int argc, char **argv) {
+    using namespace volcast::bench;
+    CLI::App app{"volcast benchmarks: warm-up, repeats, medians with min and max; JSON, CSV, Markdown and SVG "
+                 "per study, with the machine and OpenCL device."};
+    app.require_subcommand(1);
+    StudyOptions options;
+    options.data = VOLCAST_DATA_DIR;
+    volcast::DeviceOptions device;
+    int viewportFigure5 = 1000, viewportError = 256;
+    std::vector<std::string> scans = {"bonsai", "aneurism", "cranium_ct"};
+    const auto common = [&](CLI::App *sub) {
+        sub->add_option("--out", options.out, "Output folder")->capture_default_str();
+        sub->add_option("--data", options.data, "Folder of the real scans")->capture_default_str();
+        sub->add_option("--device", device.device, "OpenCL device: auto, gpu, cpu or part of its name");
+        sub->add_option("--kernel-cache", device.kernelCacheDir, "PoCL's compiled-kernel cache folder");
+        sub->add_option("--repeats", options.repeat.repeats, "Timed runs per cell at most")
+            ->check(CLI::Range(1, 1000))
+            ->capture_default_str();
+        sub->add_option("--max-seconds", options.repeat.maxSeconds, "Stop a cell's timed runs after this long")
+            ->check(CLI::PositiveNumber)
+            ->capture_default_str();
+        sub->add_flag("--quick", options.quick, "Tiny sizes: checks that the study runs; its times mean nothing");
+    };
+    auto *t1 = app.add_subcommand("table1", "Table 1: frame time against output resolution, 4 MB and 200 MB volumes");
+    auto *t2 = app.add_subcommand("prefilter", "Table 2: B-spline prefilter, simple / multithreaded / OpenCL, 256³ and 512³");
+    auto *f5 = app.add_subcommand("figure5", "Figure 5: frame rate against samples per voxel, configurations A–F");
+    auto *ev = app.add_subcommand("error", "Error against run time on real scans, with the Pareto front");
+    auto *all = app.add_subcommand("all", "Every study above, in turn");
+    for (auto *sub : {t1, t2, f5, ev, all}) common(sub);
+    for (auto *sub : {f5, all})
+        sub->add_option("--viewport", viewportFigure5, "Figure 5's square viewport")->capture_default_str();
+    for (auto *sub : {ev, all}) {
+        sub->add_option("--error-viewport", viewportError, "The error study's square viewport")->capture_default_str();
+        sub->add_option("--scans", scans, "Scans of the error study")->delimiter(',')->capture_default_str();
+    }
+
+    PeerModeOptions peer;
+    std::string sizes = "512x512";
+    auto *peers = app.add_subcommand("peers", "../shared/peers/run_table.py's --extra interface: one JSON line per size");
+    peers->add_option("--volume", peer.volume, "Volume file (NRRD)")->required()->check(CLI::ExistingFile);
+    peers->add_option("--size", sizes, "Comma list of WxH")->capture_default_str();
+    peers->add_option("--frames", peer.frames, "Frames per size, the first a warm-up")->check(CLI::Range(2, 1000));
+    peers->add_option("--sample-distance", peer.sampleDistance, "Step in voxels")->check(CLI::PositiveNumber);
+    peers->add_option("--max-seconds", peer.maxSeconds, "Stop a size's timed frames after this long")
+        ->check(CLI::PositiveNumber);
+    peers->add_option("--device", device.device, "OpenCL device: auto, gpu, cpu or part of its name");
+    peers->add_option("--kernel-cache", device.kernelCacheDir, "PoCL's compiled-kernel cache folder");
+
+    CLI11_PARSE(app, argc, argv);
+    // stdout carries the tables (and the peers' JSON lines); progress and warnings go to stderr.
+    spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
+    try {
+        volcast::OpenClContext cl(device);
+        std::cerr << "volcast-bench: OpenCL device " << cl.deviceName() << "\n";
+        if (peers->parsed()) {
+            peer.sizes = parseSizes(sizes);
+            peerMode(cl, peer);
+            return 0;
+        }
+        if (t1->parsed() || all->parsed()) table1(cl, options);
+        if (t2->parsed() || all->parsed()) prefilter(cl, options);
+        if (f5->parsed() || all->parsed()) figure5(cl, options, viewportFigure5);
+        if (ev->parsed() || all->parsed()) errorVsTime(cl, options, viewportError, scans);
+        std::cerr << "volcast-bench: results in " << options.out << "\n";
+        return 0;
+    } catch (const std::exception &e) {
+        std::cerr << "volcast-bench: " << e.what() << std::endl;
+        return 1;
+    }
+}
