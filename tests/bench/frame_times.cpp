@@ -2,12 +2,14 @@
 // orbit the peers' camera over a volume at 1 sample per voxel and time whole frames
 // (kernel, read-back to the host, and any upsampling: what a server pays before encoding).
 
+#include "renderer/image.hpp"
 #include "renderer/opencl_renderer.hpp"
 #include "renderer/volume_io.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"
 #include "tests/bench/svg_plot.hpp"
 
+#include <algorithm>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -73,6 +75,7 @@ class OtherLoad {
 };
 
 struct CellResult {
+    Image last;
     Timing timing;
     double firstFrameMs = 0;
     double otherCpus = 0;
@@ -91,7 +94,7 @@ CellResult timeOrbit(OpenClRenderer &renderer, const TransferFunction &tf, const
     RepeatOptions timed = repeat;
     timed.warmup = 0;
     r.timing = bench::repeat(timed, [&](int k) {
-        renderer.render(tf, peerCamera(renderer.volume(), k + 1), width, height, quality, {}, &r.stats);
+        r.last = renderer.render(tf, peerCamera(renderer.volume(), k + 1), width, height, quality, {}, &r.stats);
     });
     r.otherCpus = load.cpus();
     return r;
@@ -137,18 +140,22 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
     };
     const bool quick = options.quick;
     std::vector<Entry> volumes;
-    std::cerr << "table1: making the phantoms\n";
-    volumes.push_back({"small", "phantom 128×128×256 uint8 (4 MiB)",
-                       std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{32, 32, 64} : Vec3i{128, 128, 256},
-                                                                VoxelType::UInt8))});
+    const auto wanted = [&](const char *key) {
+        return std::find(options.volumes.begin(), options.volumes.end(), key) != options.volumes.end();
+    };
+    if (wanted("small"))
+        volumes.push_back({"small", "phantom 128×128×256 uint8 (4 MiB)",
+                           std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{32, 32, 64} : Vec3i{128, 128, 256},
+                                                                    VoxelType::UInt8))});
     const auto tooth = options.data / "tooth.nhdr";
-    if (std::filesystem::exists(tooth))
+    if (wanted("tooth") && std::filesystem::exists(tooth))
         volumes.push_back({"tooth", "tooth 103×94×161 uint16 (3 MiB, real micro-CT)",
                            std::make_shared<Volume>(loadVolume(tooth))});
-    volumes.push_back({"large", "phantom 512×512×400 uint16 (200 MiB)",
-                       std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{64, 64, 50} : Vec3i{512, 512, 400},
-                                                                VoxelType::UInt16))});
-    const auto sizes = quick ? parseSizes("64x64,80x60") : parseSizes("512x512,800x600,1024x768,1280x1024,1920x1080");
+    if (wanted("large"))
+        volumes.push_back({"large", "phantom 512×512×400 uint16 (200 MiB)",
+                           std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{64, 64, 50} : Vec3i{512, 512, 400},
+                                                                    VoxelType::UInt16))});
+    const auto sizes = parseSizes(quick ? "64x64,80x60" : options.sizes);
     const Quality quality = table1Quality();
 
     nlohmann::json j;
@@ -162,7 +169,9 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
     std::map<std::string, std::map<std::string, CellResult>> cells;
     for (const Entry &e : volumes) {
         OpenClRenderer renderer(cl, e.volume);
-        const TransferFunction tf = peerTransferFunction(nominalRange(*e.volume), e.volume->smallestSpacing());
+        // The peers place their ramp on a phantom's nominal range and on a scan's own range.
+        const ValueRange range = e.key == "tooth" ? e.volume->range : nominalRange(*e.volume);
+        const TransferFunction tf = peerTransferFunction(range, e.volume->smallestSpacing());
         for (const auto &s : sizes) {
             const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, options.repeat);
             cells[e.key][sizeName(s)] = r;
@@ -270,6 +279,12 @@ void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
             {"early_termination", quality.earlyTermination},
             {"mean_samples_per_ray", r.stats.meanSamplesPerRay},
             {"timing", "whole frames: kernel, read-back to host memory"}};
+        if (!options.png.empty()) {
+            auto file = options.png;
+            file.replace_filename(file.stem().string() + "_" + sizeName(s) + ".png");
+            writeImage(file, r.last);
+            line["png"] = std::filesystem::absolute(file).string();
+        }
         std::cout << line.dump() << std::endl;
     }
 }

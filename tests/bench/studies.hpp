@@ -17,6 +17,8 @@ struct StudyOptions {
     std::filesystem::path data;        // the real scans (../shared/data/volumes)
     RepeatOptions repeat{0, 5, 20};    // warm-up is a small frame of its own, see warmUp()
     bool quick = false;                // tiny sizes: checks the command works, times nothing
+    std::vector<std::string> volumes = {"small", "tooth", "large"}; // Table 1's volumes
+    std::string sizes = "512x512,800x600,1024x768,1280x1024,1920x1080";
 };
 
 void table1(OpenClContext &cl, const StudyOptions &options);
@@ -31,6 +33,7 @@ struct PeerModeOptions {
     int frames = 5;
     double sampleDistance = 1;
     double maxSeconds = 30;
+    std::filesystem::path png; // if set: each size's last frame, as PATH_WxH.png
 };
 void peerMode(OpenClContext &cl, const PeerModeOptions &options);
 

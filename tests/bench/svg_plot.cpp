@@ -41,8 +41,9 @@ struct Axis {
         lo = *mn;
         hi = *mx;
         if (log) {
-            lo = std::pow(10, std::floor(std::log10(lo) * 4) / 4);
-            hi = std::pow(10, std::ceil(std::log10(hi) * 4) / 4);
+            // A little room beyond the extreme points, then out to a quarter decade.
+            lo = std::pow(10, std::floor(std::log10(lo / 1.1) * 4) / 4);
+            hi = std::pow(10, std::ceil(std::log10(hi * 1.1) * 4) / 4);
             if (hi <= lo) hi = lo * 10;
         } else {
             const double pad = (hi - lo) * 0.05;

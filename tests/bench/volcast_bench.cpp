@@ -41,6 +41,12 @@ int main(int argc, char **argv) {
     auto *ev = app.add_subcommand("error", "Error against run time on real scans, with the Pareto front");
     auto *all = app.add_subcommand("all", "Every study above, in turn");
     for (auto *sub : {t1, t2, f5, ev, all}) common(sub);
+    for (auto *sub : {t1, all}) {
+        sub->add_option("--volumes", options.volumes, "Table 1's volumes: small, tooth, large")
+            ->delimiter(',')
+            ->capture_default_str();
+        sub->add_option("--sizes", options.sizes, "Table 1's output sizes, WxH,...")->capture_default_str();
+    }
     for (auto *sub : {f5, all})
         sub->add_option("--viewport", viewportFigure5, "Figure 5's square viewport")->capture_default_str();
     for (auto *sub : {ev, all}) {
@@ -57,6 +63,7 @@ int main(int argc, char **argv) {
     peers->add_option("--sample-distance", peer.sampleDistance, "Step in voxels")->check(CLI::PositiveNumber);
     peers->add_option("--max-seconds", peer.maxSeconds, "Stop a size's timed frames after this long")
         ->check(CLI::PositiveNumber);
+    peers->add_option("--png", peer.png, "Write each size's last frame to PNG_WxH.png");
     peers->add_option("--device", device.device, "OpenCL device: auto, gpu, cpu or part of its name");
     peers->add_option("--kernel-cache", device.kernelCacheDir, "PoCL's compiled-kernel cache folder");
 
