@@ -53,37 +53,90 @@ void bsplinePrefilterSimple(Real *data, Vec3i dims) {
         for (size_t i = 0; i < nx; ++i) bsplinePrefilterLine(data + j * nx + i, nz, ptrdiff_t(nx * ny));
 }
 
+namespace {
+
+// bsplinePrefilterLine on `width` adjacent lines at once: line i is data[i + k·stride], k < n.
+// The same operations in the same order per element, so the same bits; but each step walks
+// a contiguous row, which on the y and z axes turns one cache miss per sample into a stream.
+template <typename Real>
+void bsplinePrefilterRows(Real *data, size_t n, ptrdiff_t stride, size_t width) {
+    if (n < 2) return;
+    const double z = kBSplinePole;
+    const double gain = (1 - z) * (1 - 1 / z);
+    auto row = [&](size_t k) { return data + ptrdiff_t(k) * stride; };
+    for (size_t k = 0; k < n; ++k) {
+        Real *r = row(k);
+        for (size_t i = 0; i < width; ++i) r[i] = Real(double(r[i]) * gain);
+    }
+    const size_t horizon = size_t(std::ceil(std::log(std::numeric_limits<Real>::epsilon()) /
+                                            std::log(std::fabs(z))));
+    std::vector<double> sum(row(0), row(0) + width);
+    if (horizon < n) {
+        double zk = z;
+        for (size_t k = 1; k < horizon; ++k, zk *= z) {
+            const Real *r = row(k);
+            for (size_t i = 0; i < width; ++i) sum[i] += zk * double(r[i]);
+        }
+    } else {
+        const size_t period = 2 * n - 2;
+        double zk = z;
+        for (size_t k = 1; k < period; ++k, zk *= z) {
+            const Real *r = row(size_t(mirrorIndex(int64_t(k), int64_t(n))));
+            for (size_t i = 0; i < width; ++i) sum[i] += zk * double(r[i]);
+        }
+        const double norm = 1 - std::pow(z, double(period));
+        for (double &v : sum) v /= norm;
+    }
+    for (size_t i = 0; i < width; ++i) row(0)[i] = Real(sum[i]);
+    for (size_t k = 1; k < n; ++k) {
+        Real *r = row(k);
+        const Real *p = row(k - 1);
+        for (size_t i = 0; i < width; ++i) r[i] = Real(double(r[i]) + z * double(p[i]));
+    }
+    {
+        Real *last = row(n - 1);
+        const Real *before = row(n - 2);
+        for (size_t i = 0; i < width; ++i) last[i] = Real(z / (z * z - 1) * (double(last[i]) + z * double(before[i])));
+    }
+    for (size_t k = n - 1; k-- > 0;) {
+        Real *r = row(k);
+        const Real *next = row(k + 1);
+        for (size_t i = 0; i < width; ++i) r[i] = Real(z * (double(next[i]) - double(r[i])));
+    }
+}
+
+// Runs work(begin, end) over [0, count) split in contiguous shares, the caller taking the first.
+template <typename Work>
+void splitAmong(size_t threads, size_t count, Work work) {
+    threads = std::max<size_t>(1, std::min(threads, count));
+    std::vector<std::thread> pool;
+    pool.reserve(threads - 1);
+    for (size_t t = 1; t < threads; ++t) pool.emplace_back(work, count * t / threads, count * (t + 1) / threads);
+    work(0, count / threads);
+    for (std::thread &th : pool) th.join();
+}
+
+} // namespace
+
 void bsplinePrefilterMultithreaded(float *data, Vec3i dims, int threads) {
     const auto nx = size_t(dims.x), ny = size_t(dims.y), nz = size_t(dims.z);
     if (nx == 0 || ny == 0 || nz == 0) return;
     const size_t wanted = threads > 0 ? size_t(threads) : size_t(std::max(1u, std::thread::hardware_concurrency()));
-
-    // Line l of an axis starts at (l / inner)·outerStride + (l % inner)·innerStride.
-    struct Axis {
-        size_t n;
-        ptrdiff_t stride;
-        size_t lines, inner, innerStride, outerStride;
-    };
-    const Axis axes[3] = {
-        {nx, 1, ny * nz, ny, nx, nx * ny},
-        {ny, ptrdiff_t(nx), nx * nz, nx, 1, nx * ny},
-        {nz, ptrdiff_t(nx * ny), nx * ny, nx, 1, nx},
-    };
-    for (const Axis &a : axes) {
-        if (a.n < 2) continue; // a one-sample axis is its own coefficient
-        // Contiguous ranges of lines, so neighbouring threads rarely share cache lines.
-        const size_t count = std::min(wanted, a.lines);
-        auto work = [&a, data, count](size_t t) {
-            const size_t begin = a.lines * t / count, end = a.lines * (t + 1) / count;
-            for (size_t l = begin; l < end; ++l)
-                bsplinePrefilterLine(data + (l / a.inner) * a.outerStride + (l % a.inner) * a.innerStride, a.n, a.stride);
-        };
-        std::vector<std::thread> pool;
-        pool.reserve(count - 1);
-        for (size_t t = 1; t < count; ++t) pool.emplace_back(work, t);
-        work(0); // the calling thread takes the first share
-        for (std::thread &th : pool) th.join();
-    }
+    // x: lines are contiguous already; each thread takes a range of them.
+    if (nx > 1)
+        splitAmong(wanted, ny * nz, [&](size_t begin, size_t end) {
+            for (size_t l = begin; l < end; ++l) bsplinePrefilterLine(data + l * nx, nx, 1);
+        });
+    // y: per z slice, all nx lines at once, row by row.
+    if (ny > 1)
+        splitAmong(wanted, nz, [&](size_t begin, size_t end) {
+            for (size_t k = begin; k < end; ++k) bsplinePrefilterRows(data + k * nx * ny, ny, ptrdiff_t(nx), nx);
+        });
+    // z: per y, the nx lines of that row at once, slice by slice.
+    if (nz > 1)
+        splitAmong(wanted, ny, [&](size_t begin, size_t end) {
+            for (size_t j = begin; j < end; ++j) bsplinePrefilterRows(data + j * nx, nz, ptrdiff_t(nx * ny), nx);
+        });
 }
 
 template void bsplinePrefilterLine<float>(float *, size_t, ptrdiff_t);

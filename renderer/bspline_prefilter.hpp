@@ -20,8 +20,10 @@ void bsplinePrefilterLine(Real *data, size_t n, ptrdiff_t stride);
 template <typename Real>
 void bsplinePrefilterSimple(Real *data, Vec3i dims);
 
-// The same result on several threads: each axis's lines are split among them, and all of an
-// axis finishes before the next starts. threads = 0: std::thread::hardware_concurrency().
+// The same result, bit for bit, on several threads: all of an axis finishes before the next
+// starts. On y and z each thread filters whole slices or rows of adjacent lines together,
+// stepping along contiguous rows instead of striding through memory one line at a time.
+// threads = 0: std::thread::hardware_concurrency().
 void bsplinePrefilterMultithreaded(float *data, Vec3i dims, int threads = 0);
 
 // Index of coefficient k under mirror boundaries on an axis of n samples.
