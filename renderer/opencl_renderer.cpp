@@ -374,9 +374,11 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
         queue.enqueueReadBuffer(out, CL_FALSE, 0, cast.rgba.size() * sizeof(float), cast.rgba.data());
         cl_uint counts[VC_STAT_COUNT];
         queue.enqueueReadBuffer(counters, CL_TRUE, 0, sizeof counts, counts);
+        st.raysHit = counts[VC_STAT_RAYS_HIT];
         const double hit = std::max<double>(counts[VC_STAT_RAYS_HIT], 1);
-        st.meanSamplesPerRay = counts[VC_STAT_SAMPLES] / hit;
-        st.skippedSegmentsPerRay = counts[VC_STAT_SEGMENTS_SKIPPED] / hit;
+        const auto wide = [&](int low, int high) { return double(uint64_t(counts[high]) << 32 | counts[low]); };
+        st.meanSamplesPerRay = wide(VC_STAT_SAMPLES, VC_STAT_SAMPLES_HIGH) / hit;
+        st.skippedSegmentsPerRay = wide(VC_STAT_SEGMENTS_SKIPPED, VC_STAT_SEGMENTS_SKIPPED_HIGH) / hit;
         st.earlyTerminatedFraction = counts[VC_STAT_TERMINATED_EARLY] / hit;
         st.raysTruncated = counts[VC_STAT_TRUNCATED];
     } catch (const cl::Error &e) {

@@ -38,6 +38,7 @@ struct RenderStats {
     double preintegrationError = 0; // the table's own measured error
     double renderSeconds = 0;       // kernel, read-back and upsampling
     int raysWide = 0, raysHigh = 0; // rays cast (image_scale < 1 casts fewer, then upsamples)
+    uint64_t raysHit = 0;           // rays that entered the volume
     double meanSamplesPerRay = 0;   // over rays that hit the volume
     double skippedSegmentsPerRay = 0; // empty-space skipping, over rays that hit
     double earlyTerminatedFraction = 0;

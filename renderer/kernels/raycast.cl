@@ -412,10 +412,11 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
         segStart = segEnd;
     }
     image[y * P->width + x] = (float4)(color - colorCarry, opacityFromDepth(opticalDepth - depthCarry));
-    atomic_add(&stats[VC_STAT_SAMPLES], samples);
+    if (atomic_add(&stats[VC_STAT_SAMPLES], samples) > UINT_MAX - samples) atomic_inc(&stats[VC_STAT_SAMPLES_HIGH]);
     atomic_inc(&stats[VC_STAT_RAYS_HIT]);
     if (terminated) atomic_inc(&stats[VC_STAT_TERMINATED_EARLY]);
 #ifdef EMPTY_SPACE_SKIPPING
-    if (skipped) atomic_add(&stats[VC_STAT_SEGMENTS_SKIPPED], skipped);
+    if (skipped && atomic_add(&stats[VC_STAT_SEGMENTS_SKIPPED], skipped) > UINT_MAX - skipped)
+        atomic_inc(&stats[VC_STAT_SEGMENTS_SKIPPED_HIGH]);
 #endif
 }

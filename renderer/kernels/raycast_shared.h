@@ -67,6 +67,10 @@ typedef struct {
 #define VC_STAT_TRUNCATED 2
 #define VC_STAT_RAYS_HIT 3
 #define VC_STAT_SEGMENTS_SKIPPED 4
-#define VC_STAT_COUNT 5
+/* Carries of the two 32-bit sums that outgrow 2^32 on big frames (1000² rays × 8 samples per
+ * voxel × 880 voxels is 7e9): 64-bit atomics are optional in OpenCL 1.2. */
+#define VC_STAT_SAMPLES_HIGH 5
+#define VC_STAT_SEGMENTS_SKIPPED_HIGH 6
+#define VC_STAT_COUNT 7
 
 #endif
