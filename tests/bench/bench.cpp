@@ -55,9 +55,10 @@ std::string firstLineWith(const char *file, const std::string &key) {
     std::string line;
     while (std::getline(in, line))
         if (line.rfind(key, 0) == 0) {
-            const auto colon = line.find(':');
+            const auto colon = line.find_first_of(":=");
             std::string v = colon == std::string::npos ? line : line.substr(colon + 1);
-            v.erase(0, v.find_first_not_of(" \t"));
+            v.erase(0, v.find_first_not_of(" \t\""));
+            v.erase(v.find_last_not_of(" \t\"") + 1);
             return v;
         }
     return "";

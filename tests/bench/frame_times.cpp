@@ -188,6 +188,10 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
                                   {"first_frame_ms", r.firstFrameMs},
                                   {"cpus_busy_with_other_processes", r.otherCpus},
                                   {"mean_samples_per_ray", r.stats.meanSamplesPerRay},
+                                  {"rays_hit", r.stats.raysHit},
+                                  // The kernel's cost per sample on all cores: the profile's unit.
+                                  {"core_ns_per_sample", r.timing.median * 1e6 * std::thread::hardware_concurrency() /
+                                                             std::max(1.0, double(r.stats.raysHit) * r.stats.meanSamplesPerRay)},
                                   {"empty_brick_fraction", r.stats.emptyBrickFraction},
                                   {"paper_ms", paperMs > 0 ? nlohmann::json(paperMs) : nlohmann::json(nullptr)}});
             rows.push_back({e.key, sizeName(s), fmt(r.timing.median, 2), fmt(r.timing.min, 2), fmt(r.timing.max, 2),
