@@ -22,6 +22,9 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
   # Web client tests: Debian's Chromium driven by playwright-core
   chromium
+  # Container tests: podman with runc and netavark's bridge network (iptables),
+  # podman-compose, debootstrap for the base image (no registry is reachable), curl
+  podman runc netavark iptables podman-compose debootstrap curl
 )
 # Node.js and npm only where the machine has none: a machine may already carry a newer Node.js
 # (NodeSource's, which bundles npm), and Debian's npm package conflicts with it.
