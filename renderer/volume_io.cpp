@@ -1,5 +1,6 @@
 #include "renderer/volume_io.hpp"
 
+#include <itkCommand.h>
 #include <itkGDCMImageIO.h>
 #include <itkGDCMImageIOFactory.h>
 #include <itkGDCMSeriesFileNames.h>
@@ -11,6 +12,7 @@
 #include <itkMetaImageIOFactory.h>
 #include <itkNiftiImageIOFactory.h>
 #include <itkNrrdImageIOFactory.h>
+#include <itkProcessObject.h>
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 #include <zlib.h>
@@ -31,6 +33,46 @@
 
 namespace volcast {
 namespace {
+
+// LoadOptions::progress, kept from going backwards.
+class LoadProgress {
+  public:
+    explicit LoadProgress(const LoadOptions &options) : fn_(options.progress) {}
+    void operator()(double fraction, std::string_view task) {
+        if (!fn_) return;
+        last_ = std::clamp(fraction, last_, 1.0);
+        fn_(last_, task);
+    }
+
+  private:
+    std::function<void(double, std::string_view)> fn_;
+    double last_ = 0;
+};
+
+// Forwards an ITK filter's ProgressEvent (a DICOM series: one per slice) into [from, to].
+class ItkProgress : public itk::Command {
+  public:
+    using Self = ItkProgress;
+    using Superclass = itk::Command;
+    using Pointer = itk::SmartPointer<Self>;
+    itkNewMacro(Self)
+
+    LoadProgress *progress = nullptr;
+    double from = 0, to = 1;
+    std::string task;
+
+    void Execute(itk::Object *caller, const itk::EventObject &event) override {
+        Execute(static_cast<const itk::Object *>(caller), event);
+    }
+    void Execute(const itk::Object *caller, const itk::EventObject &event) override {
+        const auto *filter = dynamic_cast<const itk::ProcessObject *>(caller);
+        if (progress && filter && itk::ProgressEvent().CheckEvent(&event))
+            (*progress)(from + (to - from) * double(filter->GetProgress()), task);
+    }
+
+  protected:
+    ItkProgress() = default;
+};
 
 namespace fs = std::filesystem;
 
@@ -620,7 +662,8 @@ std::string displayName(const fs::path &path) {
 }
 
 // Reads all voxels of an IO whose header is read and validated, converting to float32.
-std::vector<float> readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelType type, size_t count) {
+std::vector<float> readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelType type, size_t count,
+                              LoadProgress &progress) {
     itk::ImageIORegion region(io.GetNumberOfDimensions());
     for (unsigned d = 0; d < io.GetNumberOfDimensions(); ++d) {
         region.SetIndex(d, 0);
@@ -637,7 +680,9 @@ std::vector<float> readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelT
             } else {
                 std::vector<T> native(count);
                 io.Read(native.data());
+                const size_t chunk = std::max<size_t>(count / 16, 1);
                 for (size_t i = 0; i < count; ++i) {
+                    if (i % chunk == 0) progress(0.8 + 0.1 * double(i) / double(count), "converting");
                     if constexpr (std::is_same_v<T, double>) {
                         // Finite doubles beyond float's range would become Inf; clamp them instead.
                         constexpr double kMax = std::numeric_limits<float>::max();
@@ -701,7 +746,7 @@ fs::path niftiReadPath(const fs::path &path, TemporaryLink &alias) {
     return alias.link;
 }
 
-Volume loadImageFile(const fs::path &path, const LoadOptions &options) {
+Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgress &progress) {
     {
         std::ifstream probe(path, std::ios::binary);
         if (!probe) fail(path, "cannot be opened (check its permissions)");
@@ -765,15 +810,18 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options) {
     const uint64_t need = uint64_t(v.voxelCount()) * voxelTypeSize(type);
     const std::string shape =
         fmt::format("{} x {} x {} {}", v.dims.x, v.dims.y, v.dims.z, voxelTypeName(type));
+    // Counting a gzip stream's bytes inflates it once: about half of what reading it costs.
+    progress(0.02, "checking data");
     if (nrrd) checkNrrdData(path, *nrrd, need, shape);
     if (meta) checkMetaData(path, *meta, need, shape);
     if (ioName == "NiftiImageIO") checkNiftiData(path);
 
-    v.voxels = readVoxels(path, *io, type, v.voxelCount());
+    progress(0.35, "reading voxels");
+    v.voxels = readVoxels(path, *io, type, v.voxelCount(), progress);
     return v;
 }
 
-Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options) {
+Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
     auto names = itk::GDCMSeriesFileNames::New();
     names->SetUseSeriesDetails(true);
     names->SetDirectory(dir.string());
@@ -787,7 +835,7 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options) {
     // One file may be a multi-frame volume on its own.
     if (files.size() == 1) {
         try {
-            return loadImageFile(fs::path(files.front()), options);
+            return loadImageFile(fs::path(files.front()), options, progress);
         } catch (const VolumeLoadError &e) {
             fail(dir, e.what());  // keeps the promise that messages start with the path given
         }
@@ -812,6 +860,13 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options) {
     auto reader = itk::ImageSeriesReader<Image>::New();
     reader->SetImageIO(io);
     reader->SetFileNames(files);
+    auto observer = ItkProgress::New();
+    observer->progress = &progress;
+    observer->from = 0.02;
+    observer->to = 0.9;
+    observer->task = "reading slices";
+    reader->AddObserver(itk::ProgressEvent(), observer);
+    progress(0.02, "reading slices");
     try {
         reader->Update();
     } catch (const itk::ExceptionObject &e) {
@@ -861,10 +916,15 @@ Volume loadVolume(const fs::path &path, const LoadOptions &options) {
     const auto status = fs::status(path, ec);
     if (!fs::exists(status)) fail(path, "file not found");
     try {
-        Volume v = fs::is_directory(status) ? loadDicomFolder(path, options) : loadImageFile(path, options);
+        LoadProgress progress(options);
+        progress(0, "reading header");
+        Volume v = fs::is_directory(status) ? loadDicomFolder(path, options, progress)
+                                            : loadImageFile(path, options, progress);
         v.name = displayName(path);
+        progress(0.9, "statistics");
         v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
         computeStatistics(v);
+        progress(1, "statistics");
         spdlog::debug("{}: loaded {} x {} x {} {} voxels, spacing {} {} {}, range {} .. {}", path.string(), v.dims.x,
                       v.dims.y, v.dims.z, voxelTypeName(v.sourceType), v.spacing.x, v.spacing.y, v.spacing.z,
                       v.range.min, v.range.max);

@@ -33,6 +33,8 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <string_view>
 #include <stdexcept>
 
 namespace volcast {
@@ -40,6 +42,11 @@ namespace volcast {
 struct LoadOptions {
     uint64_t maxBytes = uint64_t(8) << 30;  // in-memory size (float32 voxels) allowed, bytes
     int64_t maxDimension = 32768;           // samples per axis allowed
+    // Called on the loading thread as the load advances: the fraction done in [0, 1], never
+    // decreasing, ending at 1, and what is happening now ("checking data", "reading voxels",
+    // "reading slices", "converting", "statistics"). The fractions weigh the steps by their
+    // usual share of the time; a DICOM series advances slice by slice.
+    std::function<void(double fraction, std::string_view task)> progress;
 };
 
 // Every failure to load: the message starts with the file's path and names the problem.

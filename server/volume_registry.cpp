@@ -229,6 +229,15 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
             std::lock_guard lock(mutex_);
             options.maxBytes = budgetBytes_;
         }
+        // The loader's own steps, thinned to what a progress bar shows: a new step, or 2 % more.
+        double sent = 0;
+        std::string sentTask;
+        options.progress = [&](double fraction, std::string_view task) {
+            if (task == sentTask && fraction < sent + 0.02 && fraction < 1) return;
+            sent = fraction;
+            sentTask = task;
+            progress(p.name, ProgressStage::Loading, sentTask, fraction);
+        };
         LoadedVolume loaded = p.path.empty() ? loadSceneVolume(p.name, options) : loadSceneVolume(p.path.string(), options);
         progress(p.name, ProgressStage::Loading, "", 1.0);
         auto entry = std::make_shared<VolumeEntry>();

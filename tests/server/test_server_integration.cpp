@@ -5,6 +5,7 @@
 #include "client/ws_client.hpp"
 #include "renderer/opencl_renderer.hpp"
 #include "renderer/scene.hpp"
+#include "renderer/volume_io.hpp"
 #include "renderer/volume_source.hpp"
 #include "server/frame_encoder.hpp"
 #include "server/server.hpp"
@@ -141,6 +142,14 @@ class ServerTest : public ::testing::Test {
         fs::create_directories(tmp / "web" / "app");
         std::ofstream(tmp / "outside" / "secret.nrrd") << "NRRD0004\n";
         std::ofstream(tmp / "data" / "ct" / "broken.nrrd") << "NRRD0004\ntype: float\n";   // truncated header
+        {
+            // A real file for the loading progress: 16-bit, gzip, like most scans.
+            volcast::Volume scan;
+            scan.dims = {48, 40, 32};
+            scan.voxels.resize(scan.voxelCount());
+            for (size_t i = 0; i < scan.voxels.size(); ++i) scan.voxels[i] = float(i % 997);
+            volcast::saveVolume(scan, tmp / "data" / "ct" / "scan.nrrd", {volcast::VoxelType::Int16, true});
+        }
         fs::create_symlink(tmp / "outside" / "secret.nrrd", tmp / "data" / "escape.nrrd");
         std::ofstream(tmp / "web" / "index.html") << "<!doctype html><title>volcast</title>";
         std::ofstream(tmp / "web" / "app" / "main.js") << "export const x = 1;";
@@ -324,6 +333,41 @@ TEST_F(ServerTest, TwoSessionsOpeningOneVolumeLoadItOnce) {
         EXPECT_EQ(json::parse(state.text).at("volume").at("name"), "builtin:sphere");
     }
     EXPECT_EQ(server->state().metrics().volumeLoads(), before + 1);
+}
+
+TEST_F(ServerTest, OpeningAFileStreamsItsLoadingProgressBeforeTheState) {
+    Client c("127.0.0.1", port());
+    request(c, {{"type", "hello"}, {"id", 1}, {"protocol", 1}});
+    c.sendText(R"({"type":"open_volume","id":2,"name":"ct/scan.nrrd"})");
+    std::vector<protocol::ProgressMessage> progress;
+    bool gotState = false;
+    const auto deadline = std::chrono::steady_clock::now() + kTimeout;
+    while (!gotState && std::chrono::steady_clock::now() < deadline) {
+        const auto m = c.next(1000ms);
+        if (!m || !m->decoded) continue;
+        if (const auto *p = std::get_if<protocol::ProgressMessage>(&*m->decoded)) progress.push_back(*p);
+        gotState = std::holds_alternative<protocol::StateMessage>(*m->decoded);
+    }
+    ASSERT_TRUE(gotState);
+    // Loading from 0 to 1 through the loader's named steps, then the upload; never backwards.
+    std::set<std::string> tasks;
+    double lastLoading = -1;
+    bool uploaded = false;
+    for (const auto &p : progress) {
+        EXPECT_EQ(p.volume, "ct/scan.nrrd");
+        if (p.stage == protocol::ProgressStage::Loading) {
+            EXPECT_FALSE(uploaded) << "loading after the upload began";
+            EXPECT_GE(p.fraction, lastLoading);
+            lastLoading = p.fraction;
+            if (!p.task.empty()) tasks.insert(p.task);
+        } else if (p.stage == protocol::ProgressStage::Uploading) {
+            uploaded = true;
+        }
+    }
+    EXPECT_EQ(lastLoading, 1.0);
+    EXPECT_TRUE(uploaded);
+    for (const char *task : {"reading header", "checking data", "reading voxels", "converting", "statistics"})
+        EXPECT_TRUE(tasks.count(task)) << task;
 }
 
 TEST_F(ServerTest, BadInputGetsItsErrorCodeAndTheSessionCarriesOn) {

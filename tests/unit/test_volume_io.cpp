@@ -645,6 +645,53 @@ TEST_F(VolumeIoTest, DicomSeriesFolder) {
     EXPECT_NEAR(slice.origin.z, 50 + 2 * 2.5, 1e-6);  // decimal string in the file, as above
 }
 
+// Progress as the server streams it: from 0 to 1, never backwards, each step named.
+struct ProgressLog {
+    std::vector<std::pair<double, std::string>> steps;
+    LoadOptions options() {
+        LoadOptions o;
+        o.progress = [this](double f, std::string_view task) { steps.emplace_back(f, std::string(task)); };
+        return o;
+    }
+    void expectWellFormed() const {
+        ASSERT_GE(steps.size(), 3u);
+        EXPECT_EQ(steps.front().first, 0.0);
+        EXPECT_EQ(steps.back().first, 1.0);
+        for (size_t i = 1; i < steps.size(); ++i) EXPECT_GE(steps[i].first, steps[i - 1].first) << i;
+        for (const auto &[f, task] : steps) EXPECT_FALSE(task.empty()) << f;
+    }
+    size_t count(const std::string &task) const {
+        return size_t(std::count_if(steps.begin(), steps.end(), [&](const auto &s) { return s.second == task; }));
+    }
+};
+
+TEST_F(VolumeIoTest, ProgressOfAFileRunsFromZeroToOneThroughItsSteps) {
+    Volume src;
+    src.dims = {40, 30, 20};
+    src.voxels.assign(src.voxelCount(), 7.0f);
+    saveVolume(src, dir / "p.nrrd", {VoxelType::Int16, true});
+    ProgressLog log;
+    loadVolume(dir / "p.nrrd", log.options());
+    log.expectWellFormed();
+    for (const char *task : {"reading header", "checking data", "reading voxels", "statistics"})
+        EXPECT_GE(log.count(task), 1u) << task;
+    EXPECT_GE(log.count("converting"), 16u); // int16 to float in 16 chunks or more
+}
+
+TEST_F(VolumeIoTest, ProgressOfADicomSeriesAdvancesSliceBySlice) {
+    Volume src;
+    src.dims = {8, 8, 12};
+    src.voxels.assign(src.voxelCount(), 100.0f);
+    saveDicomSeries(src, dir / "slices", VoxelType::Int16);
+    ProgressLog log;
+    loadVolume(dir / "slices", log.options());
+    log.expectWellFormed();
+    std::vector<double> slices;
+    for (const auto &[f, task] : log.steps)
+        if (task == "reading slices" && (slices.empty() || f > slices.back())) slices.push_back(f);
+    EXPECT_GE(slices.size(), 6u) << "12 slices should advance the bar in several steps";
+}
+
 TEST_F(VolumeIoTest, DicomFolderWithTwoSeriesLoadsOne) {
     // Two series of different sizes in one folder: the loader takes one of them whole (the
     // first GDCM lists, logged) rather than mixing slices of both.
