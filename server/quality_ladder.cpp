@@ -50,6 +50,13 @@ std::vector<Level> automaticLadder(const Quality &f, int jitterPasses) {
     return unique;
 }
 
+size_t nextRefinementLevel(size_t sent, const std::vector<double> &predictedMs) {
+    if (predictedMs.empty()) return 0;
+    const size_t last = predictedMs.size() - 1;
+    const size_t next = std::min(sent + 1, last);
+    return next < last && 2 * predictedMs[next] > predictedMs[last] ? last : next;
+}
+
 std::vector<Level> explicitLadder(const Quality &quality, int jitterPasses) {
     return {{quality, quality.jitter ? jitterPasses : 1, 85}};
 }

@@ -137,7 +137,13 @@ bool RenderScheduler::nextWork(SlotId id, Slot &s, Clock::time_point now, Work &
         wakeAt = std::min(wakeAt, refineAt);
         return false;
     }
-    work.level = s.sentLevel < last ? s.sentLevel + 1 : last;
+    std::vector<double> predictedMs;
+    for (size_t i = 0; i < job.ladder.size(); ++i) {
+        const Level &l = job.ladder[i];
+        predictedMs.push_back(
+            s.timer.predictMs(i, predictedSamples(*job.volume->volume, l.quality, job.width, job.height)) * l.passes);
+    }
+    work.level = int(nextRefinementLevel(size_t(std::max(s.sentLevel, 0)), predictedMs));
     work.final = work.level == last;
     return true;
 }

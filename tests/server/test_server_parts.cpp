@@ -48,6 +48,17 @@ TEST(LevelTimer, PicksTheFinestLevelThatFitsAndAdaptsToMeasurements) {
     EXPECT_EQ(timer.choose(3, 1000, samples), 2u);
 }
 
+TEST(QualityLadder, RefinementSkipsALevelCostingMoreThanHalfTheFinal) {
+    // bonsai at 512² (README): 19, 184, 312, 804, 938 ms.
+    const std::vector<double> ms = {19, 184, 312, 804, 938};
+    EXPECT_EQ(nextRefinementLevel(0, ms), 1u);
+    EXPECT_EQ(nextRefinementLevel(1, ms), 2u);
+    EXPECT_EQ(nextRefinementLevel(2, ms), 4u); // 804 > 938 / 2: straight to the final
+    EXPECT_EQ(nextRefinementLevel(4, ms), 4u);
+    EXPECT_EQ(nextRefinementLevel(0, {5, 6}), 1u);
+    EXPECT_EQ(nextRefinementLevel(0, {7}), 0u);
+}
+
 TEST(StaticFiles, MimeTypes) {
     EXPECT_EQ(mimeType("a/index.html"), "text/html; charset=utf-8");
     EXPECT_EQ(mimeType("main.mjs"), "text/javascript; charset=utf-8");
