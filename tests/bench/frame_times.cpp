@@ -32,20 +32,6 @@ const std::map<std::string, std::map<std::string, double>> kPaperTable1 = {
 
 std::string sizeName(std::pair<int, int> s) { return std::to_string(s.first) + "x" + std::to_string(s.second); }
 
-std::string dtypeName(VoxelType t) {
-    switch (t) {
-    case VoxelType::UInt8: return "uint8";
-    case VoxelType::Int8: return "int8";
-    case VoxelType::UInt16: return "uint16";
-    case VoxelType::Int16: return "int16";
-    case VoxelType::UInt32: return "uint32";
-    case VoxelType::Int32: return "int32";
-    case VoxelType::Float32: return "float32";
-    case VoxelType::Float64: return "float64";
-    }
-    return "?";
-}
-
 // CPUs kept busy by other processes while timing, as the peers' scripts report it (their
 // '*' mark): all CPUs' busy time from /proc/stat minus this process's own CPU time.
 class OtherLoad {
@@ -273,7 +259,7 @@ void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
                          {"cpus_busy_with_other_processes", r.otherCpus}}},
             {"volume", {{"file", std::filesystem::absolute(options.volume).string()},
                         {"dims", {volume->dims.x, volume->dims.y, volume->dims.z}},
-                        {"dtype", dtypeName(volume->sourceType)},
+                        {"dtype", std::string(voxelTypeName(volume->sourceType))},
                         {"bytes", volume->voxelCount() * voxelTypeSize(volume->sourceType)},
                         {"spacing", {volume->spacing.x, volume->spacing.y, volume->spacing.z}}}},
             {"sample_distance_voxels", options.sampleDistance},
