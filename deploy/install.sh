@@ -44,15 +44,9 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 echo "install.sh: all ${#packages[@]} packages present"
 
-# playwright-core for the browser tests, at the version in tests/web's lockfile (it drives
-# Debian's chromium; no browser download).
+# The npm packages of the browser tests (playwright-core) and of the manifest checks
+# (kubernetes-models, js-yaml), at their lockfiles' versions.
 repo="$(cd "$(dirname "$0")/.." && pwd)"
-if [ ! -d "$repo/tests/web/node_modules/playwright-core" ]; then
-  echo "install.sh: npm ci in tests/web"
-  # Debian's npm trusts only its own CA list; use the system's, which also holds any CA of a
-  # local registry proxy.
-  PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --prefix "$repo/tests/web" --no-audit --no-fund --loglevel=error \
-    --cafile /etc/ssl/certs/ca-certificates.crt ||
-    echo "install.sh: WARNING: npm ci failed (registry unreachable or its TLS CA not trusted);" \
-         "the browser tests will report themselves skipped" >&2
-fi
+for folder in tests/web tests/container; do
+  "$repo/tests/npm-ci.sh" "$repo/$folder"
+done
