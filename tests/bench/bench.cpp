@@ -31,13 +31,18 @@ nlohmann::json toJson(const Timing &t) {
     return {{"median", t.median}, {"min", t.min}, {"max", t.max}, {"n", t.n}, {"samples", t.samples}};
 }
 
-Timing repeat(const RepeatOptions &options, const std::function<void(int)> &once) {
+Timing repeat(const RepeatOptions &options, const std::function<void(int)> &once,
+              const std::function<void()> &prepare) {
     using Clock = std::chrono::steady_clock;
     int k = 0;
-    for (int i = 0; i < options.warmup; ++i) once(k++);
+    for (int i = 0; i < options.warmup; ++i) {
+        if (prepare) prepare();
+        once(k++);
+    }
     std::vector<double> ms;
     double spent = 0;
     for (int i = 0; i < std::max(1, options.repeats); ++i) {
+        if (prepare) prepare();
         const auto t0 = Clock::now();
         once(k++);
         const double dt = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();

@@ -32,8 +32,10 @@ struct RepeatOptions {
     double maxSeconds = 30;    // ... stopping early once this much time went to timed runs
 };
 // Runs `once(k)` warmup + repeats times (k counts from 0, warm-up included) and returns the
-// timed runs' wall-clock ms. At least one timed run always happens.
-Timing repeat(const RepeatOptions &options, const std::function<void(int k)> &once);
+// timed runs' wall-clock ms. At least one timed run always happens. `prepare`, if given, runs
+// untimed before each run (e.g. a fresh copy of data the run changes in place).
+Timing repeat(const RepeatOptions &options, const std::function<void(int k)> &once,
+              const std::function<void()> &prepare = {});
 
 // The machine and OpenCL device, written into every study's JSON.
 nlohmann::json machineInfo(const OpenClContext *cl);

@@ -96,9 +96,14 @@ std::vector<std::pair<int, int>> parseSizes(const std::string &text) {
         const auto x = part.find_first_of("xX");
         try {
             if (x == std::string::npos) throw std::invalid_argument("no x");
-            size_t used = 0;
-            const int w = std::stoi(part.substr(0, x), &used);
-            const int h = std::stoi(part.substr(x + 1));
+            const auto whole = [](const std::string &digits) {
+                size_t used = 0;
+                const int v = std::stoi(digits, &used);
+                if (used != digits.size()) throw std::invalid_argument("trailing characters");
+                return v;
+            };
+            const int w = whole(part.substr(0, x));
+            const int h = whole(part.substr(x + 1));
             validateImageSize(w, h);
             sizes.emplace_back(w, h);
         } catch (const std::exception &) {
@@ -120,27 +125,30 @@ Quality table1Quality(double step) {
 }
 
 void table1(OpenClContext &cl, const StudyOptions &options) {
+    // paper: the row of the paper's Table 1 to set it beside. The peers place their ramp on a
+    // phantom's nominal range and on a scan's own range.
     struct Entry {
-        std::string key, label;
+        std::string key, label, paper;
         std::shared_ptr<const Volume> volume;
+        ValueRange range;
     };
     const bool quick = options.quick;
     std::vector<Entry> volumes;
     const auto wanted = [&](const char *key) {
         return std::find(options.volumes.begin(), options.volumes.end(), key) != options.volumes.end();
     };
-    if (wanted("small"))
-        volumes.push_back({"small", "phantom 128×128×256 uint8 (4 MiB)",
-                           std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{32, 32, 64} : Vec3i{128, 128, 256},
-                                                                    VoxelType::UInt8))});
+    const auto phantom = [&](const char *key, const char *label, Vec3i dims, Vec3i quickDims, VoxelType type) {
+        auto v = std::make_shared<Volume>(makePeerPhantom(quick ? quickDims : dims, type));
+        volumes.push_back({key, label, key, v, nominalRange(*v)});
+    };
+    if (wanted("small")) phantom("small", "phantom 128×128×256 uint8 (4 MiB)", {128, 128, 256}, {32, 32, 64}, VoxelType::UInt8);
     const auto tooth = options.data / "tooth.nhdr";
-    if (wanted("tooth") && std::filesystem::exists(tooth))
-        volumes.push_back({"tooth", "tooth 103×94×161 uint16 (3 MiB, real micro-CT)",
-                           std::make_shared<Volume>(loadVolume(tooth))});
+    if (wanted("tooth") && std::filesystem::exists(tooth)) {
+        auto v = std::make_shared<Volume>(loadVolume(tooth));
+        volumes.push_back({"tooth", "tooth 103×94×161 uint16 (3 MiB, real micro-CT)", "small", v, v->range});
+    }
     if (wanted("large"))
-        volumes.push_back({"large", "phantom 512×512×400 uint16 (200 MiB)",
-                           std::make_shared<Volume>(makePeerPhantom(quick ? Vec3i{64, 64, 50} : Vec3i{512, 512, 400},
-                                                                    VoxelType::UInt16))});
+        phantom("large", "phantom 512×512×400 uint16 (200 MiB)", {512, 512, 400}, {64, 64, 50}, VoxelType::UInt16);
     const auto sizes = parseSizes(quick ? "64x64,80x60" : options.sizes);
     const Quality quality = table1Quality();
 
@@ -155,15 +163,11 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
     std::map<std::string, std::map<std::string, CellResult>> cells;
     for (const Entry &e : volumes) {
         OpenClRenderer renderer(cl, e.volume);
-        // The peers place their ramp on a phantom's nominal range and on a scan's own range.
-        const ValueRange range = e.key == "tooth" ? e.volume->range : nominalRange(*e.volume);
-        const TransferFunction tf = peerTransferFunction(range, e.volume->smallestSpacing());
+        const TransferFunction tf = peerTransferFunction(e.range, e.volume->smallestSpacing());
         for (const auto &s : sizes) {
             const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, options.repeat);
             cells[e.key][sizeName(s)] = r;
-            const auto paper = kPaperTable1.count(e.key == "tooth" ? "small" : e.key)
-                                   ? kPaperTable1.at(e.key == "tooth" ? "small" : e.key)
-                                   : std::map<std::string, double>{};
+            const auto &paper = kPaperTable1.at(e.paper);
             const double paperMs = paper.count(sizeName(s)) ? paper.at(sizeName(s)) : 0;
             std::cerr << "table1: " << e.key << " " << sizeName(s) << " " << fmt(r.timing.median) << " ms (first "
                       << fmt(r.firstFrameMs) << " ms, other load " << fmt(r.otherCpus, 2) << " CPUs)\n";

@@ -109,6 +109,8 @@ TEST(Bench, SizesParseAndBadOnesAreNamed) {
         EXPECT_NE(std::string(e.what()).find("800by600"), std::string::npos);
     }
     EXPECT_THROW(parseSizes("0x10"), std::invalid_argument);
+    EXPECT_THROW(parseSizes("512x512px"), std::invalid_argument);
+    EXPECT_THROW(parseSizes("512.5x512"), std::invalid_argument);
 }
 
 TEST(Bench, SvgLeavesOutPointsALogAxisCannotShow) {
