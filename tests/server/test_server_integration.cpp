@@ -162,6 +162,10 @@ class ServerTest : public ::testing::Test {
         config.webRoot = tmp / "web";
         config.idleMs = 100;
         config.ioThreads = 2;
+        // ClientThatStopsReadingStallsNoOneAndHoldsOneFrame pauses a reader for longer than
+        // the default write timeout and expects it back: closing stuck readers is checked in
+        // test_ws_hardening.cpp.
+        config.writeTimeoutMs = 120000;
         server = std::make_unique<volcast::server::Server>(config);
         server->start();
         // Ready once the default (demo) volume is in memory.
