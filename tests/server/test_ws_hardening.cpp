@@ -12,6 +12,7 @@
 #include <boost/beast/websocket.hpp>
 #include <gtest/gtest.h>
 
+#include <iostream>
 #include <sstream>
 #include <thread>
 
@@ -345,6 +346,9 @@ TEST(WsHardening, ClientThatStopsReadingIsClosedAtTheWriteTimeoutAndFreesItsSlot
     const double writtenForA = metricSum(metrics1, "volcast_frame_bytes_total") - frameBytes0;
     EXPECT_LT(writtenForA, 2.0 * (config.sendBufferBytes + kReceiveBuffer) + 512 * 1024)
         << "bytes of frames written for a client that did not read";
+    std::cout << "the reader that stopped was closed after "
+              << std::chrono::duration<double>(*closedAt - stopped).count() << " s; " << writtenForA
+              << " bytes of frames were written for it after it stopped\n";
 
     // Its render slot is free and B keeps rendering.
     for (int i = 0; i < 3; ++i) {
