@@ -33,7 +33,7 @@ struct ServerConfig {
     // WebSocket sessions and admission control (server/README.md; docs/hardening.md).
     int maxPendingSessions = 64;              // connections not past hello yet; more get busy (1013)
     double helloTimeoutMs = 10000;            // a connection without a good hello by then: close 1008
-    int64_t maxSamplesPerFrame = int64_t(1) << 30;   // predicted samples of one frame (one pass)
+    int64_t maxSamplesPerFrame = int64_t(1) << 32;   // predicted samples of one frame (one pass)
     int64_t maxStillPixels = int64_t(4096) * 4096;   // width x height of a still
     uint64_t maxRequestBytes = uint64_t(1) << 30;    // image buffers one view may allocate
     size_t maxUnsentBytes = size_t(80) << 20; // replies + the frame not yet written, per session
