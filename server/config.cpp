@@ -63,6 +63,13 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     app.add_option("--max-message-bytes", c.maxMessageBytes, "Largest text message accepted, bytes")
         ->envname("VOLCAST_MAX_MESSAGE_BYTES")
         ->check(CLI::Range(1024, 16 << 20));
+    app.add_option("--load-timeout-s", c.loadTimeoutS, "A volume load running longer fails, seconds (0: no limit)")
+        ->envname("VOLCAST_LOAD_TIMEOUT_S")
+        ->check(CLI::Range(0.0, 86400.0));
+    app.add_option("--shutdown-grace-ms", c.shutdownGraceMs,
+                   "On SIGTERM/SIGINT, exit within this many ms whatever is still running")
+        ->envname("VOLCAST_SHUTDOWN_GRACE_MS")
+        ->check(CLI::Range(100, 600000));
     app.add_option("--port-file", portFile, "Write the bound port to this file once listening (for scripts)");
     app.add_option("--log-level", c.logLevel, "trace, debug, info, warn, error")->envname("VOLCAST_LOG_LEVEL");
     try {

@@ -29,6 +29,8 @@ struct ServerConfig {
     int jitterPasses = 4;                     // passes accumulated by a jittered final level
     bool errorCalibration = true;             // calibrate error estimates against the reference
     size_t maxMessageBytes = 64 * 1024;       // one text message
+    double loadTimeoutS = 120;                // a volume load running longer fails (0: no limit)
+    int shutdownGraceMs = 5000;               // SIGTERM: exit within this, whatever still runs
     std::filesystem::path portFile;           // write the bound port here once listening
     std::string logLevel = "info";
 };

@@ -223,7 +223,8 @@ void WebsocketSession::onOpenVolume(const protocol::OpenVolumeRequest &m) {
             net::post(executor, [weak, id, result = std::move(result)]() mutable {
                 if (auto self = weak.lock()) self->onOpened(id, std::move(result));
             });
-        });
+        },
+        volume_);   // the volume this session gives up: it may be evicted to make room
 }
 
 void WebsocketSession::onOpened(nlohmann::json id, VolumeRegistry::Result result) {
