@@ -1056,11 +1056,11 @@ TEST_F(VolumeIoTest, LoadPastItsTimeLimitFailsNamingTheLimit) {
     slow.timeLimitSeconds = 0.2;
     // Each step takes 50 ms: the 12 slices alone take 0.6 s, three times the limit.
     slow.progress = [](double, std::string_view) { std::this_thread::sleep_for(std::chrono::milliseconds(50)); };
-    const auto start = std::chrono::steady_clock::now();
     EXPECT_THROW(loadVolume(dir / "slow", slow), VolumeLoadTimeout);
     expectLoadError(dir / "slow", {"time limit", "0.2 s"}, slow);
-    // Stopped at the first step past the limit: the limit plus one 50 ms step, per attempt.
-    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(2 * (200 + 50) + 400));
+    // Without the limit the same load completes.
+    slow.timeLimitSeconds = 0;
+    EXPECT_EQ(loadVolume(dir / "slow", slow).dims, src.dims);
 }
 
 TEST_F(VolumeIoTest, StopRequestEndsTheLoad) {
