@@ -2,7 +2,12 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
+#include <fcntl.h>
+#include <filesystem>
+#include <unistd.h>
 #include <vector>
 
 namespace volcast {
@@ -24,12 +29,45 @@ std::string fromEnv(const std::string &given, const char *variable, const std::s
     return v && *v ? std::string(v) : fallback;
 }
 
+// The folder PoCL keeps compiled kernels in: POCL_CACHE_DIR, else its default under the
+// XDG cache folder or the home folder. Empty if none can be named.
+std::string poclCacheFolder() {
+    if (const char *v = std::getenv("POCL_CACHE_DIR"); v && *v) return v;
+    if (const char *v = std::getenv("XDG_CACHE_HOME"); v && *v) return std::string(v) + "/pocl/kcache";
+    if (const char *v = std::getenv("HOME"); v && *v) return std::string(v) + "/.cache/pocl/kcache";
+    return "";
+}
+
+// PoCL given a cache folder it cannot write to finds no device at all, and the user would be
+// told "no OpenCL device found"; checking first names the folder and the problem.
+void checkKernelCache(const std::string &folder) {
+    const auto refuse = [&](const std::string &problem) {
+        throw OpenClError("kernel cache folder " + folder + " " + problem +
+                          " (choose a writable folder with --kernel-cache or VOLCAST_KERNEL_CACHE)");
+    };
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::create_directories(folder, ec);
+    if (ec) refuse("cannot be created: " + ec.message());
+    if (!fs::is_directory(folder, ec)) refuse("is not a folder");
+    // Permission bits do not tell (root ignores them, a read-only mount overrides them): try.
+    const std::string probe = folder + "/.volcast-write-test-" + std::to_string(::getpid());
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    if (fd < 0) refuse(std::string("is not writable: ") + std::strerror(errno));
+    const bool written = ::write(fd, "x", 1) == 1;
+    const int writeErrno = errno;
+    ::close(fd);
+    ::unlink(probe.c_str());
+    if (!written) refuse(std::string("is not writable: ") + std::strerror(writeErrno));
+}
+
 } // namespace
 
 OpenClContext::OpenClContext(const DeviceOptions &options) {
     // PoCL reads its cache folder when the platform is first opened.
     const std::string cacheDir = fromEnv(options.kernelCacheDir, "VOLCAST_KERNEL_CACHE", "");
     if (!cacheDir.empty()) setenv("POCL_CACHE_DIR", cacheDir.c_str(), 1);
+    if (const std::string folder = poclCacheFolder(); !folder.empty()) checkKernelCache(folder);
     // PoCL's continuation-based work-groups run our long, divergent per-ray loops 12-14 %
     // faster than its default loop vectoriser, which has little to vectorise in them
     // (README, Performance). Only where the user has not chosen; other drivers ignore it.

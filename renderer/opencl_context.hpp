@@ -25,7 +25,9 @@ struct DeviceOptions {
     // "auto" (a GPU if there is one, else a CPU device), "gpu", "cpu", or a part of the
     // device's name. Empty: the VOLCAST_DEVICE environment variable, else "auto".
     std::string device;
-    // Folder for PoCL's compiled-kernel cache. Empty: VOLCAST_KERNEL_CACHE, else PoCL's default.
+    // Folder for PoCL's compiled-kernel cache. Empty: VOLCAST_KERNEL_CACHE, else PoCL's default
+    // (POCL_CACHE_DIR, else ~/.cache/pocl/kcache). The folder is created if missing and must
+    // be writable: the constructor checks, and its OpenClError names the folder.
     std::string kernelCacheDir;
 };
 

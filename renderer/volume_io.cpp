@@ -15,18 +15,24 @@
 #include <itkProcessObject.h>
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
+#include <gdcmExplicitDataElement.h>
+#include <gdcmImplicitDataElement.h>
+#include <gdcmReader.h>
 #include <zlib.h>
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <fstream>
 #include <limits>
 #include <optional>
 #include <random>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -34,11 +40,21 @@
 namespace volcast {
 namespace {
 
-// LoadOptions::progress, kept from going backwards.
+// LoadOptions::progress, kept from going backwards; every step is also where the time
+// limit and a stop request end the load.
 class LoadProgress {
   public:
-    explicit LoadProgress(const LoadOptions &options) : fn_(options.progress) {}
+    LoadProgress(const LoadOptions &options, const std::filesystem::path &path)
+        : fn_(options.progress), stopRequested_(options.stopRequested), limit_(options.timeLimitSeconds),
+          path_(path.string()) {}
     void operator()(double fraction, std::string_view task) {
+        if (stopRequested_ && stopRequested_()) throw VolumeLoadError(path_ + ": loading was stopped");
+        const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+        if (limit_ > 0 && elapsed > limit_)
+            throw VolumeLoadTimeout(fmt::format("{}: loading took longer than the time limit of {:g} s (stopped "
+                                                "while {})",
+                                                path_, limit_, task.empty() ? "starting" : std::string(task)),
+                                    limit_);
         if (!fn_) return;
         last_ = std::clamp(fraction, last_, 1.0);
         fn_(last_, task);
@@ -46,6 +62,10 @@ class LoadProgress {
 
   private:
     std::function<void(double, std::string_view)> fn_;
+    std::function<bool()> stopRequested_;
+    double limit_ = 0;
+    std::string path_;
+    std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
     double last_ = 0;
 };
 
@@ -60,15 +80,22 @@ class ItkProgress : public itk::Command {
     LoadProgress *progress = nullptr;
     double from = 0, to = 1;
     std::string task;
+    // What stopped the load (time limit, stop request): ITK may send progress from a
+    // destructor, so nothing is thrown through it; the filter is aborted and the loader
+    // rethrows this once Update() returns.
+    std::exception_ptr stopped;
 
     void Execute(itk::Object *caller, const itk::EventObject &event) override {
-        Execute(static_cast<const itk::Object *>(caller), event);
-    }
-    void Execute(const itk::Object *caller, const itk::EventObject &event) override {
-        const auto *filter = dynamic_cast<const itk::ProcessObject *>(caller);
-        if (progress && filter && itk::ProgressEvent().CheckEvent(&event))
+        auto *filter = dynamic_cast<itk::ProcessObject *>(caller);
+        if (!progress || !filter || stopped || !itk::ProgressEvent().CheckEvent(&event)) return;
+        try {
             (*progress)(from + (to - from) * double(filter->GetProgress()), task);
+        } catch (...) {
+            stopped = std::current_exception();
+            filter->AbortGenerateDataOn();
+        }
     }
+    void Execute(const itk::Object *, const itk::EventObject &) override {}
 
   protected:
     ItkProgress() = default;
@@ -175,10 +202,74 @@ std::optional<uint64_t> fileSize(const fs::path &p) {
     return uint64_t(size);
 }
 
-// A data file named by a header is relative to the header's folder unless absolute.
-fs::path besideHeader(const fs::path &header, const std::string &name) {
-    const fs::path p(name);
-    return p.is_absolute() ? p : header.parent_path() / p;
+bool isInside(const fs::path &p, const fs::path &folder) {
+    auto [f, pIt] = std::mismatch(folder.begin(), folder.end(), p.begin(), p.end());
+    return f == folder.end();
+}
+
+// A data file a header names: relative to the header's folder and inside it once symbolic
+// links are resolved (no absolute name, no "..", no link out), and a regular file. Only
+// stat() is used, never open(): a FIFO named as data would block the loader. The messages
+// name the data file as the header wrote it, never the server's absolute paths.
+fs::path confinedDataFile(const fs::path &header, const std::string &name) {
+    const auto refuse = [&](const std::string &why) {
+        fail(header, fmt::format("data file '{}' named by the header {}", name, why));
+    };
+    const fs::path given(name);
+    if (name.empty()) refuse("is empty");
+    if (given.is_absolute() || given.has_root_name() || given.has_root_directory())
+        refuse("is an absolute path; data files must lie in the header's folder (give a relative name)");
+    std::error_code ec;
+    const fs::path folder = fs::canonical(fs::absolute(header, ec).parent_path(), ec);
+    if (ec) refuse("cannot be checked: the header's folder cannot be resolved");
+    const fs::path candidate = folder / given;
+    if (!fs::exists(fs::symlink_status(candidate, ec))) refuse("was not found");
+    const fs::path resolved = fs::weakly_canonical(candidate, ec);
+    if (ec || !fs::exists(resolved, ec)) refuse("was not found (a broken symbolic link?)");
+    if (!isInside(resolved, folder))
+        refuse("lies outside the header's folder (through '..' or a symbolic link); data files must lie in the "
+               "header's folder");
+    const auto status = fs::status(resolved, ec);
+    if (ec) refuse("cannot be checked: " + ec.message());
+    if (fs::is_directory(status)) refuse("is a folder, not a data file");
+    if (!fs::is_regular_file(status)) refuse("is not a regular file (a FIFO, socket or device)");
+    return resolved;
+}
+
+// Expands a teem/MetaIO file-name pattern ("slice%03d.raw" with min, max, step) into names.
+// Only one %d conversion, with an optional 0 flag and width, is accepted: the format
+// comes from an untrusted header and is never handed to printf.
+std::vector<std::string> expandPattern(const fs::path &header, const std::string &spec) {
+    std::istringstream in(spec);
+    std::string format;
+    int64_t first = 0, last = 0, step = 0;
+    if (!(in >> format >> first >> last >> step))
+        fail(header, fmt::format("data file pattern '{}' is not 'format min max step'", spec));
+    static const std::regex conversion(R"(^([^%]*)%(0?)([0-9]{0,2})d([^%]*)$)");
+    std::smatch m;
+    if (!std::regex_match(format, m, conversion))
+        fail(header, fmt::format("data file pattern '{}' must hold exactly one %d conversion", format));
+    if (step == 0 || (step > 0 ? first > last : first < last))
+        fail(header, fmt::format("data file pattern '{}' has an empty or endless range {} {} {}", format, first,
+                                 last, step));
+    constexpr int64_t kMaxFiles = 100000;
+    const int64_t count = (last - first) / step + 1;
+    if (count > kMaxFiles)
+        fail(header, fmt::format("data file pattern '{}' names {} files, more than the {} allowed", format, count,
+                                 kMaxFiles));
+    const bool zeros = m[2].length() > 0;
+    const int width = m[3].length() > 0 ? std::stoi(m[3].str()) : 0;
+    std::vector<std::string> names;
+    for (int64_t i = 0; i < count; ++i) {
+        const int64_t n = first + i * step;
+        std::string digits = std::to_string(n < 0 ? -n : n);
+        const size_t signWidth = n < 0 ? 1 : 0;
+        if (digits.size() + signWidth < size_t(width))
+            digits.insert(0, size_t(width) - digits.size() - signWidth, zeros ? '0' : ' ');
+        if (n < 0) digits.insert(zeros ? 0 : digits.find_first_not_of(' '), "-");
+        names.push_back(m[1].str() + digits + m[4].str());
+    }
+    return names;
 }
 
 bool startsWithGzipMagic(const fs::path &file, uint64_t offset) {
@@ -295,7 +386,8 @@ std::optional<uint64_t> skipLines(const fs::path &file, uint64_t offset, int64_t
 struct NrrdLayout {
     std::string encoding = "raw";
     std::optional<std::string> dataFile;  // a single detached data file, as written
-    bool multiFile = false;               // LIST or a file-name pattern: not checked here
+    bool multiFile = false;               // LIST or a file-name pattern: lengths not checked here
+    std::vector<std::string> dataFiles;   // every detached data file, in every form, as written
     int64_t lineSkip = 0;
     int64_t byteSkip = 0;
     bool attached = false;                // data follows the header's blank line
@@ -327,8 +419,20 @@ std::optional<NrrdLayout> scanNrrdHeader(const fs::path &path) {
             // "LIST" and "pattern min max step [subdim]" name several files.
             const bool pattern = value.find('%') != std::string::npos &&
                                  std::count(value.begin(), value.end(), ' ') >= 3;
-            if (value.starts_with("LIST") || pattern) layout.multiFile = true;
-            else layout.dataFile = value;
+            if (value.starts_with("LIST")) {
+                // The header's remaining lines are the file names.
+                layout.multiFile = true;
+                while (std::getline(in, line) && layout.dataFiles.size() < 100000)
+                    if (const std::string name = trim(line); !name.empty()) layout.dataFiles.push_back(name);
+                break;
+            }
+            if (pattern) {
+                layout.multiFile = true;
+                layout.dataFiles = expandPattern(path, value);
+            } else {
+                layout.dataFile = value;
+                layout.dataFiles = {value};
+            }
         } else if (key == "line skip" || key == "lineskip") {
             layout.lineSkip = parseInt(value).value_or(0);
         } else if (key == "byte skip" || key == "byteskip") {
@@ -340,7 +444,7 @@ std::optional<NrrdLayout> scanNrrdHeader(const fs::path &path) {
 
 void checkNrrdData(const fs::path &path, const NrrdLayout &layout, uint64_t need, const std::string &shape) {
     if (layout.multiFile || (!layout.dataFile && !layout.attached)) return;
-    const fs::path file = layout.dataFile ? besideHeader(path, *layout.dataFile) : path;
+    const fs::path file = layout.dataFile ? confinedDataFile(path, *layout.dataFile) : path;
     const std::string where = layout.dataFile ? fmt::format("data file '{}'", *layout.dataFile) : "the file";
     uint64_t start = layout.dataFile ? 0 : layout.headerEnd;
     if (layout.lineSkip > 0) {
@@ -373,6 +477,7 @@ void checkNrrdData(const fs::path &path, const NrrdLayout &layout, uint64_t need
 struct MetaLayout {
     std::string dataFile;  // "LOCAL" or a file name
     bool multiFile = false;
+    std::vector<std::string> dataFiles;  // every detached data file (LIST, pattern or one), as written
     bool compressed = false;
     bool binary = true;
     int64_t headerSize = 0;
@@ -397,6 +502,15 @@ std::optional<MetaLayout> scanMetaHeader(const fs::path &path) {
             layout.multiFile = value.starts_with("LIST") || value.find('%') != std::string::npos;
             const auto pos = in.tellg();
             layout.localStart = pos < 0 ? fileSize(path).value_or(0) : uint64_t(pos);
+            if (value.starts_with("LIST")) {
+                // The header's remaining lines are the file names.
+                while (std::getline(in, line) && layout.dataFiles.size() < 100000)
+                    if (const std::string name = trim(line); !name.empty()) layout.dataFiles.push_back(name);
+            } else if (layout.multiFile) {
+                layout.dataFiles = expandPattern(path, value);
+            } else if (value != "LOCAL") {
+                layout.dataFiles = {value};
+            }
             return layout;
         }
     }
@@ -406,7 +520,7 @@ std::optional<MetaLayout> scanMetaHeader(const fs::path &path) {
 void checkMetaData(const fs::path &path, const MetaLayout &layout, uint64_t need, const std::string &shape) {
     if (layout.multiFile || !layout.binary) return;
     const bool local = layout.dataFile == "LOCAL";
-    const fs::path file = local ? path : besideHeader(path, layout.dataFile);
+    const fs::path file = local ? path : confinedDataFile(path, layout.dataFile);
     const std::string where = local ? "the file" : fmt::format("data file '{}'", layout.dataFile);
     const uint64_t start = local ? layout.localStart : uint64_t(std::max<int64_t>(layout.headerSize, 0));
     if (layout.compressed) {
@@ -419,8 +533,7 @@ void checkMetaData(const fs::path &path, const MetaLayout &layout, uint64_t need
     checkLength(path, where, have, need, shape, /*extraAllowed=*/!local && layout.headerSize == -1);
 }
 
-// --- NIfTI-1/2: the header fields that give the data's length. NiftiImageIO reports a
-// size of 0 as 1 and reads short data without complaint, so these come from the header.
+// --- NIfTI-1/2: the header's fields, read by the loader itself.
 template <typename T>
 T readScalar(const unsigned char *p, bool swap) {
     std::array<unsigned char, sizeof(T)> b;
@@ -431,7 +544,36 @@ T readScalar(const unsigned char *p, bool swap) {
     return v;
 }
 
-void checkNiftiData(const fs::path &path) {
+// The NIfTI-1 data types and the bits per voxel the specification ties to each.
+std::optional<int> niftiBitsOf(int datatype) {
+    switch (datatype) {
+    case 1: return 1;                                  // binary
+    case 2: case 256: return 8;                        // uint8, int8
+    case 4: case 512: return 16;                       // int16, uint16
+    case 8: case 16: case 768: return 32;              // int32, float32, uint32
+    case 128: return 24;                               // rgb24
+    case 2304: return 32;                              // rgba32
+    case 32: case 64: case 1024: case 1280: return 64; // complex64, float64, int64, uint64
+    case 1536: case 1792: return 128;                  // float128, complex128
+    case 2048: return 256;                             // complex256
+    default: return std::nullopt;
+    }
+}
+
+struct NiftiHeader {
+    std::array<int64_t, 8> dim{};
+    int bitpix = 0;
+    uint64_t voxOffset = 0;
+    bool singleFile = false;
+    uint64_t bytes = 0;   // voxel bytes the dims and bitpix promise
+    std::string shape;
+};
+
+// Reads and checks the header fields niftilib would trust: ITK reads a header that breaks
+// the specification (sizeof_hdr, dim, bitpix against datatype, vox_offset inside the
+// header, pixdim 0, negative or NaN) into a zero-filled or shifted volume without a word.
+// Each refusal names the field.
+NiftiHeader readNiftiHeader(const fs::path &path) {
     std::array<unsigned char, 540> h{};
     int got = 0;
     if (gzFile g = gzopen(path.string().c_str(), "rb")) {  // gzread also reads plain files
@@ -443,41 +585,76 @@ void checkNiftiData(const fs::path &path) {
     const int32_t swappedSize = readScalar<int32_t>(h.data(), true);
     const bool swap = sizeofHdr != 348 && sizeofHdr != 540;
     const int32_t hdrSize = swap ? swappedSize : sizeofHdr;
-    if (hdrSize != 348 && hdrSize != 540) return;  // not a NIfTI header we know: ITK decides
+    if (hdrSize != 348 && hdrSize != 540)
+        fail(path, fmt::format("NIfTI header's sizeof_hdr is {}; the specification requires 348 (NIfTI-1) or 540 "
+                               "(NIfTI-2)",
+                               sizeofHdr));
     if (hdrSize == 540 && got < 540) fail(path, "NIfTI-2 header is truncated");
-    std::array<int64_t, 8> dim{};
-    int bitpix = 0;
-    uint64_t voxOffset = 0;
-    bool singleFile = false;
+    NiftiHeader n;
+    int datatype = 0;
+    std::array<double, 8> pixdim{};
+    int64_t rawOffset = 0;
+    uint64_t headerBytes = 352;
     if (hdrSize == 348) {
-        for (size_t i = 0; i < 8; ++i) dim[i] = readScalar<int16_t>(h.data() + 40 + 2 * i, swap);
-        bitpix = readScalar<int16_t>(h.data() + 72, swap);
+        for (size_t i = 0; i < 8; ++i) n.dim[i] = readScalar<int16_t>(h.data() + 40 + 2 * i, swap);
+        datatype = readScalar<int16_t>(h.data() + 70, swap);
+        n.bitpix = readScalar<int16_t>(h.data() + 72, swap);
+        for (size_t i = 0; i < 8; ++i) pixdim[i] = readScalar<float>(h.data() + 76 + 4 * i, swap);
         const float off = readScalar<float>(h.data() + 108, swap);
-        voxOffset = std::isfinite(off) && off > 0 ? uint64_t(off) : 0;
-        singleFile = std::memcmp(h.data() + 344, "n+1", 4) == 0;
+        rawOffset = std::isfinite(off) && off > 0 && off < 9e18f ? int64_t(off) : -1;
+        n.singleFile = std::memcmp(h.data() + 344, "n+1", 4) == 0;
     } else {
-        for (size_t i = 0; i < 8; ++i) dim[i] = readScalar<int64_t>(h.data() + 16 + 8 * i, swap);
-        bitpix = readScalar<int16_t>(h.data() + 14, swap);
-        voxOffset = uint64_t(std::max<int64_t>(readScalar<int64_t>(h.data() + 168, swap), 0));
-        singleFile = std::memcmp(h.data() + 4, "n+2", 4) == 0;
+        for (size_t i = 0; i < 8; ++i) n.dim[i] = readScalar<int64_t>(h.data() + 16 + 8 * i, swap);
+        datatype = readScalar<int16_t>(h.data() + 12, swap);
+        n.bitpix = readScalar<int16_t>(h.data() + 14, swap);
+        for (size_t i = 0; i < 8; ++i) pixdim[i] = readScalar<double>(h.data() + 104 + 8 * i, swap);
+        rawOffset = readScalar<int64_t>(h.data() + 168, swap);
+        n.singleFile = std::memcmp(h.data() + 4, "n+2", 4) == 0;
+        headerBytes = 544;
     }
-    if (dim[0] < 1 || dim[0] > 7) fail(path, fmt::format("NIfTI header has an invalid dimension count {}", dim[0]));
-    if (bitpix <= 0 || bitpix % 8 != 0) fail(path, fmt::format("NIfTI header has an invalid bitpix {}", bitpix));
-    std::optional<uint64_t> bytes = uint64_t(bitpix / 8);
-    std::string shape;
-    for (int64_t i = 1; i <= dim[0]; ++i) {
-        if (dim[size_t(i)] < 1)
-            fail(path, fmt::format("size of axis {} is {} in the header; every size must be at least 1", i - 1,
-                                   dim[size_t(i)]));
-        bytes = bytes ? checkedMul(*bytes, uint64_t(dim[size_t(i)])) : std::nullopt;
-        shape += (shape.empty() ? "" : " x ") + std::to_string(dim[size_t(i)]);
+    if (n.dim[0] < 1 || n.dim[0] > 7)
+        fail(path, fmt::format("NIfTI header's dim[0] (the number of dimensions) is {}; the specification allows "
+                               "1 to 7",
+                               n.dim[0]));
+    for (int64_t i = 1; i <= n.dim[0]; ++i)
+        if (n.dim[size_t(i)] < 1)
+            fail(path, fmt::format("NIfTI header's dim[{}] (size of axis {}) is {}; every size must be at least 1",
+                                   i, i - 1, n.dim[size_t(i)]));
+    const auto bits = niftiBitsOf(datatype);
+    if (!bits) fail(path, fmt::format("NIfTI header's datatype {} is not a NIfTI data type", datatype));
+    if (n.bitpix != *bits)
+        fail(path, fmt::format("NIfTI header's bitpix is {}, but its datatype {} has {} bits per voxel", n.bitpix,
+                               datatype, *bits));
+    if (n.bitpix % 8 != 0)
+        fail(path, fmt::format("NIfTI header's datatype {} ({} bits per voxel) is not supported", datatype,
+                               n.bitpix));
+    for (int64_t i = 1; i <= std::min<int64_t>(n.dim[0], 3); ++i)
+        if (!std::isfinite(pixdim[size_t(i)]) || pixdim[size_t(i)] <= 0)
+            fail(path, fmt::format("NIfTI header's pixdim[{}] (spacing of axis {}) is {}; it must be finite and "
+                                   "greater than 0",
+                                   i, i - 1, pixdim[size_t(i)]));
+    if (n.singleFile && (rawOffset < 0 || uint64_t(rawOffset) < headerBytes))
+        fail(path, fmt::format("NIfTI header's vox_offset is {}; in a single-file NIfTI the voxels start after "
+                               "the {}-byte header",
+                               rawOffset, headerBytes));
+    n.voxOffset = uint64_t(std::max<int64_t>(rawOffset, 0));
+    std::optional<uint64_t> bytes = uint64_t(n.bitpix / 8);
+    for (int64_t i = 1; i <= n.dim[0]; ++i) {
+        bytes = bytes ? checkedMul(*bytes, uint64_t(n.dim[size_t(i)])) : std::nullopt;
+        n.shape += (n.shape.empty() ? "" : " x ") + std::to_string(n.dim[size_t(i)]);
     }
     if (!bytes) fail(path, "header sizes are absurd (the voxel count overflows)");
-    shape += fmt::format(", {} bits per voxel, data at byte {}", bitpix, voxOffset);
+    n.bytes = *bytes;
+    n.shape += fmt::format(", {} bits per voxel, data at byte {}", n.bitpix, n.voxOffset);
+    return n;
+}
 
+// NiftiImageIO reports a size of 0 as 1 and reads short data without complaint, so the
+// data's length is checked against the header's own fields.
+void checkNiftiData(const fs::path &path, const NiftiHeader &n) {
     fs::path dataFile = path;
     std::string where = "the file";
-    if (!singleFile) {
+    if (!n.singleFile) {
         // A .hdr/.img pair (NIfTI "ni1"/"ni2" or Analyze): the voxels are in the .img file.
         std::string stem = path.string();
         const bool gz = stem.ends_with(".gz");
@@ -489,13 +666,15 @@ void checkNiftiData(const fs::path &path) {
         if (!fs::exists(dataFile))
             fail(path, fmt::format("data file '{}' named by the header was not found",
                                    fs::path(stem + ".img").filename().string()));
-        where = fmt::format("data file '{}'", dataFile.filename().string());
+        const std::string name = dataFile.filename().string();
+        dataFile = confinedDataFile(path, name);
+        where = fmt::format("data file '{}'", name);
     }
-    const uint64_t need = voxOffset + *bytes;
+    const uint64_t need = n.voxOffset + n.bytes;
     if (startsWithGzipMagic(dataFile, 0)) {
-        checkCompressedLength(path, where, compressedSize(dataFile, 0, need), need, shape);
+        checkCompressedLength(path, where, compressedSize(dataFile, 0, need), need, n.shape);
     } else {
-        checkLength(path, where, fileSize(dataFile).value_or(0), need, shape);
+        checkLength(path, where, fileSize(dataFile).value_or(0), need, n.shape);
     }
 }
 
@@ -580,9 +759,12 @@ void checkShape(const fs::path &path, const Vec3i &dims, const LoadOptions &opti
     std::optional<uint64_t> bytes = sizeof(float);
     for (int a = 0; a < 3; ++a) bytes = bytes ? checkedMul(*bytes, uint64_t(dims[a])) : std::nullopt;
     if (!bytes || *bytes > options.maxBytes)
-        fail(path, fmt::format("volume of {} voxels needs {} as float32, more than the memory budget of {}",
-                               sizes, bytes ? humanBytes(*bytes) : std::string("more than 16 EiB"),
-                               humanBytes(options.maxBytes)));
+        throw VolumeTooLarge(path.string() + ": " +
+                                 fmt::format("volume of {} voxels needs {} as float32, more than the memory budget "
+                                             "of {}",
+                                             sizes, bytes ? humanBytes(*bytes) : std::string("more than 16 EiB"),
+                                             humanBytes(options.maxBytes)),
+                             bytes.value_or(std::numeric_limits<uint64_t>::max()));
 }
 
 // Spacing must be positive and finite, the direction matrix orthonormal; returns the
@@ -746,6 +928,87 @@ fs::path niftiReadPath(const fs::path &path, TemporaryLink &alias) {
     return alias.link;
 }
 
+// Every entry of a DICOM folder must be a regular file or a folder that stays inside it:
+// GDCM opens each file to scan it, and a FIFO would block the loader.
+void checkDicomFolderEntries(const fs::path &dir) {
+    std::error_code ec;
+    const fs::path folder = fs::canonical(dir, ec);
+    if (ec) fail(dir, "folder cannot be resolved: " + ec.message());
+    for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        std::error_code ec2;
+        const fs::path resolved = fs::weakly_canonical(it->path(), ec2);
+        if (ec2 || !isInside(resolved, folder))
+            fail(dir, fmt::format("'{}' in the folder is a symbolic link that leads out of it", name));
+        const auto status = fs::status(resolved, ec2);
+        if (!ec2 && !fs::is_regular_file(status) && !fs::is_directory(status))
+            fail(dir, fmt::format("'{}' in the folder is not a regular file (a FIFO, socket or device)", name));
+    }
+}
+
+// GDCM reads a slice whose pixel data is cut short as if the missing bytes were zero, so the
+// loader compares each slice's file size with the length its pixel data element declares,
+// and that length with what rows, columns and bits allocated need. Encapsulated
+// (compressed) pixel data has no declared length and is left to GDCM's decoder.
+void checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need) {
+    const std::string name = file.filename().string();
+    const gdcm::Tag pixelData(0x7fe0, 0x0010);
+    gdcm::Reader reader;
+    reader.SetFileName(file.string().c_str());
+    if (!reader.ReadUpToTag(pixelData))
+        fail(dir, fmt::format("slice '{}' is not a readable DICOM file (its header is damaged or cut short)", name));
+    // The pixel data element starts after the file meta header and every element before it.
+    const gdcm::File &dicom = reader.GetFile();
+    const bool implicitVr =
+        dicom.GetHeader().GetDataSetTransferSyntax().GetNegociatedType() == gdcm::TransferSyntax::Implicit;
+    uint64_t at = dicom.GetHeader().GetFullLength();
+    for (const gdcm::DataElement &de : dicom.GetDataSet().GetDES()) {
+        if (!(de.GetTag() < pixelData)) break;
+        at += implicitVr ? uint64_t(static_cast<const gdcm::ImplicitDataElement &>(de).GetLength())
+                         : uint64_t(static_cast<const gdcm::ExplicitDataElement &>(de).GetLength());
+    }
+    const uint64_t size = fileSize(file).value_or(0);
+    std::array<unsigned char, 12> e{};
+    std::ifstream in(file, std::ios::binary);
+    in.seekg(std::streamoff(at));
+    in.read(reinterpret_cast<char *>(e.data()), std::streamsize(e.size()));
+    const bool bigEndian = e[0] == 0x7f && e[1] == 0xe0;
+    const auto u16 = [&](size_t i) { return bigEndian ? uint16_t(e[i] << 8 | e[i + 1]) : uint16_t(e[i] | e[i + 1] << 8); };
+    const auto u32 = [&](size_t i) {
+        return bigEndian ? uint32_t(e[i]) << 24 | uint32_t(e[i + 1]) << 16 | uint32_t(e[i + 2]) << 8 | e[i + 3]
+                         : uint32_t(e[i]) | uint32_t(e[i + 1]) << 8 | uint32_t(e[i + 2]) << 16 | uint32_t(e[i + 3]) << 24;
+    };
+    if (size < at + 8) fail(dir, fmt::format("slice '{}' is truncated: it ends before its pixel data", name));
+    // A layout this count does not follow (no preamble, say) is left to GDCM.
+    if (u16(0) != 0x7fe0 || u16(2) != 0x0010) return;
+    // Explicit VR (OB/OW/...: two letters, two reserved bytes, 32-bit length) or implicit.
+    const bool explicitVr = !implicitVr && std::isupper(e[4]) && std::isupper(e[5]);
+    if (explicitVr && size < at + 12)
+        fail(dir, fmt::format("slice '{}' is truncated: it ends within its pixel data header", name));
+    const uint32_t length = explicitVr ? u32(8) : u32(4);
+    if (length == 0xffffffffu) return;
+    const uint64_t start = at + (explicitVr ? 12 : 8);
+    const uint64_t have = size > start ? size - start : 0;
+    if (have < length)
+        fail(dir, fmt::format("slice '{}' is truncated: its pixel data holds {} bytes of the {} it declares", name,
+                              withThousands(have), withThousands(length)));
+    if (length < need)
+        fail(dir, fmt::format("slice '{}' is truncated: its pixel data declares {} bytes, but its rows, columns "
+                              "and type need {}",
+                              name, withThousands(length), withThousands(need)));
+}
+
+// Bytes of one stored DICOM pixel (before ITK applies the rescale slope and intercept).
+uint64_t storedDicomSize(itk::GDCMImageIO &io) {
+    using C = itk::IOComponentEnum;
+    switch (io.GetInternalComponentType()) {
+    case C::UCHAR: case C::CHAR: return 1;
+    case C::USHORT: case C::SHORT: return 2;
+    case C::UINT: case C::INT: case C::FLOAT: return 4;
+    default: return 8;
+    }
+}
+
 Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgress &progress) {
     {
         std::ifstream probe(path, std::ios::binary);
@@ -759,17 +1022,22 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
                    "contents were not recognised");
     const std::string ioName = io->GetNameOfClass();
 
-    // A missing detached data file is named before ITK reports it in its own words.
+    // Every detached data file is confined to the header's folder and must be a regular
+    // file, checked before ITK opens any of them (a missing one is named here too, before
+    // ITK reports it in its own words).
     std::optional<NrrdLayout> nrrd;
     std::optional<MetaLayout> meta;
+    std::optional<NiftiHeader> nifti;
     if (ioName == "NrrdImageIO") {
         nrrd = scanNrrdHeader(path);
-        if (nrrd && nrrd->dataFile && !fs::exists(besideHeader(path, *nrrd->dataFile)))
-            fail(path, fmt::format("data file '{}' named by the header was not found", *nrrd->dataFile));
+        if (nrrd)
+            for (const auto &name : nrrd->dataFiles) confinedDataFile(path, name);
     } else if (ioName == "MetaImageIO") {
         meta = scanMetaHeader(path);
-        if (meta && !meta->multiFile && meta->dataFile != "LOCAL" && !fs::exists(besideHeader(path, meta->dataFile)))
-            fail(path, fmt::format("data file '{}' named by the header was not found", meta->dataFile));
+        if (meta)
+            for (const auto &name : meta->dataFiles) confinedDataFile(path, name);
+    } else if (ioName == "NiftiImageIO") {
+        nifti = readNiftiHeader(path);  // fields checked before niftilib trusts them
     }
 
     TemporaryLink alias;
@@ -806,6 +1074,9 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
     v.direction = checkedGeometry(path, v.spacing, v.origin, direction);
     v.sourceType = type;
 
+    if (auto *dicom = dynamic_cast<itk::GDCMImageIO *>(io.GetPointer()))
+        checkDicomSlice(path, path, uint64_t(v.voxelCount()) * storedDicomSize(*dicom));
+
     // The data must hold exactly what the header promises (see the byte-count helpers).
     const uint64_t need = uint64_t(v.voxelCount()) * voxelTypeSize(type);
     const std::string shape =
@@ -814,7 +1085,7 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
     progress(0.02, "checking data");
     if (nrrd) checkNrrdData(path, *nrrd, need, shape);
     if (meta) checkMetaData(path, *meta, need, shape);
-    if (ioName == "NiftiImageIO") checkNiftiData(path);
+    if (nifti) checkNiftiData(path, *nifti);
 
     progress(0.35, "reading voxels");
     v.voxels = readVoxels(path, *io, type, v.voxelCount(), progress);
@@ -822,6 +1093,7 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
 }
 
 Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
+    checkDicomFolderEntries(dir);
     auto names = itk::GDCMSeriesFileNames::New();
     names->SetUseSeriesDetails(true);
     names->SetDirectory(dir.string());
@@ -855,6 +1127,10 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     Volume v;
     v.dims = {int64_t(io->GetDimensions(0)), int64_t(io->GetDimensions(1)), int64_t(files.size())};
     checkShape(dir, v.dims, options);
+    // The stored pixels of one slice, before ITK's rescaling: rows x columns x stored size.
+    const uint64_t sliceBytes = uint64_t(v.dims.x) * uint64_t(v.dims.y) * storedDicomSize(*io);
+    progress(0.01, "checking slices");
+    for (const auto &file : files) checkDicomSlice(dir, fs::path(file), sliceBytes);
 
     using Image = itk::Image<float, 3>;
     auto reader = itk::ImageSeriesReader<Image>::New();
@@ -870,8 +1146,10 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     try {
         reader->Update();
     } catch (const itk::ExceptionObject &e) {
+        if (observer->stopped) std::rethrow_exception(observer->stopped);
         fail(dir, "cannot read the DICOM series: " + cleanItkMessage(e));
     }
+    if (observer->stopped) std::rethrow_exception(observer->stopped);
     const Image *image = reader->GetOutput();
     const auto size = image->GetLargestPossibleRegion().GetSize();
     if (int64_t(size[0]) != v.dims.x || int64_t(size[1]) != v.dims.y || int64_t(size[2]) != v.dims.z)
@@ -915,8 +1193,11 @@ Volume loadVolume(const fs::path &path, const LoadOptions &options) {
     std::error_code ec;
     const auto status = fs::status(path, ec);
     if (!fs::exists(status)) fail(path, "file not found");
+    // stat() only: opening a FIFO would block the loader until someone writes to it.
+    if (!fs::is_regular_file(status) && !fs::is_directory(status))
+        fail(path, "is not a regular file or a folder (a FIFO, socket or device); it is not loaded");
     try {
-        LoadProgress progress(options);
+        LoadProgress progress(options, path);
         progress(0, "reading header");
         Volume v = fs::is_directory(status) ? loadDicomFolder(path, options, progress)
                                             : loadImageFile(path, options, progress);

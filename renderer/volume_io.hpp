@@ -17,6 +17,14 @@
 //   float64 values beyond the float32 range are clamped to it (and logged). ITK applies
 //   NIfTI scl_slope/scl_inter and DICOM rescale slope/intercept itself; sourceType is then
 //   the type ITK reports for the rescaled values (float32 for a scaled NIfTI).
+// - Detached data files (NRRD `data file:` in each of its forms, MetaImage
+//   `ElementDataFile`, a NIfTI .img) must lie in the header's folder once symbolic links
+//   are resolved (no absolute name, no `..`, no link out) and be regular files; the file or
+//   folder given must be a regular file or a folder. This is checked with stat() before
+//   anything is opened, so a FIFO never blocks the loader.
+// - NIfTI headers are checked against the specification (sizeof_hdr, dim, datatype and
+//   bitpix, vox_offset, pixdim); each DICOM slice must hold all the pixel data its header
+//   promises.
 // - Geometry is ITK's: files that name a patient space (NRRD `space` RAS/LAS/LPS, NIfTI,
 //   DICOM) come out in LPS world coordinates; files without one keep their numbers. The
 //   direction matrix must be orthonormal within 1e-3 (it is then re-orthonormalized
@@ -47,11 +55,32 @@ struct LoadOptions {
     // "reading slices", "converting", "statistics"). The fractions weigh the steps by their
     // usual share of the time; a DICOM series advances slice by slice.
     std::function<void(double fraction, std::string_view task)> progress;
+    // A load still running after this many seconds fails with VolumeLoadTimeout at its next
+    // progress step (between steps, and slice by slice in a DICOM series; one read of the
+    // voxels is not interrupted, and every file read is a regular file, so none blocks
+    // forever). 0: no limit.
+    double timeLimitSeconds = 0;
+    // Asked at every progress step; true ends the load with VolumeLoadError (a server
+    // shutting down).
+    std::function<bool()> stopRequested;
 };
 
 // Every failure to load: the message starts with the file's path and names the problem.
 struct VolumeLoadError : std::runtime_error {
     using std::runtime_error::runtime_error;
+};
+
+// The header's sizes need more than LoadOptions::maxBytes (refused before any voxel is read).
+struct VolumeTooLarge : VolumeLoadError {
+    VolumeTooLarge(const std::string &message, uint64_t float32Bytes)
+        : VolumeLoadError(message), bytes(float32Bytes) {}
+    uint64_t bytes;   // the volume's size as float32 voxels
+};
+
+// The load ran past LoadOptions::timeLimitSeconds.
+struct VolumeLoadTimeout : VolumeLoadError {
+    VolumeLoadTimeout(const std::string &message, double limit) : VolumeLoadError(message), limitSeconds(limit) {}
+    double limitSeconds;
 };
 
 Volume loadVolume(const std::filesystem::path &path, const LoadOptions &options = {});

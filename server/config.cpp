@@ -94,6 +94,15 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
         ->envname("VOLCAST_SEND_BUFFER_BYTES")
         ->check(CLI::Range(4096, 64 << 20));
 
+    // Files and lifecycle.
+    app.add_option("--load-timeout-s", c.loadTimeoutS, "A volume load running longer fails, seconds (0: no limit)")
+        ->envname("VOLCAST_LOAD_TIMEOUT_S")
+        ->check(CLI::Range(0.0, 86400.0));
+    app.add_option("--shutdown-grace-ms", c.shutdownGraceMs,
+                   "On SIGTERM/SIGINT, exit within this many ms whatever is still running")
+        ->envname("VOLCAST_SHUTDOWN_GRACE_MS")
+        ->check(CLI::Range(100, 600000));
+
     app.add_option("--port-file", portFile, "Write the bound port to this file once listening (for scripts)");
     app.add_option("--log-level", c.logLevel, "trace, debug, info, warn, error")->envname("VOLCAST_LOG_LEVEL");
     // HTTP hardening.

@@ -40,6 +40,10 @@ struct ServerConfig {
     double writeTimeoutMs = 10000;            // a write not done by then closes the session
     int sendBufferBytes = 256 * 1024;         // SO_SNDBUF of a session's socket
 
+    // Files and lifecycle.
+    double loadTimeoutS = 120;                // a volume load running longer fails (0: no limit)
+    int shutdownGraceMs = 5000;               // SIGTERM: exit within this, whatever still runs
+
     std::filesystem::path portFile;           // write the bound port here once listening
     std::string logLevel = "info";
 

@@ -6,7 +6,11 @@
 #include <boost/asio/signal_set.hpp>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <chrono>
 #include <csignal>
+#include <cstdlib>
+#include <thread>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -25,7 +29,20 @@ int main(int argc, char **argv) {
         boost::asio::signal_set set(signals, SIGINT, SIGTERM);
         set.async_wait([&](const boost::system::error_code &ec, int signal) {
             if (ec) return;
-            server.stop(std::string("server shutting down (") + (signal == SIGTERM ? "SIGTERM" : "SIGINT") + ")");
+            // Whatever is still running (a long frame, a calibration, a load inside one read),
+            // the process exits within the grace period: a watchdog that shares nothing with
+            // the server but the note of what it is waiting for.
+            const auto grace = std::chrono::milliseconds(config->shutdownGraceMs);
+            std::thread([grace, stage = server.shutdownStage()] {
+                std::this_thread::sleep_for(grace);
+                spdlog::error("still not stopped {} ms after the signal, while {}; exiting now", grace.count(),
+                              stage->get());
+                spdlog::default_logger()->flush();
+                std::_Exit(0);
+            }).detach();
+            // Sessions get at most half the grace period for their close handshake.
+            server.stop(std::string("server shutting down (") + (signal == SIGTERM ? "SIGTERM" : "SIGINT") + ")",
+                        std::min(std::chrono::milliseconds(2000), grace / 2));
         });
         server.start();
         const std::string host = config->bindAddress == "0.0.0.0" ? "127.0.0.1" : config->bindAddress;

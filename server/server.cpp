@@ -70,6 +70,7 @@ void Server::stop(const std::string &reason, std::chrono::milliseconds grace) {
         stopped_ = true;
     }
     spdlog::info("stopping: {}", reason);
+    stage_->set("closing the sessions");
     listener_->stop();
     if (metricsListener_) metricsListener_->stop();
     state_->closeAll(reason);
@@ -78,8 +79,16 @@ void Server::stop(const std::string &reason, std::chrono::milliseconds grace) {
     const auto deadline = std::chrono::steady_clock::now() + grace;
     while (state_->metrics().sessions() > 0 && std::chrono::steady_clock::now() < deadline)
         std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    // A frame or an error calibration runs to its end; a load stops at its next step.
+    stage_->set("stopping the render worker (a frame or an error calibration was still running)");
+    state_->scheduler().stop();
+    const std::string loading = state_->registry().loadingNow();
+    stage_->set(loading.empty() ? "stopping the loader and the warm-up render"
+                                : "stopping the loader (volume " + loading + " was still loading)");
     state_->stopWorkers();
+    stage_->set("stopping the network");
     ioc_.stop();
+    stage_->set("releasing the device and the volumes");
 }
 
 void Server::wait() {

@@ -9,11 +9,30 @@
 #include <boost/asio/io_context.hpp>
 
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
 namespace volcast::server {
+
+// What the server's shutdown is waiting for now, readable by a watchdog that may outlive the
+// Server (shared, never a reference into it).
+class ShutdownStage {
+  public:
+    void set(std::string what) {
+        std::lock_guard lock(mutex_);
+        what_ = std::move(what);
+    }
+    std::string get() const {
+        std::lock_guard lock(mutex_);
+        return what_;
+    }
+
+  private:
+    mutable std::mutex mutex_;
+    std::string what_ = "not stopping";
+};
 
 class Server {
   public:
@@ -32,6 +51,7 @@ class Server {
     void stop(const std::string &reason, std::chrono::milliseconds grace = std::chrono::milliseconds(2000));
     // Block until stop() has finished.
     void wait();
+    std::shared_ptr<ShutdownStage> shutdownStage() const { return stage_; }
 
   private:
     std::shared_ptr<SharedState> state_;
@@ -42,6 +62,7 @@ class Server {
     std::vector<std::thread> threads_;
     std::mutex mutex_;
     bool stopped_ = false;
+    std::shared_ptr<ShutdownStage> stage_ = std::make_shared<ShutdownStage>();
 };
 
 } // namespace volcast::server

@@ -1,6 +1,7 @@
 #include "server/shared_state.hpp"
 
 #include "renderer/scene.hpp"
+#include "renderer/transfer_function.hpp"
 #include "server/websocket_session.hpp"
 
 #include <spdlog/spdlog.h>
@@ -15,7 +16,8 @@ SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
                    : (type & CL_DEVICE_TYPE_CPU)         ? "cpu"
                    : (type & CL_DEVICE_TYPE_ACCELERATOR) ? "accelerator"
                                                          : "other";
-    registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, *cl_, metrics_);
+    registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, *cl_, metrics_,
+                                                 config_.loadTimeoutS);
     scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration});
 }
 
@@ -24,6 +26,13 @@ SharedState::~SharedState() { stopWorkers(); }
 void SharedState::stopWorkers() {
     if (scheduler_) scheduler_->stop();
     if (registry_) registry_->stop();
+    std::thread warmUp;
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;   // no warm-up starts after this
+        warmUp = std::move(warmUp_);
+    }
+    if (warmUp.joinable() && warmUp.get_id() != std::this_thread::get_id()) warmUp.join();
 }
 
 protocol::ServerLimits SharedState::limits() const {
@@ -73,13 +82,18 @@ void SharedState::closeAll(const std::string &reason) {
 }
 
 void SharedState::preloadDefaultVolume() {
-    if (config_.defaultVolume.empty()) return;
+    if (config_.defaultVolume.empty()) {
+        std::lock_guard lock(mutex_);
+        startWarmUp(nullptr);
+        return;
+    }
     registry_->open(
         config_.defaultVolume, [](const protocol::ProgressMessage &) {},
         [this](VolumeRegistry::Result result) {
             std::lock_guard lock(mutex_);
             if (auto *e = std::get_if<std::shared_ptr<VolumeEntry>>(&result)) {
                 defaultVolume_ = *e;
+                startWarmUp(defaultVolume_);
             } else {
                 defaultVolumeError_ = std::get<protocol::ProtocolError>(result).message;
                 spdlog::error("default volume {}: {}", config_.defaultVolume, defaultVolumeError_);
@@ -87,12 +101,49 @@ void SharedState::preloadDefaultVolume() {
         });
 }
 
+void SharedState::startWarmUp(std::shared_ptr<VolumeEntry> entry) {
+    if (stopping_ || warmUp_.joinable()) return;
+    warmUp_ = std::thread([this, entry = std::move(entry)] { warmUp(entry); });
+}
+
+void SharedState::warmUp(std::shared_ptr<VolumeEntry> entry) {
+    // A frame at 8 x 8 pixels: cheap, but it builds the ray-casting program (seconds with a
+    // cold PoCL cache), which the first session would otherwise wait for.
+    try {
+        std::unique_ptr<OpenClRenderer> own;
+        if (!entry) {
+            Volume tiny;
+            tiny.name = "warm-up";
+            tiny.dims = {8, 8, 8};
+            tiny.voxels.resize(tiny.voxelCount());
+            for (size_t i = 0; i < tiny.voxels.size(); ++i) tiny.voxels[i] = float(i % 7);
+            computeStatistics(tiny);
+            own = std::make_unique<OpenClRenderer>(*cl_, tiny);
+        }
+        OpenClRenderer &renderer = entry ? *entry->renderer : *own;
+        const Volume &v = renderer.volume();
+        Camera camera;
+        camera.target = v.center();
+        camera.eye = camera.target + Vec3d(0, 0, 3 * length(v.extent()));
+        renderer.render(presetTransferFunction("mr", v.range), camera, 8, 8, Quality{}, {});
+        std::lock_guard lock(mutex_);
+        kernelReady_ = true;
+    } catch (const std::exception &e) {
+        spdlog::error("warm-up render failed: {}", e.what());
+        std::lock_guard lock(mutex_);
+        kernelError_ = e.what();
+    }
+}
+
 std::string SharedState::notReadyReason() const {
     std::lock_guard lock(mutex_);
     if (stopping_) return "shutting down";
-    if (config_.defaultVolume.empty()) return "";
-    if (!defaultVolumeError_.empty()) return "default volume failed to load: " + defaultVolumeError_;
-    if (!defaultVolume_) return "default volume " + config_.defaultVolume + " still loading";
+    if (!config_.defaultVolume.empty()) {
+        if (!defaultVolumeError_.empty()) return "default volume failed to load: " + defaultVolumeError_;
+        if (!defaultVolume_) return "default volume " + config_.defaultVolume + " still loading";
+    }
+    if (!kernelError_.empty()) return "the ray-casting program failed to build or run: " + kernelError_;
+    if (!kernelReady_) return "the ray-casting program is still being built";
     return "";
 }
 

@@ -20,6 +20,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 
 namespace volcast::server {
 
@@ -52,8 +53,12 @@ class SharedState {
     void closeAll(const std::string &reason);
     bool stopping() const { return stopping_; }
 
-    // Start loading the default volume; /readyz reports ready once it is in memory.
+    // Start loading the default volume, then build the ray-casting program with a tiny
+    // warm-up render of it (of an 8³ volume when there is no default volume): /readyz
+    // reports ready once both are done.
     void preloadDefaultVolume();
+    // Programs the device has built (tests: readiness implies at least one).
+    size_t programsBuilt() const { return cl_->programsBuilt(); }
     // Empty when ready, else why not.
     std::string notReadyReason() const;
     bool originAllowed(std::string_view origin) const;
@@ -74,6 +79,11 @@ class SharedState {
     std::atomic<bool> stopping_{false};
     std::shared_ptr<VolumeEntry> defaultVolume_;   // held, so never evicted
     std::string defaultVolumeError_;
+    void warmUp(std::shared_ptr<VolumeEntry> entry);
+    void startWarmUp(std::shared_ptr<VolumeEntry> entry);   // with mutex_ held
+    std::thread warmUp_;
+    bool kernelReady_ = false;
+    std::string kernelError_;
 };
 
 } // namespace volcast::server

@@ -4,9 +4,11 @@
 #include "renderer/volume_io.hpp"
 #include "renderer/volume_source.hpp"
 
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <regex>
 
 namespace volcast::server {
 
@@ -27,7 +29,17 @@ std::string lower(std::string s) {
 }
 // The in-memory cost of a volume: float32 voxels, plus the mip pyramid (1/7) and slack for
 // bricks and tables the renderer builds on demand.
-uint64_t memoryOf(const Volume &v) { return uint64_t(double(v.voxelCount()) * 4.0 * 1.2); }
+constexpr double kMemoryFactor = 1.2;
+uint64_t memoryOf(const Volume &v) { return uint64_t(double(v.voxelCount()) * 4.0 * kMemoryFactor); }
+uint64_t mib(uint64_t bytes) { return (bytes + (uint64_t(1) << 20) - 1) >> 20; }
+
+// What a session holds: every copy of the returned pointer (the session's, its render jobs')
+// shares one control block holding one reference to the entry, so the entry's use count
+// is the registry's own reference plus one per hold.
+std::shared_ptr<VolumeEntry> holdOn(const std::shared_ptr<VolumeEntry> &entry) {
+    auto hold = std::make_shared<std::shared_ptr<VolumeEntry>>(entry);
+    return std::shared_ptr<VolumeEntry>(hold, entry.get());
+}
 } // namespace
 
 bool hasVolumeExtension(const fs::path &p) {
@@ -55,8 +67,8 @@ protocol::VolumeInfo VolumeEntry::info() const {
 }
 
 VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBytes, OpenClContext &cl,
-                               Metrics &metrics)
-    : budgetBytes_(budgetBytes), cl_(cl), metrics_(metrics) {
+                               Metrics &metrics, double loadTimeoutSeconds)
+    : budgetBytes_(budgetBytes), loadTimeoutSeconds_(loadTimeoutSeconds), cl_(cl), metrics_(metrics) {
     for (const auto &d : dataDirs) {
         std::error_code ec;
         fs::path c = fs::canonical(d, ec);
@@ -69,6 +81,7 @@ VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBy
 VolumeRegistry::~VolumeRegistry() { stop(); }
 
 void VolumeRegistry::stop() {
+    stopRequested_ = true;   // the load in progress stops at its next step
     {
         std::lock_guard lock(mutex_);
         stopping_ = true;
@@ -127,7 +140,20 @@ bool VolumeRegistry::isLoaded(const std::string &name) const {
     return loaded_.count(name) > 0;
 }
 
-void VolumeRegistry::open(const std::string &name, Progress progressFn, Done done) {
+uint64_t VolumeRegistry::usedBytes() const {
+    std::lock_guard lock(mutex_);
+    uint64_t total = 0;
+    for (const auto &[n, e] : loaded_) total += e->bytes;
+    return total;
+}
+
+std::string VolumeRegistry::loadingNow() const {
+    std::lock_guard lock(mutex_);
+    return loading_;
+}
+
+void VolumeRegistry::open(const std::string &name, Progress progressFn, Done done,
+                          const std::shared_ptr<const VolumeEntry> &releasing) {
     fs::path path;
     if (name.starts_with(kBuiltinPrefix)) {
         const auto names = builtinVolumeNames();
@@ -150,9 +176,9 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
     }
     if (auto it = loaded_.find(name); it != loaded_.end()) {
         lastUse_[name] = ++useClock_;
-        auto entry = it->second;
+        auto hold = holdOn(it->second);
         lock.unlock();
-        done(entry);
+        done(std::move(hold));
         return;
     }
     auto &pending = pending_[name];
@@ -163,7 +189,7 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
         queue_.push_back(pending);
         wake_.notify_all();
     }
-    pending->waiters.push_back({std::move(progressFn), std::move(done)});
+    pending->waiters.push_back({std::move(progressFn), std::move(done), releasing.get()});
 }
 
 void VolumeRegistry::progress(const std::string &name, protocol::ProgressStage stage, const std::string &task,
@@ -198,37 +224,56 @@ void VolumeRegistry::loaderLoop() {
             }
             next = queue_.front();
             queue_.pop_front();
+            loading_ = next->name;
         }
         Result result = load(*next);
         std::vector<Waiter> waiters;
+        std::shared_ptr<VolumeEntry> entry;
         {
             std::lock_guard lock(mutex_);
-            if (auto *entry = std::get_if<std::shared_ptr<VolumeEntry>>(&result)) {
-                loaded_[next->name] = *entry;
-                lastUse_[next->name] = ++useClock_;
-            }
+            loading_.clear();
             waiters = std::move(pending_[next->name]->waiters);
             pending_.erase(next->name);
+            if (auto *loaded = std::get_if<std::shared_ptr<VolumeEntry>>(&result)) {
+                // Room is made now that the volume is ready, and only if it can be made.
+                entry = *loaded;
+                if (auto victims = planRoom(entry->bytes, waiters)) {
+                    evict(*victims);
+                    loaded_[next->name] = entry;
+                    lastUse_[next->name] = ++useClock_;
+                    metrics_.volumeLoaded(entry->bytes);
+                    spdlog::info("loaded volume {} ({}x{}x{}, {} MiB)", next->name, entry->volume->dims.x,
+                                 entry->volume->dims.y, entry->volume->dims.z, entry->bytes >> 20);
+                } else {
+                    const std::string message = roomMessage(next->name, entry->bytes, waiters);
+                    spdlog::warn("loading {}: {}", next->name, message);
+                    result = ProtocolError{ErrorCode::LoadFailed, message, nullptr, "open_volume"};
+                    entry.reset();
+                }
+            }
             publishMemory();
         }
-        for (auto &w : waiters) w.done(result);
+        for (auto &w : waiters) {
+            if (entry) w.done(holdOn(entry));
+            else w.done(result);
+        }
     }
 }
 
 VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
     using protocol::ProgressStage;
     const auto failed = [&](ErrorCode code, const std::string &message) -> Result {
-        spdlog::warn("loading {}: {}", p.name, message);
-        return ProtocolError{code, message, nullptr, "open_volume"};
+        spdlog::warn("loading {}: {}", p.name, message);   // the log keeps the server's paths
+        return ProtocolError{code, forClients(message, p), nullptr, "open_volume"};
     };
     try {
         progress(p.name, ProgressStage::Loading, "", 0.0);
         LoadOptions options;
-        {
-            // What the budget can hold at most, even after evicting every unused volume.
-            std::lock_guard lock(mutex_);
-            options.maxBytes = budgetBytes_;
-        }
+        // What the whole budget can hold at most, with the renderer's share: a larger volume
+        // is refused from its header, before its voxels are read.
+        options.maxBytes = uint64_t(double(budgetBytes_) / kMemoryFactor);
+        options.timeLimitSeconds = loadTimeoutSeconds_;
+        options.stopRequested = [this] { return stopRequested_.load(); };
         // The loader's own steps, thinned to what a progress bar shows: a new step, or 2 % more.
         double sent = 0;
         std::string sentTask;
@@ -243,21 +288,23 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         auto entry = std::make_shared<VolumeEntry>();
         entry->name = p.name;
         entry->bytes = memoryOf(loaded.volume);
+        if (entry->bytes > budgetBytes_) return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, entry->bytes));
         {
+            // Checked before the upload; room is made only once the volume is ready (loaderLoop).
             std::lock_guard lock(mutex_);
-            if (!makeRoom(entry->bytes))
-                return failed(ErrorCode::LoadFailed,
-                              p.name + ": needs " + std::to_string(entry->bytes >> 20) +
-                                  " MiB, over the server's memory budget with the volumes in use");
+            if (!planRoom(entry->bytes, pending_.at(p.name)->waiters))
+                return failed(ErrorCode::LoadFailed, roomMessage(p.name, entry->bytes, pending_.at(p.name)->waiters));
         }
         entry->volume = std::make_shared<const Volume>(std::move(loaded.volume));
         progress(p.name, ProgressStage::Uploading, "", 0.0);
         entry->renderer = std::make_unique<OpenClRenderer>(cl_, entry->volume);
         progress(p.name, ProgressStage::Uploading, "", 1.0);
-        metrics_.volumeLoaded(entry->bytes);
-        spdlog::info("loaded volume {} ({}x{}x{}, {} MiB)", p.name, entry->volume->dims.x, entry->volume->dims.y,
-                     entry->volume->dims.z, entry->bytes >> 20);
         return entry;
+    } catch (const VolumeTooLarge &e) {
+        spdlog::warn("loading {}: {}", p.name, e.what());
+        return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, uint64_t(double(e.bytes) * kMemoryFactor)));
+    } catch (const VolumeLoadTimeout &e) {
+        return failed(ErrorCode::LoadFailed, std::string(e.what()) + " (--load-timeout-s)");
     } catch (const VolumeLoadError &e) {
         return failed(ErrorCode::LoadFailed, e.what());
     } catch (const std::bad_alloc &) {
@@ -269,29 +316,77 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
     }
 }
 
-bool VolumeRegistry::makeRoom(uint64_t bytes) {
-    auto used = [&] {
-        uint64_t total = 0;
-        for (const auto &[n, e] : loaded_) total += e->bytes;
-        return total;
-    };
-    while (used() + bytes > budgetBytes_) {
-        // The least recently opened volume no session holds (use_count 1: only this map).
-        std::string victim;
-        uint64_t oldest = UINT64_MAX;
-        for (const auto &[n, e] : loaded_)
-            if (e.use_count() == 1 && lastUse_[n] < oldest) {
-                oldest = lastUse_[n];
-                victim = n;
-            }
-        if (victim.empty()) return false;
-        spdlog::info("evicting unused volume {} for the memory budget", victim);
-        metrics_.volumeEvicted(loaded_[victim]->bytes);
-        loaded_.erase(victim);
-        lastUse_.erase(victim);
+std::string VolumeRegistry::tooLargeMessage(const std::string &name, uint64_t bytes) const {
+    return fmt::format("{}: needs {} MiB (float32 voxels and the renderer's 20 %), more than the whole memory "
+                       "budget of {} MiB (--memory-budget-mib); it cannot be loaded on this server",
+                       name, mib(bytes), budgetBytes_ >> 20);
+}
+
+std::string VolumeRegistry::roomMessage(const std::string &name, uint64_t bytes,
+                                        const std::vector<Waiter> &waiters) const {
+    uint64_t held = 0;
+    for (const auto &[n, e] : loaded_)
+        if (!evictable(e, waiters)) held += e->bytes;
+    return fmt::format("{}: needs {} MiB; the memory budget is {} MiB (--memory-budget-mib) and volumes open in "
+                       "sessions hold {} MiB of it, which cannot be evicted",
+                       name, mib(bytes), budgetBytes_ >> 20, mib(held));
+}
+
+bool VolumeRegistry::evictable(const std::shared_ptr<VolumeEntry> &e, const std::vector<Waiter> &waiters) const {
+    // The registry's own reference plus one per hold; holds given up by this load's waiters
+    // (sessions switching away from the volume) do not keep it.
+    const auto releasers = std::count_if(waiters.begin(), waiters.end(),
+                                         [&](const Waiter &w) { return w.releasing == e.get(); });
+    return e.use_count() - 1 <= releasers;
+}
+
+std::optional<std::vector<std::string>> VolumeRegistry::planRoom(uint64_t bytes,
+                                                                 const std::vector<Waiter> &waiters) const {
+    uint64_t used = 0;
+    std::vector<std::pair<uint64_t, std::string>> candidates;   // (last use, name)
+    for (const auto &[n, e] : loaded_) {
+        used += e->bytes;
+        if (evictable(e, waiters)) candidates.emplace_back(lastUse_.at(n), n);
     }
-    publishMemory();
-    return true;
+    std::sort(candidates.begin(), candidates.end());
+    std::vector<std::string> victims;
+    for (const auto &[use, n] : candidates) {
+        if (used + bytes <= budgetBytes_) break;
+        used -= loaded_.at(n)->bytes;
+        victims.push_back(n);
+    }
+    if (used + bytes > budgetBytes_) return std::nullopt;
+    return victims;
+}
+
+void VolumeRegistry::evict(const std::vector<std::string> &names) {
+    for (const auto &n : names) {
+        spdlog::info("evicting volume {} for the memory budget", n);
+        metrics_.volumeEvicted(loaded_.at(n)->bytes);
+        loaded_.erase(n);
+        lastUse_.erase(n);
+    }
+}
+
+std::string VolumeRegistry::forClients(std::string message, const Pending &p) const {
+    const auto replaceAll = [&](const std::string &from, const std::string &to) {
+        if (from.empty()) return;
+        for (size_t at = message.find(from); at != std::string::npos; at = message.find(from, at + to.size()))
+            message.replace(at, from.size(), to);
+    };
+    if (!p.path.empty()) replaceAll(p.path.string(), p.name);
+    for (const fs::path &folder : dataDirs_) replaceAll(folder.string() + "/", "");
+    // Anything else absolute (a temporary file, a link's target): its last part only.
+    static const std::regex absolute(R"((^|[\s'"(=])(/[^\s'"(),;]+))");
+    std::string out;
+    auto last = message.cbegin();
+    for (std::sregex_iterator it(message.begin(), message.end(), absolute), end; it != end; ++it) {
+        out.append(last, (*it)[2].first);
+        out += fs::path((*it)[2].str()).filename().string();
+        last = (*it)[2].second;
+    }
+    out.append(last, message.cend());
+    return out;
 }
 
 void VolumeRegistry::publishMemory() {

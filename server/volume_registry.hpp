@@ -1,10 +1,18 @@
 #pragma once
 // The volumes the server can open, found only inside its data folders, and the ones in
-// memory. A volume is loaded once and shared: sessions hold a shared_ptr to its entry, so an
-// entry whose only owner is the registry is unused and may be evicted when a new load needs
-// its memory (least recently opened first). Loads run on one loader thread; every session
-// waiting for a volume gets its progress and its result through callbacks, which the
-// sessions post to their own strands.
+// memory. A volume is loaded once and shared: every successful open() hands out a hold on
+// its entry (a shared_ptr whose copies, in the session and its render jobs, all count as
+// that one hold), so an entry nobody holds is unused and may be evicted when a new load
+// needs its memory (least recently opened first). Loads run on one loader thread; every
+// session waiting for a volume gets its progress and its result through callbacks, which
+// the sessions post to their own strands.
+//
+// Memory budget: a volume larger than the whole budget is refused from its header, before
+// its voxels are read. Room is made only once a new volume is loaded and ready to be
+// inserted, and only if evicting enough is possible: a failed load evicts nothing. A
+// session switching volumes passes the hold it will give up (`releasing`): that volume
+// counts as evictable for this load when no one else holds it. The session keeps it until
+// the new volume arrives; if the new load fails, nothing was evicted and it keeps it.
 
 #include "protocol/errors.hpp"
 #include "protocol/server_messages.hpp"
@@ -12,6 +20,7 @@
 #include "renderer/volume.hpp"
 #include "server/metrics.hpp"
 
+#include <atomic>
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
@@ -19,6 +28,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <variant>
@@ -41,16 +51,23 @@ class VolumeRegistry {
     using Result = std::variant<std::shared_ptr<VolumeEntry>, protocol::ProtocolError>;
     using Done = std::function<void(Result)>;
 
+    // loadTimeoutSeconds: a load running longer fails (load_failed naming the limit); 0: none.
     VolumeRegistry(std::vector<std::filesystem::path> dataDirs, uint64_t budgetBytes, OpenClContext &cl,
-                   Metrics &metrics);
-    ~VolumeRegistry();   // stops the loader after its current load
+                   Metrics &metrics, double loadTimeoutSeconds = 120);
+    ~VolumeRegistry();   // stops the loader after its current load (which stops at its next step)
 
     // Every volume a client may open: built-in ones and files with known extensions.
     std::vector<protocol::VolumeInfo> list() const;
     // Open `name` (already through validateVolumeName): at once if loaded, else joining or
     // starting its load. progress and done are called from the loader thread (or this one).
-    void open(const std::string &name, Progress progress, Done done);
+    // `releasing`: the hold the caller gives up once it has the new one (its current volume).
+    void open(const std::string &name, Progress progress, Done done,
+              const std::shared_ptr<const VolumeEntry> &releasing = nullptr);
     bool isLoaded(const std::string &name) const;
+    // Host memory counted against the budget by the volumes in the registry.
+    uint64_t usedBytes() const;
+    // The volume being loaded now, or "" (for the shutdown log).
+    std::string loadingNow() const;
     void stop();
 
     // The file `name` stands for, or an error (not_found) when there is none inside a data
@@ -61,6 +78,7 @@ class VolumeRegistry {
     struct Waiter {
         Progress progress;
         Done done;
+        const VolumeEntry *releasing = nullptr;   // identity only: never dereferenced
     };
     struct Pending {
         std::string name;
@@ -70,11 +88,22 @@ class VolumeRegistry {
     void loaderLoop();
     Result load(Pending &pending);
     void progress(const std::string &name, protocol::ProgressStage stage, const std::string &task, double fraction);
-    bool makeRoom(uint64_t bytes);   // evict unused entries; false if it cannot fit
+    // The entries to evict so that `bytes` more fit, least recently opened first, or nothing
+    // if they cannot be made to fit. Evictable: held by no one, or only by waiters releasing it.
+    std::optional<std::vector<std::string>> planRoom(uint64_t bytes, const std::vector<Waiter> &waiters) const;
+    void evict(const std::vector<std::string> &names);
     void publishMemory();
+    bool evictable(const std::shared_ptr<VolumeEntry> &entry, const std::vector<Waiter> &waiters) const;
+    std::string tooLargeMessage(const std::string &name, uint64_t bytes) const;
+    std::string roomMessage(const std::string &name, uint64_t bytes, const std::vector<Waiter> &waiters) const;
+    // A loader message fit for clients: no absolute server path (the log keeps them).
+    std::string forClients(std::string message, const Pending &pending) const;
 
     std::vector<std::filesystem::path> dataDirs_;   // canonical
     uint64_t budgetBytes_;
+    double loadTimeoutSeconds_;
+    std::atomic<bool> stopRequested_{false};   // read by the load in progress at each step
+    std::string loading_;                      // guarded by mutex_
     OpenClContext &cl_;
     Metrics &metrics_;
 

@@ -317,7 +317,8 @@ void WebsocketSession::onOpenVolume(const protocol::OpenVolumeRequest &m) {
             net::post(executor, [weak, id, result = std::move(result)]() mutable {
                 if (auto self = weak.lock()) self->guarded("open_volume", [&] { self->onOpened(id, std::move(result)); }, id);
             });
-        });
+        },
+        volume_);   // the volume this session gives up: it may be evicted to make room
 }
 
 void WebsocketSession::onOpened(nlohmann::json id, VolumeRegistry::Result result) {

@@ -13,7 +13,10 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <chrono>
 #include <filesystem>
+#include <future>
+#include <thread>
 #include <fstream>
 #include <initializer_list>
 #include <limits>
@@ -22,6 +25,8 @@
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace volcast {
@@ -224,7 +229,7 @@ protected:
 };
 
 // The load must fail with a message that starts with the path, names the file, and
-// contains every word (lower case) that names the problem.
+// contains every word (lower case) that names the problem after the path.
 void expectLoadError(const fs::path &path, std::initializer_list<const char *> words, const LoadOptions &options = {}) {
     try {
         const Volume v = loadVolume(path, options);
@@ -234,8 +239,11 @@ void expectLoadError(const fs::path &path, std::initializer_list<const char *> w
         const std::string message = e.what();
         EXPECT_TRUE(message.starts_with(path.string())) << message;
         EXPECT_NE(message.find(path.filename().string()), std::string::npos) << message;
+        // The words must name the problem, so they are looked for after the path (which
+        // holds the test's own name).
+        const std::string problem = lowerCase(message.substr(std::min(message.size(), path.string().size())));
         for (const char *word : words)
-            EXPECT_NE(lowerCase(message).find(word), std::string::npos) << "no '" << word << "' in: " << message;
+            EXPECT_NE(problem.find(word), std::string::npos) << "no '" << word << "' in: " << message;
     } catch (const std::exception &e) {
         ADD_FAILURE() << path << " threw something other than VolumeLoadError: " << e.what();
     }
@@ -850,6 +858,219 @@ TEST_F(VolumeIoTest, NiftiZeroSize) {
     // NiftiImageIO reports a size of 0 as 1; the loader reads the header's own dims.
     writeFile(dir / "zero.nii", niftiHeader({5, 0, 3}, 2, 8, kSform) + std::string(15, '\0'));
     expectLoadError(dir / "zero.nii", {"size"});
+}
+
+// ---------------------------------------------------------------------------------------
+// 3b. Damaged NIfTI headers: each breaks one rule of the NIfTI-1 specification, which ITK
+// would read into a zero-filled or shifted volume. The refusal names the field.
+
+template <typename T>
+std::string patched(std::string bytes, size_t offset, T value) {
+    std::memcpy(bytes.data() + offset, &value, sizeof value);
+    return bytes;
+}
+
+class VolumeIoNiftiHeader : public VolumeIoTest {
+  protected:
+    // A valid int16 .nii of kDims with one header field replaced.
+    template <typename T>
+    fs::path writeWith(const std::string &name, size_t offset, T value) {
+        const std::string good =
+            niftiHeader(kDims, 4, 16, kSform) + encode(VoxelType::Int16, testValues(VoxelType::Int16, kCount), false);
+        writeFile(dir / name, patched(good, offset, value));
+        return dir / name;
+    }
+};
+
+TEST_F(VolumeIoNiftiHeader, ValidHeaderLoads) {  // the baseline the others break
+    EXPECT_EQ(loadVolume(writeWith("ok.nii", 70, int16_t(4))).dims, kDims);
+}
+TEST_F(VolumeIoNiftiHeader, SizeofHdrNot348) {
+    expectLoadError(writeWith("header_size.nii", 0, int32_t(350)), {"sizeof_hdr", "348"});
+}
+TEST_F(VolumeIoNiftiHeader, DimZeroOutsideOneToSeven) {
+    expectLoadError(writeWith("rank_zero.nii", 40, int16_t(0)), {"dim[0]"});
+    expectLoadError(writeWith("rank_eight.nii", 40, int16_t(8)), {"dim[0]"});
+}
+TEST_F(VolumeIoNiftiHeader, NegativeDim) {
+    expectLoadError(writeWith("negative_size.nii", 44, int16_t(-4)), {"dim[2]", "-4"});
+}
+TEST_F(VolumeIoNiftiHeader, BitpixNotMatchingDatatype) {
+    // int16 data (datatype 4) declared with 8 bits per voxel.
+    expectLoadError(writeWith("bits.nii", 72, int16_t(8)), {"bitpix", "datatype 4"});
+}
+TEST_F(VolumeIoNiftiHeader, UnknownDatatype) {
+    expectLoadError(writeWith("type3.nii", 70, int16_t(3)), {"datatype 3"});
+}
+TEST_F(VolumeIoNiftiHeader, VoxOffsetInsideTheHeader) {
+    expectLoadError(writeWith("early_data.nii", 108, 100.0f), {"vox_offset", "100"});
+}
+TEST_F(VolumeIoNiftiHeader, ZeroPixdim) {
+    expectLoadError(writeWith("zero_spacing.nii", 80, 0.0f), {"pixdim[1]"});
+}
+TEST_F(VolumeIoNiftiHeader, NegativePixdim) {
+    expectLoadError(writeWith("negative_spacing.nii", 84, -3.0f), {"pixdim[2]"});
+}
+TEST_F(VolumeIoNiftiHeader, NanPixdim) {
+    expectLoadError(writeWith("nan_spacing.nii", 88, std::numeric_limits<float>::quiet_NaN()), {"pixdim[3]"});
+}
+
+// ---------------------------------------------------------------------------------------
+// 3c. Damaged DICOM series
+
+// A slice cut short: GDCM would read the missing pixels as zeros.
+TEST_F(VolumeIoTest, DicomSeriesWithATruncatedSlice) {
+    Volume src;
+    src.dims = {6, 5, 4};
+    src.voxels.resize(src.voxelCount());
+    for (size_t i = 0; i < src.voxels.size(); ++i) src.voxels[i] = float(int(i) * 37 - 1024);
+    saveDicomSeries(src, dir / "series", VoxelType::Int16);
+    const fs::path slice = dir / "series" / "slice_0002.dcm";
+    fs::resize_file(slice, fs::file_size(slice) - 10);
+    expectLoadError(dir / "series", {"slice_0002.dcm", "truncated"});
+    // The same file on its own, as a one-slice volume.
+    expectLoadError(slice, {"truncated"});
+}
+
+// ---------------------------------------------------------------------------------------
+// 3d. Detached data files stay in the header's folder and are regular files
+
+class VolumeIoDataFiles : public VolumeIoTest {
+  protected:
+    void SetUp() override {
+        VolumeIoTest::SetUp();
+        fs::create_directories(dir / "sub");
+    }
+    // dir/sub/NAME, a 2x2x2 uint8 header naming `dataFile`; dir/x.raw lies outside sub/.
+    fs::path header(const std::string &name, const std::string &dataFile) {
+        fs::create_directories(dir / "sub");
+        writeFile(dir / "x.raw", std::string(8, '\1'));
+        writeFile(dir / "sub" / name, "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n"
+                                      "data file: " + dataFile + "\n");
+        return dir / "sub" / name;
+    }
+    fs::path metaHeader(const std::string &name, const std::string &dataFile) {
+        fs::create_directories(dir / "sub");
+        writeFile(dir / "x.raw", std::string(8, '\1'));
+        writeFile(dir / "sub" / name, "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n"
+                                      "ElementDataFile = " + dataFile + "\n");
+        return dir / "sub" / name;
+    }
+    // No server path in the message: the data file as the header names it, nothing more.
+    void expectNoOutsidePath(const fs::path &p) {
+        try {
+            loadVolume(p);
+        } catch (const VolumeLoadError &e) {
+            EXPECT_EQ(std::string(e.what()).find((dir / "x.raw").string()), std::string::npos) << e.what();
+        }
+    }
+    // Loads on another thread: a loader that opened a FIFO would wait for a writer forever.
+    // If it does, the test writes nothing, closes the FIFO's write end to free it, and fails.
+    void expectRefusedWithoutBlocking(const fs::path &p, const fs::path &fifo,
+                                      std::initializer_list<const char *> words) {
+        auto result = std::async(std::launch::async, [p, words] { expectLoadError(p, words); });
+        if (result.wait_for(std::chrono::seconds(10)) != std::future_status::ready) {
+            ADD_FAILURE() << "loading " << p << " blocked on the FIFO " << fifo;
+            const int fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK);
+            if (fd >= 0) ::close(fd);
+        }
+        result.wait();
+    }
+};
+
+TEST_F(VolumeIoDataFiles, ValidDetachedDataFileLoads) {  // the baseline the others break
+    writeFile(dir / "sub" / "in.raw", std::string(8, '\2'));
+    const fs::path p = header("ok.nhdr", "in.raw");
+    EXPECT_EQ(loadVolume(p).voxels, std::vector<float>(8, 2.0f));
+}
+TEST_F(VolumeIoDataFiles, NrrdDataFileWithDotDotIsRefused) {
+    const fs::path p = header("dotdot.nhdr", "../x.raw");
+    expectLoadError(p, {"../x.raw", "outside"});
+    expectNoOutsidePath(p);
+}
+TEST_F(VolumeIoDataFiles, NrrdAbsoluteDataFileIsRefused) {
+    expectLoadError(header("rooted.nhdr", "/etc/passwd"), {"/etc/passwd", "absolute"});
+}
+TEST_F(VolumeIoDataFiles, NrrdDataFileLinkLeadingOutIsRefused) {
+    const fs::path p = header("link.nhdr", "link.raw");
+    fs::create_symlink(dir / "x.raw", dir / "sub" / "link.raw");
+    expectLoadError(p, {"link.raw", "outside"});
+    expectNoOutsidePath(p);
+}
+TEST_F(VolumeIoDataFiles, NrrdDataFileThatIsAFolderIsRefused) {
+    fs::create_directories(dir / "sub" / "inner");
+    expectLoadError(header("dir.nhdr", "inner"), {"inner", "folder"});
+}
+TEST_F(VolumeIoDataFiles, NrrdDataFileThatIsAFifoIsRefusedBeforeOpening) {
+    const fs::path p = header("fifo.nhdr", "fifo.raw");
+    ASSERT_EQ(::mkfifo((dir / "sub" / "fifo.raw").c_str(), 0600), 0) << std::strerror(errno);
+    expectRefusedWithoutBlocking(p, dir / "sub" / "fifo.raw", {"fifo.raw", "regular file"});
+}
+TEST_F(VolumeIoDataFiles, NrrdListDataFilesAreConfined) {
+    writeFile(dir / "sub" / "a.raw", std::string(4, '\1'));
+    const fs::path p = header("list.nhdr", "LIST\na.raw\n../x.raw");
+    expectLoadError(p, {"../x.raw", "outside"});
+}
+TEST_F(VolumeIoDataFiles, NrrdPatternDataFilesAreConfined) {
+    writeFile(dir / "s1.raw", std::string(4, '\1'));
+    writeFile(dir / "s2.raw", std::string(4, '\1'));
+    expectLoadError(header("pattern.nhdr", "../s%d.raw 1 2 1"), {"../s1.raw", "outside"});
+}
+TEST_F(VolumeIoDataFiles, NrrdListAndPatternInsideTheFolderLoad) {
+    // Two files of one z slice (4 bytes) each, in both multi-file forms.
+    writeFile(dir / "sub" / "s01.raw", std::string(4, '\1'));
+    writeFile(dir / "sub" / "s02.raw", std::string(4, '\2'));
+    const std::vector<float> expected = {1, 1, 1, 1, 2, 2, 2, 2};
+    EXPECT_EQ(loadVolume(header("list_ok.nhdr", "LIST\ns01.raw\ns02.raw")).voxels, expected);
+    EXPECT_EQ(loadVolume(header("pattern_ok.nhdr", "s%02d.raw 1 2 1")).voxels, expected);
+}
+TEST_F(VolumeIoDataFiles, MetaImageDataFileOutsideOrAbsoluteOrFifoIsRefused) {
+    expectLoadError(metaHeader("dotdot.mhd", "../x.raw"), {"../x.raw", "outside"});
+    expectLoadError(metaHeader("rooted.mhd", "/etc/passwd"), {"/etc/passwd", "absolute"});
+    ASSERT_EQ(::mkfifo((dir / "sub" / "fifo.raw").c_str(), 0600), 0) << std::strerror(errno);
+    expectRefusedWithoutBlocking(metaHeader("fifo.mhd", "fifo.raw"), dir / "sub" / "fifo.raw",
+                                 {"fifo.raw", "regular file"});
+}
+TEST_F(VolumeIoDataFiles, HeaderThatIsAFifoIsRefusedBeforeOpening) {
+    ASSERT_EQ(::mkfifo((dir / "pipe.nrrd").c_str(), 0600), 0) << std::strerror(errno);
+    expectRefusedWithoutBlocking(dir / "pipe.nrrd", dir / "pipe.nrrd", {"regular file"});
+}
+TEST_F(VolumeIoDataFiles, DicomFolderHoldingAFifoIsRefusedBeforeScanning) {
+    Volume src;
+    src.dims = {4, 4, 2};
+    src.voxels.assign(src.voxelCount(), 5.0f);
+    saveDicomSeries(src, dir / "series", VoxelType::Int16);
+    ASSERT_EQ(::mkfifo((dir / "series" / "pipe.dcm").c_str(), 0600), 0) << std::strerror(errno);
+    expectRefusedWithoutBlocking(dir / "series", dir / "series" / "pipe.dcm", {"pipe.dcm", "regular file"});
+}
+
+// ---------------------------------------------------------------------------------------
+// 3e. Time limit and stop request, checked at every progress step
+
+TEST_F(VolumeIoTest, LoadPastItsTimeLimitFailsNamingTheLimit) {
+    Volume src;
+    src.dims = {8, 8, 12};
+    src.voxels.assign(src.voxelCount(), 100.0f);
+    saveDicomSeries(src, dir / "slow", VoxelType::Int16);
+    LoadOptions slow;
+    slow.timeLimitSeconds = 0.2;
+    // Each step takes 50 ms: the 12 slices alone take 0.6 s, three times the limit.
+    slow.progress = [](double, std::string_view) { std::this_thread::sleep_for(std::chrono::milliseconds(50)); };
+    EXPECT_THROW(loadVolume(dir / "slow", slow), VolumeLoadTimeout);
+    expectLoadError(dir / "slow", {"time limit", "0.2 s"}, slow);
+    // Without the limit the same load completes.
+    slow.timeLimitSeconds = 0;
+    EXPECT_EQ(loadVolume(dir / "slow", slow).dims, src.dims);
+}
+
+TEST_F(VolumeIoTest, StopRequestEndsTheLoad) {
+    Volume src;
+    src.dims = {8, 8, 4};
+    src.voxels.assign(src.voxelCount(), 1.0f);
+    saveVolume(src, dir / "s.nrrd");
+    LoadOptions stopping;
+    stopping.stopRequested = [] { return true; };
+    expectLoadError(dir / "s.nrrd", {"stopped"}, stopping);
 }
 
 // ---------------------------------------------------------------------------------------

@@ -1,0 +1,163 @@
+// The server's start and stop: the kernel cache checked at start, readiness that waits for
+// a compiled ray-casting program, and SIGTERM that ends the process within its grace
+// period whatever is running.
+
+#include "client/ws_client.hpp"
+#include "server/server.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using nlohmann::json;
+using volcast::client::Client;
+
+// The server executable with `args`, its output in `log`; returns its pid.
+pid_t startServer(std::vector<std::string> args, const fs::path &log) {
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        if (FILE *f = std::freopen(log.c_str(), "w", stdout)) (void)f;
+        ::dup2(::fileno(stdout), 2);
+        std::vector<char *> argv{const_cast<char *>(VOLCAST_SERVER_EXE)};
+        for (auto &a : args) argv.push_back(a.data());
+        argv.push_back(nullptr);
+        ::execv(VOLCAST_SERVER_EXE, argv.data());
+        ::_exit(127);
+    }
+    return pid;
+}
+
+uint16_t waitForPort(const fs::path &portFile, std::chrono::seconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+        std::ifstream in(portFile);
+        int p = 0;
+        if (in >> p) return uint16_t(p);
+        std::this_thread::sleep_for(20ms);
+    }
+    return 0;
+}
+
+// Exit status once the process ends, or -1 if it is still running after `timeout`.
+int waitForExit(pid_t pid, std::chrono::milliseconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    int status = 0;
+    while (std::chrono::steady_clock::now() < deadline) {
+        if (::waitpid(pid, &status, WNOHANG) == pid) return status;
+        std::this_thread::sleep_for(10ms);
+    }
+    return -1;
+}
+
+std::string readAll(const fs::path &p) {
+    std::ifstream in(p);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+class ServerLifecycle : public ::testing::Test {
+  protected:
+    fs::path tmp;
+    void SetUp() override {
+        const auto *info = ::testing::UnitTest::GetInstance()->current_test_info();
+        tmp = fs::temp_directory_path() / ("volcast_lifecycle_" + std::to_string(::getpid()) + "_" + info->name());
+        fs::remove_all(tmp);
+        fs::create_directories(tmp);
+    }
+    void TearDown() override { fs::remove_all(tmp); }
+};
+
+// A cache folder that cannot be created (its parent is a regular file: permission bits
+// would not stop root) must be named, not reported as a missing OpenCL device.
+TEST_F(ServerLifecycle, UnwritableKernelCacheFailsNamingTheFolder) {
+    std::ofstream(tmp / "file") << "a regular file, not a folder";
+    const fs::path cache = tmp / "file" / "kcache";
+    const pid_t pid = startServer({"--port", "0", "--kernel-cache", cache.string(), "--default-volume", ""},
+                                  tmp / "log.txt");
+    ASSERT_GT(pid, 0);
+    const int status = waitForExit(pid, 30s);
+    ASSERT_NE(status, -1) << "the server started with an unusable kernel cache";
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) != 0);
+    const std::string log = readAll(tmp / "log.txt");
+    EXPECT_NE(log.find(cache.string()), std::string::npos) << log;
+    EXPECT_NE(log.find("kernel cache"), std::string::npos) << log;
+    EXPECT_EQ(log.find("no OpenCL device"), std::string::npos) << log;
+}
+
+// Ready means a session's first frame does not wait for the program to build: whenever
+// the server says ready, the device has built a program.
+TEST_F(ServerLifecycle, ReadinessWaitsForACompiledKernel) {
+    volcast::server::ServerConfig config;
+    config.port = 0;
+    config.defaultVolume = "builtin:sphere";
+    volcast::server::Server server(config);
+    server.start();
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    std::string reason = server.state().notReadyReason();
+    while (!reason.empty() && std::chrono::steady_clock::now() < deadline) {
+        std::this_thread::sleep_for(1ms);
+        reason = server.state().notReadyReason();
+    }
+    ASSERT_TRUE(reason.empty()) << "not ready after 60 s: " << reason;
+    EXPECT_GE(server.state().programsBuilt(), 1u) << "ready before any ray-casting program was built";
+}
+
+// A frame that takes minutes (explicit policy, tiny step, cubic and shaded, 1024²): SIGTERM
+// must still end the process within the grace period (1.5 s here), exiting 0.
+TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongRender) {
+    const fs::path portFile = tmp / "port";
+    const pid_t pid = startServer({"--port", "0", "--port-file", portFile.string(), "--default-volume",
+                                   "builtin:sphere", "--shutdown-grace-ms", "1500", "--error-calibration", "false",
+                                   "--log-level", "info"},
+                                  tmp / "log.txt");
+    ASSERT_GT(pid, 0);
+    const uint16_t port = waitForPort(portFile, 30s);
+    if (port == 0) ::kill(pid, SIGKILL);
+    ASSERT_NE(port, 0) << "the server did not start: " << readAll(tmp / "log.txt");
+    {
+        Client c("127.0.0.1", port);
+        c.sendText(json{{"type", "hello"}, {"id", 1}, {"protocol", 1}}.dump());
+        c.sendText(json{{"type", "viewport"}, {"id", 2}, {"image", {{"width", 1024}, {"height", 1024}}}}.dump());
+        c.sendText(json{{"type", "quality_policy"},
+                        {"id", 3},
+                        {"mode", "explicit"},
+                        {"quality", {{"step", 0.02}, {"interpolation", "cubic"}, {"shading", true}}}}
+                       .dump());
+        c.sendText(json{{"type", "open_volume"}, {"id", 4}, {"name", "builtin:demo"}}.dump());
+        // The state comes just before the frame's render starts.
+        bool state = false;
+        const auto until = std::chrono::steady_clock::now() + 30s;
+        while (!state && std::chrono::steady_clock::now() < until)
+            if (auto m = c.next(100ms); m && !m->isFrame) state = m->text.find("\"state\"") != std::string::npos;
+        ASSERT_TRUE(state) << "no state for builtin:demo";
+        std::this_thread::sleep_for(500ms);   // well inside the frame's render
+        const auto start = std::chrono::steady_clock::now();
+        ASSERT_EQ(::kill(pid, SIGTERM), 0);
+        const int status = waitForExit(pid, 1500ms + 1s);
+        const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start);
+        if (status == -1) {
+            ::kill(pid, SIGKILL);
+            ::waitpid(pid, nullptr, 0);
+        }
+        ASSERT_NE(status, -1) << "still running 2.5 s after SIGTERM; log:\n" << readAll(tmp / "log.txt");
+        EXPECT_TRUE(WIFEXITED(status)) << status;
+        EXPECT_EQ(WEXITSTATUS(status), 0);
+        EXPECT_LT(took.count(), 2500);
+        // The log says what was still running when the grace period ended.
+        EXPECT_NE(readAll(tmp / "log.txt").find("render worker"), std::string::npos) << readAll(tmp / "log.txt");
+    }
+}
+
+} // namespace

@@ -1,0 +1,176 @@
+// The volume registry on its own (server/volume_registry.cpp): the memory budget's edges,
+// the load time limit, and the messages clients get. Built-in volumes (64³: 1.2 MiB counted
+// each, float32 plus 20 %) and small files the tests write; budgets of a few MiB.
+
+#include "renderer/opencl_context.hpp"
+#include "renderer/volume_io.hpp"
+#include "server/metrics.hpp"
+#include "server/volume_registry.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <future>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+using volcast::server::VolumeEntry;
+using volcast::server::VolumeRegistry;
+namespace protocol = volcast::protocol;
+
+constexpr uint64_t kMiB = uint64_t(1) << 20;
+
+class VolumeRegistryTest : public ::testing::Test {
+  protected:
+    static inline std::unique_ptr<volcast::OpenClContext> cl;
+    volcast::server::Metrics metrics;
+    fs::path data;
+
+    static void SetUpTestSuite() { cl = std::make_unique<volcast::OpenClContext>(); }
+    static void TearDownTestSuite() { cl.reset(); }
+    void SetUp() override {
+        const auto *info = ::testing::UnitTest::GetInstance()->current_test_info();
+        data = fs::temp_directory_path() / ("volcast_registry_" + std::to_string(::getpid()) + "_" + info->name());
+        fs::remove_all(data);
+        fs::create_directories(data);
+    }
+    void TearDown() override { fs::remove_all(data); }
+
+    std::unique_ptr<VolumeRegistry> registry(uint64_t budget, double loadTimeout = 120) {
+        return std::make_unique<VolumeRegistry>(std::vector<fs::path>{data}, budget, *cl, metrics, loadTimeout);
+    }
+    // A uint8 NRRD of dims x*y*z: counted as x*y*z*4*1.2 bytes once loaded.
+    void writeVolume(const std::string &name, int x, int y, int z) {
+        volcast::Volume v;
+        v.dims = {x, y, z};
+        v.voxels.resize(v.voxelCount());
+        for (size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(i % 251);
+        volcast::saveVolume(v, data / name, {volcast::VoxelType::UInt8, false});
+    }
+};
+
+VolumeRegistry::Result openNow(VolumeRegistry &r, const std::string &name,
+                               const std::shared_ptr<const VolumeEntry> &releasing = nullptr) {
+    auto promise = std::make_shared<std::promise<VolumeRegistry::Result>>();
+    auto future = promise->get_future();
+    r.open(
+        name, [](const protocol::ProgressMessage &) {},
+        [promise](VolumeRegistry::Result result) { promise->set_value(std::move(result)); }, releasing);
+    if (future.wait_for(std::chrono::seconds(60)) != std::future_status::ready) {
+        ADD_FAILURE() << "open " << name << " gave no answer in 60 s";
+        return protocol::ProtocolError{};
+    }
+    return future.get();
+}
+
+std::shared_ptr<VolumeEntry> entryOf(const VolumeRegistry::Result &r) {
+    if (auto *e = std::get_if<protocol::ProtocolError>(&r)) {
+        ADD_FAILURE() << "unexpected error: " << e->message;
+        return nullptr;
+    }
+    return std::get<std::shared_ptr<VolumeEntry>>(r);
+}
+
+std::string errorOf(const VolumeRegistry::Result &r) {
+    if (auto *e = std::get_if<protocol::ProtocolError>(&r)) {
+        EXPECT_EQ(e->code, protocol::ErrorCode::LoadFailed) << e->message;
+        return e->message;
+    }
+    ADD_FAILURE() << "the open succeeded but should have failed";
+    return "";
+}
+
+TEST_F(VolumeRegistryTest, VolumeLargerThanTheWholeBudgetIsRefusedSayingSo) {
+    auto r = registry(1 * kMiB);
+    // builtin:sphere counts 1.2 MiB.
+    const std::string builtin = errorOf(openNow(*r, "builtin:sphere"));
+    for (const char *words : {"needs 2 MiB", "whole memory budget of 1 MiB", "--memory-budget-mib"})
+        EXPECT_NE(builtin.find(words), std::string::npos) << "no '" << words << "' in: " << builtin;
+    // A file is refused from its header: its data file here holds 10 bytes of the 16 MiB the
+    // header promises, and the message is about the budget, not the truncated data.
+    std::ofstream(data / "big.nhdr") << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 256 256 256\nencoding: raw\n"
+                                        "data file: big.raw\n";
+    std::ofstream(data / "big.raw") << "0123456789";
+    const std::string file = errorOf(openNow(*r, "big.nhdr"));
+    for (const char *words : {"big.nhdr", "needs 77 MiB", "whole memory budget of 1 MiB", "--memory-budget-mib"})
+        EXPECT_NE(file.find(words), std::string::npos) << "no '" << words << "' in: " << file;
+    EXPECT_EQ(file.find("truncated"), std::string::npos) << file;
+}
+
+TEST_F(VolumeRegistryTest, FailedLoadEvictsNothing) {
+    auto r = registry(3 * kMiB);
+    const auto held = entryOf(openNow(*r, "builtin:sphere"));   // 1.2 MiB, held
+    entryOf(openNow(*r, "builtin:gaussian_blob"));                // 1.2 MiB, unused at once
+    ASSERT_TRUE(r->isLoaded("builtin:gaussian_blob"));
+    // 128 x 128 x 32 voxels count 2.4 MiB: it would fit only by evicting both, and the
+    // sphere is held, so it fails, and the unused blob must still be there.
+    writeVolume("wide.nrrd", 128, 128, 32);
+    const std::string message = errorOf(openNow(*r, "wide.nrrd"));
+    EXPECT_NE(message.find("cannot be evicted"), std::string::npos) << message;
+    EXPECT_TRUE(r->isLoaded("builtin:gaussian_blob")) << "a failed load evicted an unused volume";
+    // A file that fails to load evicts nothing either.
+    std::ofstream(data / "broken.nrrd") << "NRRD0004\ntype: float\n";
+    errorOf(openNow(*r, "broken.nrrd"));
+    EXPECT_TRUE(r->isLoaded("builtin:gaussian_blob"));
+    EXPECT_TRUE(r->isLoaded("builtin:sphere"));
+}
+
+TEST_F(VolumeRegistryTest, SwitchingSessionMayHaveItsOwnVolumeEvicted) {
+    auto r = registry(3 * kMiB);
+    writeVolume("wide.nrrd", 128, 128, 32);   // 2.4 MiB: fits only once the sphere is gone
+    auto current = entryOf(openNow(*r, "builtin:sphere"));
+    ASSERT_TRUE(current);
+    // Without saying that it gives the sphere up, the session's own hold blocks the load.
+    errorOf(openNow(*r, "wide.nrrd"));
+    EXPECT_TRUE(r->isLoaded("builtin:sphere"));
+    // Another session holding the sphere too keeps it, whatever this one releases.
+    {
+        auto other = entryOf(openNow(*r, "builtin:sphere"));
+        errorOf(openNow(*r, "wide.nrrd", current));
+        EXPECT_TRUE(r->isLoaded("builtin:sphere"));
+    }
+    // Released by its only holder, the sphere makes room; the session still has it until it
+    // drops its hold, and then its memory goes.
+    auto next = entryOf(openNow(*r, "wide.nrrd", current));
+    ASSERT_TRUE(next);
+    EXPECT_FALSE(r->isLoaded("builtin:sphere"));
+    EXPECT_TRUE(r->isLoaded("wide.nrrd"));
+    EXPECT_EQ(current->volume->dims, volcast::Vec3i(64, 64, 64)) << "the session's old volume stays usable";
+    EXPECT_LE(r->usedBytes(), 3 * kMiB);
+}
+
+TEST_F(VolumeRegistryTest, LoadPastItsTimeLimitFailsNamingTheFlag) {
+    // 64 DICOM slices take GDCM far more than 1 ms to scan; the limit is checked at the
+    // loader's next step after that.
+    volcast::Volume v;
+    v.dims = {8, 8, 64};
+    v.voxels.assign(v.voxelCount(), 10.0f);
+    volcast::saveDicomSeries(v, data / "series");
+    auto r = registry(64 * kMiB, 0.001);
+    const std::string message = errorOf(openNow(*r, "series"));
+    for (const char *words : {"series", "time limit", "--load-timeout-s"})
+        EXPECT_NE(message.find(words), std::string::npos) << "no '" << words << "' in: " << message;
+}
+
+TEST_F(VolumeRegistryTest, ClientMessagesNameNoServerPath) {
+    fs::create_directories(data / "ct");
+    std::ofstream(data / "ct" / "missing.nhdr") << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\n"
+                                                   "encoding: raw\ndata file: gone.raw\n";
+    std::ofstream(data / "ct" / "broken.nrrd") << "NRRD0004\ntype: float\n";
+    std::ofstream(data / "ct" / "escape.nhdr") << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\n"
+                                                  "encoding: raw\ndata file: ../../outside.raw\n";
+    auto r = registry(64 * kMiB);
+    for (const char *name : {"ct/missing.nhdr", "ct/broken.nrrd", "ct/escape.nhdr"}) {
+        const std::string message = errorOf(openNow(*r, name));
+        EXPECT_EQ(message.find(data.string()), std::string::npos) << message;
+        EXPECT_EQ(message.find(fs::canonical(data).string()), std::string::npos) << message;
+        EXPECT_EQ(message.find(fs::temp_directory_path().string()), std::string::npos) << message;
+        EXPECT_TRUE(message.starts_with(name)) << message;
+    }
+}
+
+} // namespace
