@@ -40,6 +40,7 @@ import serverproc  # noqa: E402
 DOCUMENTED_CODES = set(vc.ERROR_CODES) - {"internal"}   # `internal` is the server's word for a bug
 ROLES = ("prehello", "hello", "volume")
 ANSWER_TIMEOUT_S = 20.0
+HELLO_DEADLINE_S = 10.0   # the server's --hello-timeout-ms: a connection without hello is then closed 1008
 
 
 @dataclass
@@ -101,9 +102,12 @@ class HostileSession:
 
     async def _open(self) -> None:
         self.ws = await RawWebSocket.connect(self.host, self.port)
+        self.connected_at = time.monotonic()
+        self.hello_done = False
         if self.role == "prehello":
             return
         await self._call(vc.hello(client="soak hostile", id="setup-hello"), "setup-hello")
+        self.hello_done = True
         if self.role == "volume":
             # A small viewport first: the soak is about answers, not about rendering load.
             await self._call(vc.viewport(96, 96, id="setup-viewport"), None)
@@ -180,6 +184,8 @@ class HostileSession:
                     problems.append(problem)
                 if message is None:
                     continue
+                if message.get("type") == "hello":
+                    self.hello_done = True
                 if message.get("id") == probe_id and message.get("type") != "progress":
                     answered = True
                 elif message.get("type") != "progress":
@@ -219,6 +225,10 @@ class HostileSession:
                         problems.append(f"the server process exited ({self.server.proc.returncode})")
             elif closed in h.expect_close or (closed == 1000 and h.may_close_normally):
                 pass
+            elif (closed == 1008 and not self.hello_done and
+                  time.monotonic() - self.connected_at >= HELLO_DEADLINE_S - 0.5):
+                self.tally.closes["1008 (hello deadline)"] += 1
+                self.tally.closes[str(closed)] -= 1
             elif h.expect_code and h.expect_code in codes:
                 pass   # the documented error came, then a close (a later probe cannot matter)
             else:
