@@ -149,7 +149,8 @@ async def load(args) -> int:
         rss_end = server.rss_kib() if server else None
         alive = server.alive() if server else True
         load_after = serverproc.loadavg()
-        exit_code, exit_s = server.stop() if server else (None, 0.0)
+        exit_code, exit_s, shutdown_closes = (await serverproc.stop_with_sessions_open(server, None)
+                                                if server and alive else (server.stop() + ([],) if server else (None, 0.0, [])))
     finally:
         tail = server.log_tail() if server else ""
         if server:
@@ -184,7 +185,8 @@ async def load(args) -> int:
     if server:
         print(f"server RSS               ready {rss_ready / 1024:.1f} MiB, after warm-up (start) "
               f"{rss_start / 1024:.1f} MiB, end {(rss_end or 0) / 1024:.1f} MiB")
-        print(f"SIGTERM                  exit code {exit_code}, {exit_s * 1000:.0f} ms to exit")
+        print(f"SIGTERM                  exit code {exit_code}, {exit_s * 1000:.0f} ms to exit with "
+              f"{len(shutdown_closes)} sessions open (one rendering); their closes: {', '.join(shutdown_closes)}")
     if args.slow_clients:
         for name, r in zip(("slow client", "slowloris"), side_results):
             print(f"{name:24} {r}")
@@ -199,6 +201,8 @@ async def load(args) -> int:
         print(tail)
     if server and exit_code != 0:
         failures.append(f"SIGTERM exit code {exit_code}")
+    if any(c != "1001" for c in shutdown_closes):
+        failures.append(f"SIGTERM: open sessions got closes {shutdown_closes}, not 1001 (server/README.md)")
     if any(not st.opened for st in results):
         failures.append("a session could not open its volume")
     if failures:

@@ -47,12 +47,13 @@ class DragSession:
     def __init__(self, name: str, host: str, port: int, volume: str, rng: random.Random,
                  drag_s=(1.0, 2.0), rest_s=(1.0, 2.0), camera_ms=(40.0, 50.0),
                  wait_final: bool = False, final_timeout_s: float = 30.0, viewport=(512, 512),
-                 max_drags: Optional[int] = None):
+                 max_drags: Optional[int] = None, token: Optional[str] = None):
         self.stats = DragStats(name, volume)
         self.host, self.port, self.volume, self.rng = host, port, volume, rng
         self.drag_s, self.rest_s, self.camera_ms = drag_s, rest_s, camera_ms
         self.wait_final, self.final_timeout_s, self.viewport = wait_final, final_timeout_s, viewport
         self.max_drags = max_drags
+        self.token = token
         self.pending = {}                 # camera id -> send time, until a frame shows it
         self.last_frame_at = 0.0
         self.final_for: Optional[int] = None   # request id of the newest final frame
@@ -134,7 +135,7 @@ class DragSession:
         return self.stats
 
     async def _session(self) -> None:
-        await self._send(vc.hello(client="volcast soak/load scripted session", id=1))
+        await self._send(vc.hello(token=self.token, client="volcast soak/load scripted session", id=1))
         if (await self._reply()).get("type") != "hello":
             return
         await self._send(vc.viewport(*self.viewport, id=self._id()))

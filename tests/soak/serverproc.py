@@ -151,6 +151,44 @@ def render_summary(host: str, port: int) -> str:
             f"({1000 * render_s / max(renders, 1):.0f} ms mean), {stale:.0f} dropped as stale")
 
 
+async def stop_with_sessions_open(server: "Server", token=None, sessions: int = 3) -> tuple:
+    """SIGTERM while sessions are open (one of them rendering): (exit code, seconds to exit,
+    the close codes those sessions got). server/README.md: each gets 1001, exit 0 within ~2 s."""
+    import asyncio
+    import sys as _sys
+    _sys.path.insert(0, os.path.join(REPO, "protocol", "python"))
+    import volcast_client as vc
+    from rawws import Closed, ConnectionLost, RawWebSocket
+
+    open_ws = []
+    for i in range(sessions):
+        ws = await RawWebSocket.connect(server.host, server.port)
+        await ws.send_text(vc.dumps(vc.hello(token=token, client="shutdown check", id=1)).encode())
+        await asyncio.wait_for(ws.receive(), 30)
+        if i == 0:   # one session busy rendering when the signal comes
+            await ws.send_text(vc.dumps(vc.open_volume("builtin:demo", id=2)).encode())
+        open_ws.append(ws)
+
+    async def close_code(ws):
+        try:
+            while True:
+                await asyncio.wait_for(ws.receive(), 25)
+        except Closed as e:
+            return str(e.code)
+        except ConnectionLost:
+            return "no close frame"
+        except asyncio.TimeoutError:
+            return "still open"
+
+    await asyncio.sleep(0.3)
+    readers = [asyncio.create_task(close_code(ws)) for ws in open_ws]
+    code, seconds = await asyncio.get_running_loop().run_in_executor(None, server.stop)
+    codes = await asyncio.gather(*readers)
+    for ws in open_ws:
+        ws.abort()
+    return code, seconds, codes
+
+
 def loadavg() -> str:
     try:
         with open("/proc/loadavg") as f:

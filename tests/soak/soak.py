@@ -98,6 +98,7 @@ class HostileSession:
         self.index, self.role, self.host, self.port = index, role, host, port
         self.gen, self.count, self.tally, self.server, self.deadline = gen, count, tally, server, deadline
         self.ws: Optional[RawWebSocket] = None
+        self.token: Optional[str] = None
         self.probe = 0
 
     async def _open(self) -> None:
@@ -106,7 +107,7 @@ class HostileSession:
         self.hello_done = False
         if self.role == "prehello":
             return
-        await self._call(vc.hello(client="soak hostile", id="setup-hello"), "setup-hello")
+        await self._call(vc.hello(token=self.token, client="soak hostile", id="setup-hello"), "setup-hello")
         self.hello_done = True
         if self.role == "volume":
             # A small viewport first: the soak is about answers, not about rendering load.
@@ -225,6 +226,8 @@ class HostileSession:
                         problems.append(f"the server process exited ({self.server.proc.returncode})")
             elif closed in h.expect_close or (closed == 1000 and h.may_close_normally):
                 pass
+            elif closed == 1008 and "unauthorized" in codes:
+                pass
             elif (closed == 1008 and not self.hello_done and
                   time.monotonic() - self.connected_at >= HELLO_DEADLINE_S - 0.5):
                 self.tally.closes["1008 (hello deadline)"] += 1
@@ -273,6 +276,7 @@ async def replay(args) -> int:
     try:
         gen = Generator(random.Random(0))
         s = HostileSession(0, args.role, host, port, gen, 1, Tally(), server, time.monotonic() + 60)
+        s.token = args.token
         await s._open()
         h = Hostile("replay", [frames], frames, needs_answer=True)
         await s._exchange(h, 1)
@@ -297,6 +301,8 @@ def server_args(args) -> List[str]:
     extra = ["--log-level", "warn", "--max-sessions", str(args.sessions + 8)]
     if args.data and os.path.isdir(args.data):
         extra += ["--data", args.data]
+    if args.token:
+        extra += ["--token", args.token]
     return extra
 
 
@@ -315,7 +321,7 @@ async def soak(args) -> int:
         deadline = time.monotonic() + args.time_limit
         good = DragSession("good", host, port, args.volume, random.Random(args.seed), drag_s=(1.0, 1.0),
                            rest_s=(0.3, 0.5), camera_ms=(45.0, 45.0), wait_final=True,
-                           final_timeout_s=30.0, viewport=(512, 512))
+                           final_timeout_s=30.0, viewport=(512, 512), token=args.token)
         good_task = asyncio.create_task(good.run(deadline + 60))
         # The good session's first final frame comes before any hostile traffic: the first
         # renders compile the OpenCL kernels (seconds on PoCL), which is not what is measured.
@@ -330,6 +336,8 @@ async def soak(args) -> int:
                                    Generator(random.Random(args.seed * 1000003 + i), args.categories),
                                    per[i], tally, server,
                                    deadline) for i in range(args.sessions)]
+        for s in sessions:
+            s.token = args.token
 
         async def sample_rss():
             while True:
@@ -363,7 +371,8 @@ async def soak(args) -> int:
         rss_end = server.rss_kib() if server else None
         alive = server.alive() if server else True
         render_summary = serverproc.render_summary(host, port) if alive else "(server gone)"
-        exit_code, exit_s = server.stop() if server else (None, 0.0)
+        exit_code, exit_s, shutdown_closes = (await serverproc.stop_with_sessions_open(server, args.token)
+                                                if server and alive else (server.stop() + ([],) if server else (None, 0.0, [])))
         load = serverproc.loadavg()
     finally:
         log_tail = server.log_tail() if server else ""
@@ -399,7 +408,8 @@ async def soak(args) -> int:
     if server:
         print(f"server RSS               ready {rss_start / 1024:.1f} MiB, after warm-up {rss_warm / 1024:.1f} MiB, "
               f"peak {max(rss + [rss_start]) / 1024:.1f} MiB, end {(rss_end or 0) / 1024:.1f} MiB")
-        print(f"SIGTERM                  exit code {exit_code}, {exit_s * 1000:.0f} ms to exit")
+        print(f"SIGTERM                  exit code {exit_code}, {exit_s * 1000:.0f} ms to exit with "
+              f"{len(shutdown_closes)} sessions open (one rendering); their closes: {', '.join(shutdown_closes)}")
     print(f"wall time                {time.monotonic() - start_wall:.1f} s")
 
     for n, f in enumerate(tally.findings):
@@ -426,6 +436,8 @@ async def soak(args) -> int:
                         f"final frame within 30 s, {good_stats.unshown} cameras never shown")
     if server and exit_code != 0:
         failures.append(f"SIGTERM: the server exited with {exit_code} (None: killed after 20 s)")
+    if any(c != "1001" for c in shutdown_closes):
+        failures.append(f"SIGTERM: open sessions got closes {shutdown_closes}, not 1001 (server/README.md)")
     if failures:
         print("\nFAILED: " + "; ".join(failures))
         return 1
@@ -448,6 +460,7 @@ def main() -> int:
     p.add_argument("--show", type=int, default=10, help="findings printed in full")
     p.add_argument("--save", type=int, default=50, help="findings saved as reproducers")
     p.add_argument("--progress", action="store_true", help="a line every 10 s")
+    p.add_argument("--token", help="start the server with this access token (hostile hellos mostly lack it)")
     p.add_argument("--categories", help="comma-separated: only these kinds of message (hostile.py's names)")
     p.add_argument("--replay", help="send this saved .frames file on a fresh session and report")
     p.add_argument("--role", choices=ROLES, default="hello", help="session state for --replay")
