@@ -112,6 +112,7 @@ def valid_messages(rng: random.Random, msg_id) -> List[dict]:
         {"type": "clip_planes", "id": msg_id, "clip_planes": []},
         {"type": "still", "id": msg_id, "image": {"width": w, "height": h}},
         {"type": "get_state", "id": msg_id},
+        {"type": "close", "id": msg_id},
     ]
 
 
