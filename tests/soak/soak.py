@@ -316,6 +316,7 @@ async def soak(args) -> int:
         host, port = args.host, args.port
     tally = Tally()
     rss = []
+    rss_by_sent = []   # (messages sent so far, RSS KiB), one a second
     try:
         rss_start = server.rss_kib() if server else None
         deadline = time.monotonic() + args.time_limit
@@ -345,6 +346,7 @@ async def soak(args) -> int:
                     value = server.rss_kib()
                     if value:
                         rss.append(value)
+                        rss_by_sent.append((tally.sent, value))
                 await asyncio.sleep(1.0)
 
         sampler = asyncio.create_task(sample_rss())
@@ -410,6 +412,13 @@ async def soak(args) -> int:
               f"peak {max(rss + [rss_start]) / 1024:.1f} MiB, end {(rss_end or 0) / 1024:.1f} MiB")
         print(f"SIGTERM                  exit code {exit_code}, {exit_s * 1000:.0f} ms to exit with "
               f"{len(shutdown_closes)} sessions open (one rendering); their closes: {', '.join(shutdown_closes)}")
+    if rss_by_sent:
+        marks = []
+        for q in (0, 25, 50, 75, 100):
+            target = tally.sent * q / 100
+            sent, value = min(rss_by_sent, key=lambda sv: abs(sv[0] - target))
+            marks.append(f"{sent} msgs {value / 1024:.1f}")
+        print("server RSS over the run   " + ", ".join(marks) + " (MiB)")
     print(f"wall time                {time.monotonic() - start_wall:.1f} s")
 
     for n, f in enumerate(tally.findings):
