@@ -63,6 +63,37 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     app.add_option("--max-message-bytes", c.maxMessageBytes, "Largest text message accepted, bytes")
         ->envname("VOLCAST_MAX_MESSAGE_BYTES")
         ->check(CLI::Range(1024, 16 << 20));
+    // WebSocket sessions and admission control.
+    double requestMiB = double(c.maxRequestBytes >> 20);
+    app.add_option("--max-pending-sessions", c.maxPendingSessions,
+                   "WebSocket connections that have not completed hello yet")
+        ->envname("VOLCAST_MAX_PENDING_SESSIONS")
+        ->check(CLI::Range(1, 100000));
+    app.add_option("--hello-timeout-ms", c.helloTimeoutMs, "ms a new connection has to complete hello")
+        ->envname("VOLCAST_HELLO_TIMEOUT_MS")
+        ->check(CLI::Range(1.0, 3600e3));
+    app.add_option("--max-samples-per-frame", c.maxSamplesPerFrame,
+                   "Predicted samples (rays x samples per ray) one frame may take")
+        ->envname("VOLCAST_MAX_SAMPLES_PER_FRAME")
+        ->check(CLI::Range(int64_t(1000), int64_t(1) << 50));
+    app.add_option("--max-still-pixels", c.maxStillPixels, "Pixels (width x height) of a still")
+        ->envname("VOLCAST_MAX_STILL_PIXELS")
+        ->check(CLI::Range(int64_t(1), int64_t(1) << 40));
+    app.add_option("--max-request-mib", requestMiB,
+                   "Image memory one view may allocate, MiB (width x height x 16 bytes x passes)")
+        ->envname("VOLCAST_MAX_REQUEST_MIB")
+        ->check(CLI::Range(1.0, 1e7));
+    app.add_option("--max-unsent-bytes", c.maxUnsentBytes,
+                   "Bytes waiting to be written to one session (replies and its frame) before it is closed")
+        ->envname("VOLCAST_MAX_UNSENT_BYTES")
+        ->check(CLI::Range(size_t(64) << 10, size_t(1) << 40));
+    app.add_option("--write-timeout-ms", c.writeTimeoutMs, "ms a write to a session may take before it is closed")
+        ->envname("VOLCAST_WRITE_TIMEOUT_MS")
+        ->check(CLI::Range(1.0, 3600e3));
+    app.add_option("--send-buffer-bytes", c.sendBufferBytes, "Kernel send buffer (SO_SNDBUF) of a session's socket")
+        ->envname("VOLCAST_SEND_BUFFER_BYTES")
+        ->check(CLI::Range(4096, 64 << 20));
+
     app.add_option("--port-file", portFile, "Write the bound port to this file once listening (for scripts)");
     app.add_option("--log-level", c.logLevel, "trace, debug, info, warn, error")->envname("VOLCAST_LOG_LEVEL");
     try {
@@ -76,6 +107,7 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     c.webRoot = webRoot;
     c.portFile = portFile;
     c.memoryBudgetBytes = uint64_t(budgetMiB * 1024.0 * 1024.0);
+    c.maxRequestBytes = uint64_t(requestMiB * 1024.0 * 1024.0);
     return c;
 }
 

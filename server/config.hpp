@@ -29,6 +29,17 @@ struct ServerConfig {
     int jitterPasses = 4;                     // passes accumulated by a jittered final level
     bool errorCalibration = true;             // calibrate error estimates against the reference
     size_t maxMessageBytes = 64 * 1024;       // one text message
+
+    // WebSocket sessions and admission control (server/README.md; docs/hardening.md).
+    int maxPendingSessions = 64;              // connections not past hello yet; more get busy (1013)
+    double helloTimeoutMs = 10000;            // a connection without a good hello by then: close 1008
+    int64_t maxSamplesPerFrame = int64_t(1) << 30;   // predicted samples of one frame (one pass)
+    int64_t maxStillPixels = int64_t(4096) * 4096;   // width x height of a still
+    uint64_t maxRequestBytes = uint64_t(1) << 30;    // image buffers one view may allocate
+    size_t maxUnsentBytes = size_t(80) << 20; // replies + the frame not yet written, per session
+    double writeTimeoutMs = 10000;            // a write not done by then closes the session
+    int sendBufferBytes = 256 * 1024;         // SO_SNDBUF of a session's socket
+
     std::filesystem::path portFile;           // write the bound port here once listening
     std::string logLevel = "info";
 };

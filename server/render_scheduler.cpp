@@ -164,7 +164,18 @@ void RenderScheduler::workerLoop() {
             lastServed_ = work.slot;
             slots_[work.slot].inFlight = true;
             lock.unlock();
-            render(work);
+            // The worker thread's one boundary: nothing thrown here may end the thread (every
+            // session would wait for frames forever) or the process.
+            try {
+                render(work);
+            } catch (const std::exception &e) {
+                spdlog::error("render worker: {}", e.what());
+                try {
+                    renderFailed(work, std::string("internal error: ") + e.what());
+                } catch (const std::exception &again) {
+                    spdlog::error("render worker: telling the session failed too: {}", again.what());
+                }
+            }
             lock.lock();
             continue;
         }
@@ -173,7 +184,11 @@ void RenderScheduler::workerLoop() {
             auto job = std::move(toCalibrate_);
             toCalibrate_.reset();
             lock.unlock();
-            calibrate(*job, calibrationKey(*job));
+            try {
+                calibrate(*job, calibrationKey(*job));
+            } catch (const std::exception &e) {
+                spdlog::error("render worker: calibration: {}", e.what());
+            }
             lock.lock();
             continue;
         }
@@ -229,16 +244,7 @@ void RenderScheduler::render(const Work &work) {
         }
     } catch (const std::exception &e) {
         spdlog::error("render failed: {}", e.what());
-        Failed failed;
-        {
-            std::lock_guard lock(mutex_);
-            auto it = slots_.find(work.slot);
-            if (it == slots_.end()) return;
-            it->second.inFlight = false;
-            it->second.finalSent = true;   // do not retry the same view in a loop
-            failed = it->second.failed;
-        }
-        failed(e.what());
+        renderFailed(work, e.what());
         return;
     }
     const double renderMs = Ms(Clock::now() - t0).count();
@@ -252,16 +258,7 @@ void RenderScheduler::render(const Work &work) {
             // Like a render failure: tell the client once and stop, rather than re-render the
             // view forever with nothing to show for it.
             spdlog::error("encoding failed: {}", e.what());
-            Failed failed;
-            {
-                std::lock_guard lock(mutex_);
-                auto it = slots_.find(work.slot);
-                if (it == slots_.end()) return;
-                it->second.inFlight = false;
-                it->second.finalSent = true;
-                failed = it->second.failed;
-            }
-            failed(std::string("encoding the frame failed: ") + e.what());
+            renderFailed(work, std::string("encoding the frame failed: ") + e.what());
             return;
         }
         const double encodeMs = Ms(Clock::now() - t1).count();
@@ -309,6 +306,20 @@ void RenderScheduler::render(const Work &work) {
         deliver = s.deliver;
     }
     deliver(std::move(frame));
+}
+
+void RenderScheduler::renderFailed(const Work &work, const std::string &message) {
+    Failed failed;
+    {
+        std::lock_guard lock(mutex_);
+        auto it = slots_.find(work.slot);
+        if (it == slots_.end()) return;
+        it->second.inFlight = false;
+        it->second.finalSent = true;   // do not retry the same view in a loop
+        failed = it->second.failed;
+    }
+    wake_.notify_all();
+    failed(message, work.job->request);
 }
 
 std::string RenderScheduler::calibrationKey(const ViewJob &job) const {

@@ -63,7 +63,8 @@ class RenderScheduler {
   public:
     using SlotId = uint64_t;
     using Deliver = std::function<void(RenderedFrame)>;                 // must only post
-    using Failed = std::function<void(const std::string &message)>;    // render_failed; must only post
+    // render_failed for the request whose frame failed; must only post.
+    using Failed = std::function<void(const std::string &message, const nlohmann::json &request)>;
 
     RenderScheduler(Metrics &metrics, SchedulerOptions options);
     ~RenderScheduler();   // stop()
@@ -108,6 +109,8 @@ class RenderScheduler {
     // What slot s should render now; false with wakeAt set when it waits for its idle time.
     bool nextWork(SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
     void render(const Work &work);
+    // The view of `work` cannot be rendered: tell the session once and stop trying it.
+    void renderFailed(const Work &work, const std::string &message);
     bool stale(const Work &work);
     std::string calibrationKey(const ViewJob &job) const;
     void calibrate(const ViewJob &job, const std::string &key);

@@ -31,19 +31,32 @@ protocol::ServerLimits SharedState::limits() const {
     l.maxMessageBytes = config_.maxMessageBytes;
     l.maxImageSide = kMaxImageSide;
     l.maxImagePixels = kMaxImagePixels;
+    l.maxSamplesPerFrame = config_.maxSamplesPerFrame;
+    l.maxStillPixels = config_.maxStillPixels;
+    l.maxRequestBytes = int64_t(config_.maxRequestBytes);
     return l;
 }
 
-bool SharedState::join(WebsocketSession *session, std::weak_ptr<WebsocketSession> weak) {
+bool SharedState::enterPending(WebsocketSession *session, std::weak_ptr<WebsocketSession> weak) {
     std::lock_guard lock(mutex_);
-    if (stopping_ || int(sessions_.size()) >= config_.maxSessions) return false;
-    sessions_[session] = std::move(weak);
+    if (stopping_ || int(pending_.size()) >= config_.maxPendingSessions) return false;
+    pending_[session] = std::move(weak);
+    return true;
+}
+
+bool SharedState::join(WebsocketSession *session) {
+    std::lock_guard lock(mutex_);
+    const auto it = pending_.find(session);
+    if (stopping_ || it == pending_.end() || int(sessions_.size()) >= config_.maxSessions) return false;
+    sessions_[session] = std::move(it->second);
+    pending_.erase(it);
     metrics_.sessionOpened();
     return true;
 }
 
 void SharedState::leave(WebsocketSession *session) {
     std::lock_guard lock(mutex_);
+    pending_.erase(session);
     if (sessions_.erase(session)) metrics_.sessionClosed();
 }
 
@@ -52,8 +65,9 @@ void SharedState::closeAll(const std::string &reason) {
     {
         std::lock_guard lock(mutex_);
         stopping_ = true;
-        for (auto &[p, weak] : sessions_)
-            if (auto s = weak.lock()) open.push_back(std::move(s));
+        for (const auto *group : {&pending_, &sessions_})
+            for (auto &[p, weak] : *group)
+                if (auto s = weak.lock()) open.push_back(std::move(s));
     }
     for (auto &s : open) s->shutdown(reason);
 }

@@ -1,7 +1,12 @@
 #pragma once
 // What every session shares (Beast chat-multi's shared_state): the configuration, the
-// OpenCL device, the volume registry, the render scheduler, the metrics, and the set of
-// open WebSocket sessions (to refuse past max_sessions and to close them all at shutdown).
+// OpenCL device, the volume registry, the render scheduler, the metrics, and the open
+// WebSocket sessions (to refuse past their limits and to close them all at shutdown).
+//
+// A connection is *pending* from the WebSocket handshake until its hello succeeds (with the
+// token, when one is set), and only then *joined*: max_sessions counts joined sessions only,
+// so connections that never say hello cannot keep clients with the token out; pending ones
+// have their own bound (max_pending_sessions) and a hello deadline.
 
 #include "protocol/server_messages.hpp"
 #include "renderer/opencl_context.hpp"
@@ -35,8 +40,13 @@ class SharedState {
     uint16_t port() const { return port_; }
     void setPort(uint16_t p) { port_ = p; }
 
-    // False when the session would be one over max_sessions, or the server is stopping.
-    bool join(WebsocketSession *session, std::weak_ptr<WebsocketSession> weak);
+    // A new connection, before hello. False when it would be one over max_pending_sessions,
+    // or the server is stopping.
+    bool enterPending(WebsocketSession *session, std::weak_ptr<WebsocketSession> weak);
+    // Hello succeeded: from pending to joined. False (and still pending) when it would be one
+    // over max_sessions, or the server is stopping.
+    bool join(WebsocketSession *session);
+    // The connection is gone (pending or joined).
     void leave(WebsocketSession *session);
     // Tell every session why it is closing (WebSocket close 1001 with `reason`).
     void closeAll(const std::string &reason);
@@ -60,7 +70,7 @@ class SharedState {
     std::atomic<uint16_t> port_{0};
 
     mutable std::mutex mutex_;
-    std::map<WebsocketSession *, std::weak_ptr<WebsocketSession>> sessions_;
+    std::map<WebsocketSession *, std::weak_ptr<WebsocketSession>> pending_, sessions_;
     std::atomic<bool> stopping_{false};
     std::shared_ptr<VolumeEntry> defaultVolume_;   // held, so never evicted
     std::string defaultVolumeError_;

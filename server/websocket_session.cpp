@@ -4,7 +4,10 @@
 #include "renderer/volume_source.hpp"
 
 #include <boost/asio/post.hpp>
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
+
+#include <chrono>
 
 namespace volcast::server {
 
@@ -28,14 +31,42 @@ void fail(beast::error_code ec, const char *what) {
         return;
     spdlog::debug("websocket {}: {}", what, ec.message());
 }
+
+std::chrono::steady_clock::duration milliseconds(double ms) {
+    return std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double, std::milli>(ms));
+}
+
+std::string mib(double bytes) { return fmt::format("{:.0f} MiB", bytes / double(1 << 20)); }
 } // namespace
 
+template <class F>
+void WebsocketSession::guarded(const char *where, F &&f, const nlohmann::json &id) noexcept {
+    try {
+        f();
+    } catch (const std::exception &e) {
+        internalError(where, e.what(), id);
+    } catch (...) {
+        internalError(where, "an exception of unknown type", id);
+    }
+}
+
+void WebsocketSession::internalError(const char *where, const std::string &what, const nlohmann::json &id) noexcept {
+    try {
+        spdlog::error("session {}: internal error in {}: {}", slot_, where, what);
+        sendError({ErrorCode::Internal, std::string("internal error (") + where + "): " + protocol::quotableText(what, 500),
+                   id, ""});
+    } catch (...) {
+        // Out of memory while answering: the session may hang, the server carries on.
+    }
+}
+
 WebsocketSession::WebsocketSession(net::ip::tcp::socket &&socket, std::shared_ptr<SharedState> state)
-    : ws_(std::move(socket)), state_(std::move(state)) {}
+    : ws_(std::move(socket)), state_(std::move(state)), helloTimer_(ws_.get_executor()),
+      writeTimer_(ws_.get_executor()) {}
 
 WebsocketSession::~WebsocketSession() {
     state_->scheduler().removeSession(slot_);
-    if (joined_) state_->leave(this);
+    state_->leave(this);
     if (frame_) state_->metrics().setQueuedBytes(-int64_t(frame_->bytes.size()));
     if (frameInFlight_) state_->metrics().setQueuedBytes(-int64_t(frameInFlight_->bytes.size()));
 }
@@ -47,39 +78,72 @@ void WebsocketSession::run(http::request<http::string_body> request) {
     ws_.read_message_max(std::max<size_t>(state_->config().maxMessageBytes * 16, 1 << 20));
     ws_.set_option(websocket::stream_base::decorator(
         [](websocket::response_type &res) { res.set(http::field::server, "volcast/0.1.0"); }));
+    // Without this, Linux autotunes the send buffer to megabytes on loopback, and a client that
+    // stops reading is noticed (write timeout, unsent bytes) only after that much rendering.
+    beast::error_code ignored;
+    beast::get_lowest_layer(ws_).socket().set_option(net::socket_base::send_buffer_size(state_->config().sendBufferBytes),
+                                                     ignored);
     ws_.async_accept(request, beast::bind_front_handler(&WebsocketSession::onAccept, shared_from_this()));
 }
 
 void WebsocketSession::onAccept(beast::error_code ec) {
     if (ec) return fail(ec, "accept");
-    joined_ = state_->join(this, weak_from_this());
-    if (!joined_) {
-        state_->metrics().sessionRefused();
-        const bool stopping = state_->stopping();
-        sendError({ErrorCode::Busy,
-                   stopping ? "the server is shutting down"
-                            : "the server is at its limit of " + std::to_string(state_->config().maxSessions) +
-                                  " sessions; try again later",
-                   nullptr, ""});
-        closeWith(stopping ? websocket::close_code::going_away : websocket::close_code::try_again_later,
-                  stopping ? "server shutting down" : "too many sessions");
-        return;
-    }
+    bool refused = false;
+    guarded("accept", [&] {
+        pending_ = state_->enterPending(this, weak_from_this());
+        if (!pending_) {
+            refused = true;
+            state_->metrics().sessionRefused();
+            const bool stopping = state_->stopping();
+            const int limit = state_->config().maxPendingSessions;
+            sendError({ErrorCode::Busy,
+                       stopping ? "the server is shutting down"
+                                : fmt::format("the server has {} connections that have not said hello yet, its limit "
+                                              "(--max-pending-sessions); try again later",
+                                              limit),
+                       nullptr, ""});
+            closeWith(stopping ? websocket::close_code::going_away : websocket::close_code::try_again_later,
+                      stopping ? "server shutting down" : "too many connections before hello");
+            return;
+        }
+        // The slot is taken only at hello, so a connection that never says hello costs no
+        // session; the deadline frees its pending place too.
+        helloTimer_.expires_after(milliseconds(state_->config().helloTimeoutMs));
+        helloTimer_.async_wait([weak = weak_from_this()](beast::error_code e) {
+            if (e) return;
+            if (auto self = weak.lock()) self->guarded("hello deadline", [&] { self->onHelloTimeout(); });
+        });
+    });
+    if (!refused) doRead();
+}
+
+void WebsocketSession::onHelloTimeout() {
+    if (helloDone_ || closing_) return;
+    const double ms = state_->config().helloTimeoutMs;
+    spdlog::info("session: no hello within {:.0f} ms; closing", ms);
+    sendError({ErrorCode::BadState,
+               fmt::format("no hello within {:.0f} ms of connecting (the server's --hello-timeout-ms); closing", ms),
+               nullptr, ""});
+    closeWith(websocket::close_code::policy_error, "no hello in time");
+}
+
+void WebsocketSession::joinScheduler() {
     auto weak = weak_from_this();
     auto executor = ws_.get_executor();
     slot_ = state_->scheduler().addSession(
         [weak, executor](RenderedFrame frame) {
             net::post(executor, [weak, f = std::make_shared<RenderedFrame>(std::move(frame))]() mutable {
-                if (auto self = weak.lock()) self->onFrame(std::move(*f));
+                if (auto self = weak.lock()) self->guarded("frame", [&] { self->onFrame(std::move(*f)); });
             });
         },
-        [weak, executor](const std::string &message) {
-            net::post(executor, [weak, message] {
+        [weak, executor](const std::string &message, const nlohmann::json &request) {
+            net::post(executor, [weak, message, request] {
                 if (auto self = weak.lock())
-                    self->sendError({ErrorCode::RenderFailed, "rendering failed: " + message, self->lastRequest_, ""});
+                    self->guarded("render_failed", [&] {
+                        self->sendError({ErrorCode::RenderFailed, "rendering failed: " + message, request, ""});
+                    });
             });
         });
-    doRead();
 }
 
 void WebsocketSession::doRead() {
@@ -90,16 +154,21 @@ void WebsocketSession::onRead(beast::error_code ec, size_t) {
     if (ec) {
         if (ec == websocket::error::message_too_big)
             spdlog::info("session closed: a message over the WebSocket limit of {} bytes", ws_.read_message_max());
+        // Beast checks text frames as they arrive: invalid UTF-8 fails the read and closes
+        // with 1007 (protocol/README.md).
+        if (ec == websocket::error::bad_frame_payload) spdlog::info("session closed: a text message that is not UTF-8");
         return fail(ec, "read");
     }
-    if (closing_) {
-        // Requests after the close was sent are not answered.
-    } else if (!ws_.got_text()) {
-        sendError(protocol::binaryMessageError(buffer_.size()));
-    } else {
-        const auto data = buffer_.cdata();
-        handle(std::string_view(static_cast<const char *>(data.data()), data.size()));
-    }
+    guarded("read", [&] {
+        if (closing_) {
+            // Requests after the close was sent are not answered.
+        } else if (!ws_.got_text()) {
+            sendError(protocol::binaryMessageError(buffer_.size()));
+        } else {
+            const auto data = buffer_.cdata();
+            handle(std::string_view(static_cast<const char *>(data.data()), data.size()));
+        }
+    });
     buffer_.consume(buffer_.size());
     // Keep reading while closing too: the peer's close frame arrives through a read.
     doRead();
@@ -147,7 +216,11 @@ void WebsocketSession::handle(std::string_view text) {
                     state_->scheduler().setInteracting(slot_, false);
                 },
                 [&](const protocol::ViewportRequest &m) {
-                    scene_.setViewport(m.image);
+                    SessionScene candidate = scene_;
+                    candidate.setViewport(m.image);
+                    const Scene s = candidate.scene();
+                    admit(candidate, s.width, s.height, false);
+                    scene_ = std::move(candidate);
                     if (volume_) submitView(id);
                 },
                 [&](const protocol::TransferFunctionRequest &m) {
@@ -156,7 +229,11 @@ void WebsocketSession::handle(std::string_view text) {
                     submitView(id);
                 },
                 [&](const protocol::QualityPolicyRequest &m) {
-                    scene_.setPolicy(m.policy);
+                    SessionScene candidate = scene_;
+                    candidate.setPolicy(m.policy);
+                    const Scene s = candidate.scene();
+                    admit(candidate, s.width, s.height, false);
+                    scene_ = std::move(candidate);
                     if (volume_) submitView(id);
                 },
                 [&](const protocol::ClipPlanesRequest &m) {
@@ -177,6 +254,8 @@ void WebsocketSession::handle(std::string_view text) {
             message);
     } catch (const SceneError &e) {
         error(ErrorCode::BadField, e.what());
+    } catch (const AdmissionError &e) {
+        error(ErrorCode::TooLarge, e.what());
     } catch (const std::exception &e) {
         // Caught once here, at the session boundary: the session and the server carry on.
         spdlog::error("internal error answering {}: {}", type, e.what());
@@ -192,8 +271,23 @@ void WebsocketSession::onHello(const protocol::HelloRequest &m) {
         closeWith(websocket::close_code::policy_error, "unauthorized");
         return;
     }
+    if (!state_->join(this)) {
+        state_->metrics().sessionRefused();
+        const bool stopping = state_->stopping();
+        sendError({ErrorCode::Busy,
+                   stopping ? "the server is shutting down"
+                            : fmt::format("the server is at its limit of {} sessions (--max-sessions); try again later",
+                                          state_->config().maxSessions),
+                   m.id, "hello"});
+        closeWith(stopping ? websocket::close_code::going_away : websocket::close_code::try_again_later,
+                  stopping ? "server shutting down" : "too many sessions");
+        return;
+    }
+    pending_ = false;
+    helloTimer_.cancel();
+    joinScheduler();
     helloDone_ = true;
-    spdlog::info("session {}: hello from \"{}\"", slot_, m.client);
+    spdlog::info("session {}: hello from \"{}\"", slot_, protocol::quotableText(m.client, 64));
     protocol::ServerHello h;
     h.id = m.id;
     h.server = "volcast 0.1.0";
@@ -216,12 +310,12 @@ void WebsocketSession::onOpenVolume(const protocol::OpenVolumeRequest &m) {
             protocol::ProgressMessage withId = p;
             withId.id = id;
             net::post(executor, [weak, withId] {
-                if (auto self = weak.lock()) self->sendMessage(withId);
+                if (auto self = weak.lock()) self->guarded("progress", [&] { self->sendMessage(withId); }, withId.id);
             });
         },
         [weak, executor, id](VolumeRegistry::Result result) {
             net::post(executor, [weak, id, result = std::move(result)]() mutable {
-                if (auto self = weak.lock()) self->onOpened(id, std::move(result));
+                if (auto self = weak.lock()) self->guarded("open_volume", [&] { self->onOpened(id, std::move(result)); }, id);
             });
         });
 }
@@ -236,11 +330,55 @@ void WebsocketSession::onOpened(nlohmann::json id, VolumeRegistry::Result result
     volume_ = std::get<std::shared_ptr<VolumeEntry>>(result);
     scene_.openVolume(*volume_);
     sendMessage(stateMessage(id));
-    submitView(id);
+    try {
+        submitView(id);
+    } catch (const AdmissionError &e) {
+        // The viewport and policy were set before a volume could be judged: the volume is
+        // open, its view is not rendered until a smaller viewport or cheaper policy comes.
+        sendError({ErrorCode::TooLarge, e.what(), id, "open_volume"});
+    }
+}
+
+void WebsocketSession::admit(const SessionScene &candidate, int width, int height, bool still) const {
+    const ServerConfig &config = state_->config();
+    const Scene scene = candidate.scene();
+    const int passes = config.jitterPasses;
+    const std::vector<Level> ladder = candidate.policy().mode == protocol::QualityMode::Explicit
+                                          ? explicitLadder(scene.quality, passes)
+                                          : automaticLadder(scene.quality, passes);
+    const int64_t pixels = int64_t(width) * height;
+    if (still && pixels > config.maxStillPixels)
+        throw AdmissionError(fmt::format("a still of {}x{} is {} pixels, over the server's limit of {} "
+                                         "(--max-still-pixels)",
+                                         width, height, pixels, config.maxStillPixels));
+    // A still renders only the final level; a view may render any of them.
+    const size_t first = still ? ladder.size() - 1 : 0;
+    for (size_t i = first; i < ladder.size(); ++i) {
+        const Level &level = ladder[i];
+        const double scale = level.quality.imageScale;
+        // The float RGBA image of each jittered pass (a conservative bound of what one view holds).
+        const double bytes = double(width) * height * scale * scale * 16.0 * level.passes;
+        if (bytes > double(config.maxRequestBytes))
+            throw AdmissionError(fmt::format("a frame of {}x{} at image scale {} with {} pass(es) needs {} of image "
+                                             "buffers (width x height x 16 bytes x passes), over the server's limit "
+                                             "of {} (--max-request-mib)",
+                                             width, height, scale, level.passes, mib(bytes),
+                                             mib(double(config.maxRequestBytes))));
+        if (!volume_) continue;
+        const double samples = predictedSamples(*volume_->volume, level.quality, width, height);
+        if (samples > double(config.maxSamplesPerFrame)) {
+            const double rays = double(width) * height * scale * scale;
+            throw AdmissionError(fmt::format("a frame of this view at step {} is predicted to take {:.3g} samples "
+                                             "({:.3g} rays x {:.3g} samples per ray), over the server's limit of "
+                                             "{:.3g} (--max-samples-per-frame); use a larger step, a coarser "
+                                             "mip level or a smaller image",
+                                             level.quality.step, samples, rays, samples / rays,
+                                             double(config.maxSamplesPerFrame)));
+        }
+    }
 }
 
 void WebsocketSession::submitView(const nlohmann::json &requestId, const nlohmann::json &stillImage) {
-    lastRequest_ = requestId;
     const Scene scene = scene_.scene();
     auto job = std::make_shared<ViewJob>();
     job->volume = volume_;
@@ -256,6 +394,8 @@ void WebsocketSession::submitView(const nlohmann::json &requestId, const nlohman
             job->height = stillImage.at("height").get<int>();
         }
     }
+    // Checked before anything is handed to the renderer; the view in the scheduler stays.
+    admit(scene_, job->width, job->height, job->stillOnly);
     job->clipPlanes = scene.clipPlanes;
     const auto &policy = scene_.policy();
     const int passes = state_->config().jitterPasses;
@@ -286,11 +426,12 @@ void WebsocketSession::sendError(ProtocolError error) {
 
 void WebsocketSession::sendText(std::string text) {
     if (closing_) return;   // the session is going: nothing more is sent
-    if (texts_.size() >= kMaxQueuedTexts) {
-        spdlog::warn("session {}: closing, {} replies unread", slot_, texts_.size());
-        closeWith(websocket::close_code::policy_error, "too many unread replies: read the messages you are sent");
-        return;
-    }
+    const size_t limit = state_->config().maxUnsentBytes;
+    if (texts_.size() >= kMaxQueuedTexts || unsentBytes_ + text.size() > limit)
+        return dropConnection(fmt::format("{} replies ({} bytes) unsent, over the limit of {} replies or {} bytes "
+                                 "(--max-unsent-bytes)",
+                                 texts_.size(), unsentBytes_, kMaxQueuedTexts, limit));
+    unsentBytes_ += text.size();
     texts_.push_back(std::move(text));
     doWrite();
 }
@@ -307,9 +448,14 @@ void WebsocketSession::onFrame(RenderedFrame frame) {
     p.final = frame.header.final;
     p.renderMs = frame.header.renderMs;
     p.encodeMs = frame.header.encodeMs;
+    const size_t limit = state_->config().maxUnsentBytes;
+    if (unsentBytes_ + p.bytes.size() > limit)
+        return dropConnection(fmt::format("a frame of {} bytes on top of {} unsent bytes is over the limit of {} "
+                                 "(--max-unsent-bytes)",
+                                 p.bytes.size(), unsentBytes_, limit));
+    unsentBytes_ += p.bytes.size();
     state_->metrics().setQueuedBytes(int64_t(p.bytes.size()));
-    if (frame_) state_->metrics().setQueuedBytes(-int64_t(frame_->bytes.size()));   // cannot happen: one in flight
-    frame_ = std::move(p);
+    frame_ = std::move(p);   // never one there already: the scheduler waits for frameDone
     doWrite();
 }
 
@@ -320,6 +466,7 @@ void WebsocketSession::doWrite() {
         textInFlight_ = std::move(texts_.front());
         texts_.pop_front();
         ws_.text(true);
+        armWriteTimer();
         ws_.async_write(net::buffer(textInFlight_),
                         beast::bind_front_handler(&WebsocketSession::onWrite, shared_from_this()));
     } else if (frame_) {
@@ -327,25 +474,73 @@ void WebsocketSession::doWrite() {
         frameInFlight_ = std::move(frame_);
         frame_.reset();
         ws_.binary(true);
+        armWriteTimer();
         ws_.async_write(net::buffer(frameInFlight_->bytes),
                         beast::bind_front_handler(&WebsocketSession::onWrite, shared_from_this()));
     } else if (closing_) {
         closeStarted_ = true;
-        ws_.async_close(closeReason_, [self = shared_from_this()](beast::error_code ec) { fail(ec, "close"); });
+        writing_ = true;   // the close handshake is guarded by the write timer too
+        armWriteTimer();
+        ws_.async_close(closeReason_, [self = shared_from_this()](beast::error_code ec) {
+            ++self->writeSerial_;
+            self->writeTimer_.cancel();
+            self->writing_ = false;
+            fail(ec, "close");
+        });
     }
 }
 
 void WebsocketSession::onWrite(beast::error_code ec, size_t) {
-    writing_ = false;
-    if (frameInFlight_) {
-        const PendingFrame &f = *frameInFlight_;
-        state_->metrics().setQueuedBytes(-int64_t(f.bytes.size()));
-        if (!ec) state_->metrics().frameSent(f.level, f.final, f.renderMs / 1e3, f.encodeMs / 1e3, f.bytes.size());
-        frameInFlight_.reset();
-        state_->scheduler().frameDone(slot_);
+    guarded("write", [&] {
+        writing_ = false;
+        ++writeSerial_;   // the timer now guards nothing
+        writeTimer_.cancel();
+        if (frameInFlight_) {
+            const PendingFrame &f = *frameInFlight_;
+            unsentBytes_ -= f.bytes.size();
+            state_->metrics().setQueuedBytes(-int64_t(f.bytes.size()));
+            if (!ec) state_->metrics().frameSent(f.level, f.final, f.renderMs / 1e3, f.encodeMs / 1e3, f.bytes.size());
+            frameInFlight_.reset();
+            state_->scheduler().frameDone(slot_);
+        } else {
+            unsentBytes_ -= textInFlight_.size();
+            textInFlight_.clear();
+        }
+        if (ec) return fail(ec, "write");
+        doWrite();
+    });
+}
+
+void WebsocketSession::armWriteTimer() {
+    const uint64_t serial = ++writeSerial_;
+    writeTimer_.expires_after(milliseconds(state_->config().writeTimeoutMs));
+    writeTimer_.async_wait([weak = weak_from_this(), serial](beast::error_code ec) {
+        if (ec) return;
+        if (auto self = weak.lock()) self->guarded("write deadline", [&] { self->onWriteTimeout(serial); });
+    });
+}
+
+void WebsocketSession::onWriteTimeout(uint64_t serial) {
+    if (serial != writeSerial_ || !writing_) return;   // that write has completed meanwhile
+    dropConnection(fmt::format("a write has not completed in {:.0f} ms (--write-timeout-ms)", state_->config().writeTimeoutMs));
+}
+
+void WebsocketSession::dropConnection(const std::string &why) {
+    if (!beast::get_lowest_layer(ws_).socket().is_open()) return;   // dropped already
+    spdlog::warn("session {}: closing the connection: the client does not read ({})", slot_, why);
+    // The peer is not reading, so a close frame would wait behind what is unsent: the
+    // socket is closed outright, which fails the pending read and write and ends the session.
+    closing_ = true;
+    closeStarted_ = true;
+    state_->scheduler().removeSession(slot_);
+    if (frame_) {
+        unsentBytes_ -= frame_->bytes.size();
+        state_->metrics().setQueuedBytes(-int64_t(frame_->bytes.size()));
+        frame_.reset();
     }
-    if (ec) return fail(ec, "write");
-    doWrite();
+    for (const std::string &t : texts_) unsentBytes_ -= t.size();
+    texts_.clear();
+    beast::get_lowest_layer(ws_).close();
 }
 
 void WebsocketSession::closeWith(websocket::close_code code, std::string reason) {
@@ -357,6 +552,7 @@ void WebsocketSession::closeWith(websocket::close_code code, std::string reason)
     // Text replies already queued go first (the error that explains the close, say); a frame
     // not yet written is dropped. doWrite closes once the queue is empty.
     if (frame_) {
+        unsentBytes_ -= frame_->bytes.size();
         state_->metrics().setQueuedBytes(-int64_t(frame_->bytes.size()));
         frame_.reset();
     }
@@ -365,7 +561,7 @@ void WebsocketSession::closeWith(websocket::close_code code, std::string reason)
 
 void WebsocketSession::shutdown(std::string reason) {
     net::post(ws_.get_executor(), [self = shared_from_this(), reason = std::move(reason)] {
-        self->closeWith(websocket::close_code::going_away, reason);
+        self->guarded("shutdown", [&] { self->closeWith(websocket::close_code::going_away, reason); });
     });
 }
 
