@@ -34,6 +34,7 @@ class Hostile:
     expect_close: Tuple[int, ...] = ()
     may_close_normally: bool = False    # a valid `close` request: the server closes with 1000
     needs_answer: bool = True           # False where the message may be a valid request answered by frames only
+    may_drop: bool = False              # the connection may end without a close frame (see over_ws_limit)
     note: str = ""
 
 
@@ -372,7 +373,10 @@ class Generator:
 
     def over_ws_limit(self) -> Hostile:
         payload = b'{"type": "hello", "client": "' + b"z" * (WS_LIMIT_BYTES + 10) + b'"}'
-        return _text("over_ws_limit", payload, expect_close=(1009,), note=f"{len(payload)} bytes")
+        # protocol/README.md: over the WebSocket limit the connection closes. The server sends
+        # 1009 and closes while most of the message is still unread in its socket, so its TCP
+        # answers the rest of our write with a reset, which can beat the close frame to us.
+        return _text("over_ws_limit", payload, expect_close=(1009,), may_drop=True, note=f"{len(payload)} bytes")
 
     def not_a_message(self) -> Hostile:
         payload = self.rng.choice([b"[]", b"[1,2]", b"42", b'"hello"', b"null", b"true", b"{}",
