@@ -9,6 +9,7 @@
 #include "server/server.hpp"
 #include "tests/server/server_fixture.hpp"
 
+#include <boost/beast/_experimental/test/stream.hpp>
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -350,6 +351,30 @@ TEST(HttpHardeningParts, AllowedHostsDefaultToLoopbackNamesOnlyOnALoopbackBind) 
     config.metricsBind = "127.0.0.1:9090";
     EXPECT_FALSE(httpEndpointFor(config, "127.0.0.1", false).serveMetrics);
     EXPECT_TRUE(httpEndpointFor(config, "127.0.0.1", true).serveMetrics);
+}
+
+// What the fuzz target relies on: the session over beast::test::stream, without a socket.
+TEST(HttpHardeningParts, SessionRunsOverABeastTestStream) {
+    volcast::server::ServerConfig config;
+    config.defaultVolume = "";
+    auto state = std::make_shared<volcast::server::SharedState>(config);
+    auto endpoint =
+        std::make_shared<volcast::server::HttpEndpoint>(volcast::server::httpEndpointFor(config, "127.0.0.1", false));
+    boost::asio::io_context ioc;
+    boost::beast::test::stream client(ioc), serverSide(ioc);
+    client.connect(serverSide);
+    std::make_shared<volcast::server::BasicHttpSession<boost::beast::test::stream>>(std::move(serverSide), state,
+                                                                                    endpoint)
+        ->run();
+    // Two pipelined requests: a health check, then an upgrade that passes every check; only
+    // a socket can become a WebSocket session, so this one is answered 501.
+    const std::string requests = get("/healthz", "localhost") + upgradeRequest("/ws", "");
+    boost::asio::write(client, boost::asio::buffer(requests));
+    ioc.run_for(2s);
+    const std::string answer(client.str());
+    EXPECT_EQ(answer.rfind("HTTP/1.1 200 OK\r\n", 0), 0u) << answer;
+    EXPECT_NE(answer.find("HTTP/1.1 501 Not Implemented\r\n"), std::string::npos) << answer;
+    EXPECT_NE(answer.find("no WebSocket over this stream"), std::string::npos) << answer;
 }
 
 // ---- the executable out of file descriptors ---------------------------------------------
