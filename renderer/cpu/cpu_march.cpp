@@ -1,0 +1,382 @@
+// The CPU ray march: packets of rays from a small screen block, one ray per SIMD lane, each
+// lane with its own segment state and a mask of lanes still marching. The arithmetic follows
+// kernels/raycast.cl step by step (same ray setup in float, same segment boundaries, jitter
+// hash, opacity polynomial, Kahan sums and transmittance refresh every 16 samples), so the
+// two back ends draw the same image up to float rounding.
+//
+// Highway compiles this file once per instruction set (foreach_target.h re-includes it) and
+// marchTile() calls the best one the machine supports.
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "renderer/cpu/cpu_march.cpp"
+#include <hwy/foreach_target.h> // IWYU pragma: keep
+
+#include <hwy/contrib/math/math-inl.h>
+#include <hwy/highway.h>
+
+#include "renderer/cpu/cpu_march.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+HWY_BEFORE_NAMESPACE();
+namespace volcast::cpu::HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+using DF = hn::ScalableTag<float>;
+using DI = hn::RebindToSigned<DF>;
+using VF = hn::Vec<DF>;
+using VI = hn::Vec<DI>;
+using MF = hn::Mask<DF>;
+
+constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+// PCG hash: the kernel's random01, so jittered images match.
+inline float random01(uint32_t x, uint32_t y, uint32_t seed, uint32_t pass) {
+    uint32_t s = x * 1973u + y * 9277u + seed * 26699u + pass * 104729u;
+    s = s * 747796405u + 2891336453u;
+    uint32_t w = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
+    w = (w >> 22u) ^ w;
+    return float(w >> 8) * (1.0f / 16777216.0f);
+}
+
+// One ray's parameters, in the kernel's float arithmetic: entry and exit t at the level-0 box
+// and the clip planes, the level coordinates q(t) = q0 + t·dq, the world direction.
+struct Ray {
+    float t0 = 0, t1 = 0, q0[3] = {0, 0, 0}, dq[3] = {0, 0, 0}, dir[3] = {0, 0, 0};
+};
+
+inline float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+bool setUpRay(const FrameParams &P, int x, int y, Ray &r) {
+    const float u = 2.0f * (float(x) + 0.5f) / float(P.width) - 1.0f;
+    const float v = 1.0f - 2.0f * (float(y) + 0.5f) / float(P.height);
+    float origin[3], dir[3];
+    for (int a = 0; a < 3; ++a) {
+        const float offset = u * P.right[a] + v * P.up[a];
+        origin[a] = P.eye[a] + (P.orthographic ? offset : 0.0f);
+        dir[a] = P.orthographic ? P.forward[a] : P.forward[a] + offset;
+    }
+    if (!P.orthographic) {
+        const float len = std::sqrt(dot3(dir, dir));
+        for (float &c : dir) c /= len;
+    }
+    float p0[3], dq[3];
+    for (int a = 0; a < 3; ++a) {
+        p0[a] = dot3(P.indexFromWorld[a], origin) + P.indexFromWorld[a][3];
+        dq[a] = dot3(P.indexFromWorld[a], dir);
+    }
+    float t0 = 0.0f, t1 = kInf;
+    for (int a = 0; a < 3; ++a) {
+        const float lo = -0.5f, hi = float(P.dims[a]) - 0.5f;
+        if (dq[a] == 0.0f) {
+            if (p0[a] < lo || p0[a] > hi) t1 = -kInf;
+            continue;
+        }
+        const float ta = (lo - p0[a]) / dq[a], tb = (hi - p0[a]) / dq[a];
+        t0 = std::fmax(t0, std::fmin(ta, tb));
+        t1 = std::fmin(t1, std::fmax(ta, tb));
+    }
+    if (P.features.clipPlanes)
+        for (int c = 0; c < P.clipPlaneCount; ++c) {
+            const float *plane = P.clipPlanes[c];
+            const float g0 = dot3(plane, origin) + plane[3], gd = dot3(plane, dir);
+            if (gd == 0.0f) {
+                if (g0 < 0.0f) t1 = -kInf;
+            } else if (gd > 0.0f) {
+                t0 = std::fmax(t0, -g0 / gd);
+            } else {
+                t1 = std::fmin(t1, -g0 / gd);
+            }
+        }
+    if (!(t1 > t0)) return false;
+    r.t0 = t0;
+    r.t1 = t1;
+    for (int a = 0; a < 3; ++a) {
+        r.q0[a] = (p0[a] + 0.5f) * P.levelScale - 0.5f;
+        r.dq[a] = dq[a] * P.levelScale;
+        r.dir[a] = dir[a];
+    }
+    return true;
+}
+
+inline VF lerp(VF a, VF b, VF t) { return hn::MulAdd(hn::Sub(b, a), t, a); }
+
+// Trilinear at level coordinates q, clamped to the outermost samples; the padding after the
+// last sample makes the upper taps of a clamped position safe without a second clamp.
+VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df);
+    x = hn::Min(hn::Max(x, zero), hn::Set(df, float(P.levelDims[0] - 1)));
+    y = hn::Min(hn::Max(y, zero), hn::Set(df, float(P.levelDims[1] - 1)));
+    z = hn::Min(hn::Max(z, zero), hn::Set(df, float(P.levelDims[2] - 1)));
+    const VI ix = hn::ConvertTo(di, x), iy = hn::ConvertTo(di, y), iz = hn::ConvertTo(di, z);
+    const VF fx = hn::Sub(x, hn::ConvertTo(df, ix)), fy = hn::Sub(y, hn::ConvertTo(df, iy)),
+             fz = hn::Sub(z, hn::ConvertTo(df, iz));
+    const VI sy = hn::Set(di, P.rowStride), sz = hn::Set(di, P.sliceStride), one = hn::Set(di, 1);
+    const VI i000 = hn::Add(hn::Add(ix, hn::Mul(iy, sy)), hn::Mul(iz, sz));
+    const VI i010 = hn::Add(i000, sy), i001 = hn::Add(i000, sz), i011 = hn::Add(i001, sy);
+    const float *v = P.voxels;
+    const VF c000 = hn::GatherIndex(df, v, i000), c100 = hn::GatherIndex(df, v, hn::Add(i000, one));
+    const VF c010 = hn::GatherIndex(df, v, i010), c110 = hn::GatherIndex(df, v, hn::Add(i010, one));
+    const VF c001 = hn::GatherIndex(df, v, i001), c101 = hn::GatherIndex(df, v, hn::Add(i001, one));
+    const VF c011 = hn::GatherIndex(df, v, i011), c111 = hn::GatherIndex(df, v, hn::Add(i011, one));
+    const VF c00 = lerp(c000, c100, fx), c10 = lerp(c010, c110, fx);
+    const VF c01 = lerp(c001, c101, fx), c11 = lerp(c011, c111, fx);
+    return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
+}
+
+// Colour and sigma, linear between table entries.
+void classify(const FrameParams &P, VF value, VF rgbs[4]) {
+    const DF df;
+    const DI di;
+    const VF x = hn::Min(hn::Max(hn::Mul(hn::Sub(value, hn::Set(df, P.tfMin)), hn::Set(df, P.tfScale)), hn::Zero(df)),
+                         hn::Set(df, float(P.tfEntries - 1)));
+    const VI i = hn::Min(hn::ConvertTo(di, x), hn::Set(di, P.tfEntries - 2));
+    const VF f = hn::Sub(x, hn::ConvertTo(df, i));
+    const VI i4 = hn::ShiftLeft<2>(i);
+    for (int c = 0; c < 4; ++c)
+        rgbs[c] = lerp(hn::GatherIndex(df, P.tf + c, i4), hn::GatherIndex(df, P.tf + 4 + c, i4), f);
+}
+
+// 1 − exp(−x): the kernel's Taylor polynomial below 1/2, exp above.
+VF opacityFromDepth(VF x) {
+    const DF df;
+    const VF one = hn::Set(df, 1.0f);
+    VF r = hn::Sub(one, hn::Mul(x, hn::Set(df, 1.0f / 8.0f)));
+    for (float n : {7.0f, 6.0f, 5.0f, 4.0f, 3.0f, 2.0f}) r = hn::Sub(one, hn::Mul(hn::Mul(x, hn::Set(df, 1.0f / n)), r));
+    VF result = hn::Mul(x, r);
+    const MF large = hn::Ge(x, hn::Set(df, 0.5f));
+    if (!hn::AllFalse(df, large)) result = hn::IfThenElse(large, hn::Sub(one, hn::Exp(df, hn::Neg(x))), result);
+    return result;
+}
+
+// Kahan sum += x in the lanes of `m`; an infinite sum keeps a zero carry (if `guardInf`).
+inline void addCompensated(MF m, VF &sum, VF &carry, VF x, bool guardInf) {
+    const VF y = hn::Sub(x, carry);
+    const VF t = hn::Add(sum, y);
+    VF c = hn::Sub(hn::Sub(t, sum), y);
+    if (guardInf) c = hn::IfThenZeroElse(hn::IsInf(t), c);
+    carry = hn::IfThenElse(m, c, carry);
+    sum = hn::IfThenElse(m, t, sum);
+}
+
+// Headlight Phong on the central-difference gradient (shading.hpp): diffuse factor, specular.
+void phong(const FrameParams &P, const VF q[3], const VF dir[3], VF &diffuse, VF &specular) {
+    const DF df;
+    const VF one = hn::Set(df, 1.0f);
+    VF g[3];
+    for (int a = 0; a < 3; ++a) {
+        VF plus[3] = {q[0], q[1], q[2]}, minus[3] = {q[0], q[1], q[2]};
+        plus[a] = hn::Add(q[a], one);
+        minus[a] = hn::Sub(q[a], one);
+        g[a] = hn::Sub(sampleTrilinear(P, plus[0], plus[1], plus[2]), sampleTrilinear(P, minus[0], minus[1], minus[2]));
+    }
+    VF w[3]; // world gradient = (index-from-world linear part)ᵀ · index gradient
+    for (int c = 0; c < 3; ++c)
+        w[c] = hn::MulAdd(g[2], hn::Set(df, P.indexFromWorld[2][c]),
+                          hn::MulAdd(g[1], hn::Set(df, P.indexFromWorld[1][c]),
+                                     hn::Mul(g[0], hn::Set(df, P.indexFromWorld[0][c]))));
+    const VF len = hn::Sqrt(hn::MulAdd(w[2], w[2], hn::MulAdd(w[1], w[1], hn::Mul(w[0], w[0]))));
+    const VF gd = hn::MulAdd(w[2], dir[2], hn::MulAdd(w[1], dir[1], hn::Mul(w[0], dir[0])));
+    const VF ndl = hn::Min(hn::Div(hn::Abs(gd), len), one);
+    const VF n2 = hn::Mul(ndl, ndl), n4 = hn::Mul(n2, n2), n16 = hn::Mul(hn::Mul(n4, n4), hn::Mul(n4, n4));
+    static_assert(int(20.0f) == 20, "ndl^20 below is the shininess");
+    const MF lit = hn::Gt(len, hn::Zero(df)); // a zero gradient leaves the colour unlit
+    diffuse = hn::IfThenElse(lit, hn::MulAdd(ndl, hn::Set(df, 0.7f), hn::Set(df, 0.3f)), one);
+    specular = hn::IfThenElseZero(lit, hn::Mul(hn::Set(df, 0.2f), hn::Mul(n16, n4)));
+}
+
+void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba, Counters &counters) {
+    const DF df;
+    const DI di;
+    const int lanes = int(hn::Lanes(df));
+    const int packetWide = std::min(lanes, 4), packetHigh = lanes / packetWide;
+    const Features &F = P.features;
+    uint64_t samplesTotal = 0, hitTotal = 0, terminatedTotal = 0, truncatedTotal = 0, skippedTotal = 0;
+
+    HWY_ALIGN float t0a[kMaxLanes], t1a[kMaxLanes], q0a[3][kMaxLanes], dqa[3][kMaxLanes], dira[3][kMaxLanes],
+        ja[kMaxLanes], outa[4][kMaxLanes];
+    HWY_ALIGN int32_t hita[kMaxLanes], samplesa[kMaxLanes];
+    int px[kMaxLanes], py[kMaxLanes];
+
+    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step);
+    for (int by = y0; by < y1; by += packetHigh)
+        for (int bx = x0; bx < x1; bx += packetWide) {
+            int hits = 0;
+            for (int l = 0; l < lanes; ++l) {
+                const int x = bx + l % packetWide, y = by + l / packetWide;
+                px[l] = x;
+                py[l] = y;
+                Ray r;
+                const bool inside = x < x1 && y < y1;
+                const bool hit = inside && setUpRay(P, x, y, r);
+                if (inside && !hit)
+                    std::fill_n(rgba + (size_t(y) * size_t(P.width) + size_t(x)) * 4, 4, 0.0f);
+                if (!hit) r = Ray{}; // finite values in the lanes that do not march
+                hita[l] = hit;
+                hits += hit;
+                t0a[l] = r.t0;
+                t1a[l] = r.t1;
+                for (int a = 0; a < 3; ++a) {
+                    q0a[a][l] = r.q0[a];
+                    dqa[a][l] = r.dq[a];
+                    dira[a][l] = r.dir[a];
+                }
+                ja[l] = hit && F.jitter ? random01(uint32_t(x), uint32_t(y), P.seed, P.pass) : 0.0f;
+            }
+            if (hits == 0) continue;
+            hitTotal += uint64_t(hits);
+
+            const VF t0 = hn::Load(df, t0a), t1 = hn::Load(df, t1a), j = hn::Load(df, ja);
+            const VF q0[3] = {hn::Load(df, q0a[0]), hn::Load(df, q0a[1]), hn::Load(df, q0a[2])};
+            const VF dq[3] = {hn::Load(df, dqa[0]), hn::Load(df, dqa[1]), hn::Load(df, dqa[2])};
+            VF dir[3] = {zero, zero, zero};
+            if (F.shading)
+                for (int a = 0; a < 3; ++a) dir[a] = hn::Load(df, dira[a]);
+            MF alive = hn::RebindMask(df, hn::Ne(hn::Load(di, hita), hn::Zero(di)));
+
+            VF k = hn::IfThenElse(hn::Gt(j, zero), zero, one); // the first boundary past t0
+            VF segStart = t0, visibleUntil = t0;
+            VF depth = zero, depthCarry = zero, T = one;
+            VF color[3] = {zero, zero, zero}, colorCarry[3] = {zero, zero, zero};
+            VI samples = hn::Zero(di);
+            while (!hn::AllFalse(df, alive)) {
+                if (F.emptySpaceSkipping) {
+                    const MF entering = hn::And(alive, hn::Ge(segStart, visibleUntil));
+                    if (!hn::AllFalse(df, entering)) {
+                        // The brick holding q just past segStart, whether it is visible, and
+                        // where the ray leaves it (raycast.cl's brickExit).
+                        const VF t = hn::Add(segStart, hn::Set(df, 1e-3f * P.step));
+                        const float B = float(P.brickSize);
+                        VI b[3];
+                        VF exit = hn::Set(df, kInf);
+                        for (int a = 0; a < 3; ++a) {
+                            const VF q = hn::MulAdd(t, dq[a], q0[a]);
+                            b[a] = hn::ConvertTo(di, hn::Floor(hn::Div(hn::Add(q, hn::Set(df, 0.5f)), hn::Set(df, B))));
+                            b[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
+                            const VF lo = hn::Sub(hn::Mul(hn::ConvertTo(df, b[a]), hn::Set(df, B)), hn::Set(df, 0.5f));
+                            const VF hi = hn::Add(lo, hn::Set(df, B));
+                            const VF wall = hn::IfThenElse(hn::Gt(dq[a], zero), hi, lo);
+                            const VF at = hn::Div(hn::Sub(wall, q0[a]), dq[a]);
+                            exit = hn::IfThenElse(hn::Ne(dq[a], zero), hn::Min(exit, at), exit);
+                        }
+                        const VI brick = hn::Add(
+                            hn::Mul(hn::Add(hn::Mul(b[2], hn::Set(di, P.bricks[1])), b[1]), hn::Set(di, P.bricks[0])), b[0]);
+                        const MF visible = hn::RebindMask(df, hn::Ne(hn::GatherIndex(di, P.brickVisible, brick), hn::Zero(di)));
+                        const MF keep = hn::And(entering, hn::Or(visible, hn::Not(hn::Gt(exit, segStart))));
+                        visibleUntil = hn::IfThenElse(keep, hn::Max(exit, segStart), visibleUntil);
+                        const MF skip = hn::AndNot(keep, entering);
+                        if (!hn::AllFalse(df, skip)) {
+                            // Last boundary t0 + (k' + j)·d at or before the exit.
+                            const VF kLast = hn::Floor(hn::Sub(hn::Div(hn::Sub(hn::Min(exit, t1), t0), d), j));
+                            const MF jump = hn::And(skip, hn::Ge(kLast, k));
+                            HWY_ALIGN float jumped[kMaxLanes];
+                            hn::Store(hn::IfThenElseZero(jump, hn::Add(hn::Sub(kLast, k), one)), df, jumped);
+                            for (int l = 0; l < lanes; ++l) skippedTotal += uint64_t(jumped[l]);
+                            k = hn::IfThenElse(jump, hn::Add(kLast, one), k);
+                            segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(kLast, j), d, t0), segStart);
+                            visibleUntil = hn::IfThenElse(skip, segStart, visibleUntil); // look again from here
+                        }
+                    }
+                }
+                const VF boundary = hn::MulAdd(hn::Add(k, j), d, t0);
+                const VF segEnd = hn::Min(boundary, t1);
+                const VF len = hn::Sub(segEnd, segStart);
+                MF take = hn::And(alive, hn::Gt(len, zero));
+                if (!F.boundarySegment) {
+                    // A partial segment: the first one under jitter, or the last at the exit.
+                    const MF partial = hn::Or(hn::Gt(boundary, t1), hn::Eq(k, zero));
+                    take = hn::AndNot(partial, take);
+                }
+                if (!hn::AllFalse(df, take)) {
+                    const MF truncated =
+                        hn::AndNot(hn::RebindMask(df, hn::Lt(samples, hn::Set(di, P.maxSamples))), take);
+                    if (!hn::AllFalse(df, truncated)) {
+                        truncatedTotal += hn::CountTrue(df, truncated);
+                        alive = hn::AndNot(truncated, alive);
+                        take = hn::AndNot(truncated, take);
+                    }
+                    samples = hn::Add(samples, hn::IfThenElseZero(hn::RebindMask(di, take), hn::Set(di, 1)));
+                    // Sample the segment at its centre and classify.
+                    const VF tMid = hn::MulAdd(hn::Set(df, 0.5f), len, segStart);
+                    const VF q[3] = {hn::MulAdd(tMid, dq[0], q0[0]), hn::MulAdd(tMid, dq[1], q0[1]),
+                                     hn::MulAdd(tMid, dq[2], q0[2])};
+                    VF c[4];
+                    classify(P, sampleTrilinear(P, q[0], q[1], q[2]), c);
+                    // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
+                    const VF segDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
+                    const VF alpha = opacityFromDepth(segDepth);
+                    if (F.shading) {
+                        const MF lit = hn::And(take, hn::Gt(alpha, zero));
+                        if (!hn::AllFalse(df, lit)) {
+                            VF diffuse, specular;
+                            phong(P, q, dir, diffuse, specular);
+                            for (int a = 0; a < 3; ++a)
+                                c[a] = hn::IfThenElse(lit, hn::Min(hn::MulAdd(c[a], diffuse, specular), one), c[a]);
+                        }
+                    }
+                    const VF weight = hn::Mul(T, alpha);
+                    for (int a = 0; a < 3; ++a) addCompensated(take, color[a], colorCarry[a], hn::Mul(weight, c[a]), false);
+                    addCompensated(take, depth, depthCarry, segDepth, true);
+                    // T = exp(−depth), kept by products and made exact every 16 samples.
+                    VF nextT = hn::Mul(T, hn::Sub(one, alpha));
+                    const MF exact =
+                        hn::And(take, hn::RebindMask(df, hn::Eq(hn::And(samples, hn::Set(di, 15)), hn::Zero(di))));
+                    if (!hn::AllFalse(df, exact))
+                        nextT = hn::IfThenElse(exact, hn::Exp(df, hn::Neg(hn::Sub(depth, depthCarry))), nextT);
+                    T = hn::IfThenElse(take, nextT, T);
+                    if (F.earlyTermination) {
+                        const MF stop = hn::And(take, hn::Ge(depth, hn::Set(df, P.terminationDepth)));
+                        if (!hn::AllFalse(df, stop)) {
+                            terminatedTotal += hn::CountTrue(df, stop);
+                            alive = hn::AndNot(stop, alive);
+                        }
+                    }
+                }
+                alive = hn::AndNot(hn::Ge(boundary, t1), alive);
+                segStart = hn::IfThenElse(alive, segEnd, segStart);
+                k = hn::IfThenElse(alive, hn::Add(k, one), k);
+            }
+
+            for (int a = 0; a < 3; ++a) hn::Store(hn::Sub(color[a], colorCarry[a]), df, outa[a]);
+            hn::Store(opacityFromDepth(hn::Sub(depth, depthCarry)), df, outa[3]);
+            hn::Store(samples, di, samplesa);
+            for (int l = 0; l < lanes; ++l) {
+                if (!hita[l]) continue;
+                samplesTotal += uint64_t(samplesa[l]);
+                float *pixel = rgba + (size_t(py[l]) * size_t(P.width) + size_t(px[l])) * 4;
+                for (int c = 0; c < 4; ++c) pixel[c] = outa[c][l];
+            }
+        }
+    counters.samples += samplesTotal;
+    counters.raysHit += hitTotal;
+    counters.terminatedEarly += terminatedTotal;
+    counters.truncated += truncatedTotal;
+    counters.segmentsSkipped += skippedTotal;
+}
+
+int LanesHere() { return int(hn::Lanes(DF())); }
+const char *TargetHere() { return hwy::TargetName(HWY_TARGET); }
+
+} // namespace volcast::cpu::HWY_NAMESPACE
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace volcast::cpu {
+
+HWY_EXPORT(MarchTile);
+HWY_EXPORT(LanesHere);
+HWY_EXPORT(TargetHere);
+
+void marchTile(const FrameParams &p, int x0, int y0, int x1, int y1, float *rgba, Counters &counters) {
+    HWY_DYNAMIC_DISPATCH(MarchTile)(p, x0, y0, x1, y1, rgba, counters);
+}
+std::string marchTarget() { return HWY_DYNAMIC_DISPATCH(TargetHere)(); }
+int raysPerPacket() { return HWY_DYNAMIC_DISPATCH(LanesHere)(); }
+
+} // namespace volcast::cpu
+#endif
