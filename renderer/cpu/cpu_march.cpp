@@ -129,6 +129,51 @@ VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
     return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
 }
 
+// Cubic B-spline weights of the four taps around fractional position f.
+inline void cubicWeights(VF f, VF w[4]) {
+    const DF df;
+    const VF g = hn::Sub(hn::Set(df, 1.0f), f), sixth = hn::Set(df, 1.0f / 6.0f), four = hn::Set(df, 4.0f);
+    const VF f2 = hn::Mul(f, f), g2 = hn::Mul(g, g);
+    w[0] = hn::Mul(hn::Mul(g2, g), sixth);
+    w[1] = hn::Mul(hn::MulAdd(hn::Mul(f2, f), hn::Set(df, 3.0f), hn::NegMulAdd(f2, hn::Set(df, 6.0f), four)), sixth);
+    w[2] = hn::Mul(hn::MulAdd(hn::Mul(g2, g), hn::Set(df, 3.0f), hn::NegMulAdd(g2, hn::Set(df, 6.0f), four)), sixth);
+    w[3] = hn::Mul(hn::Mul(f2, f), sixth);
+}
+
+// Tricubic B-spline at level coordinates q, clamped to the outermost samples: 64 gathered
+// coefficients. Padded index of tap (i − 1 + x, …) is (i + x, …), as in raycast.cl.
+VF sampleCubic(const FrameParams &P, VF x, VF y, VF z) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df);
+    VF p[3] = {x, y, z};
+    VI i[3];
+    VF w[3][4];
+    for (int a = 0; a < 3; ++a) {
+        p[a] = hn::Min(hn::Max(p[a], zero), hn::Set(df, float(P.levelDims[a] - 1)));
+        i[a] = hn::Min(hn::ConvertTo(di, p[a]), hn::Set(di, P.levelDims[a] - 1));
+        cubicWeights(hn::Sub(p[a], hn::ConvertTo(df, i[a])), w[a]);
+    }
+    const VI base = hn::Add(hn::Add(i[0], hn::Mul(i[1], hn::Set(di, P.rowStride))), hn::Mul(i[2], hn::Set(di, P.sliceStride)));
+    VF sum = zero;
+    for (int tz = 0; tz < 4; ++tz) {
+        VF sz = zero;
+        for (int ty = 0; ty < 4; ++ty) {
+            const VI row = hn::Add(base, hn::Set(di, tz * P.sliceStride + ty * P.rowStride));
+            VF r = hn::Mul(w[0][0], hn::GatherIndex(df, P.voxels, row));
+            for (int tx = 1; tx < 4; ++tx)
+                r = hn::MulAdd(w[0][tx], hn::GatherIndex(df, P.voxels, hn::Add(row, hn::Set(di, tx))), r);
+            sz = hn::MulAdd(w[1][ty], r, sz);
+        }
+        sum = hn::MulAdd(w[2][tz], sz, sum);
+    }
+    return sum;
+}
+
+inline VF sampleVolume(const FrameParams &P, VF x, VF y, VF z) {
+    return P.features.cubic ? sampleCubic(P, x, y, z) : sampleTrilinear(P, x, y, z);
+}
+
 // Colour and sigma, linear between table entries.
 void classify(const FrameParams &P, VF value, VF rgbs[4]) {
     const DF df;
@@ -173,7 +218,7 @@ void phong(const FrameParams &P, const VF q[3], const VF dir[3], VF &diffuse, VF
         VF plus[3] = {q[0], q[1], q[2]}, minus[3] = {q[0], q[1], q[2]};
         plus[a] = hn::Add(q[a], one);
         minus[a] = hn::Sub(q[a], one);
-        g[a] = hn::Sub(sampleTrilinear(P, plus[0], plus[1], plus[2]), sampleTrilinear(P, minus[0], minus[1], minus[2]));
+        g[a] = hn::Sub(sampleVolume(P, plus[0], plus[1], plus[2]), sampleVolume(P, minus[0], minus[1], minus[2]));
     }
     VF w[3]; // world gradient = (index-from-world linear part)ᵀ · index gradient
     for (int c = 0; c < 3; ++c)
@@ -306,7 +351,7 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                     const VF q[3] = {hn::MulAdd(tMid, dq[0], q0[0]), hn::MulAdd(tMid, dq[1], q0[1]),
                                      hn::MulAdd(tMid, dq[2], q0[2])};
                     VF c[4];
-                    classify(P, sampleTrilinear(P, q[0], q[1], q[2]), c);
+                    classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
                     // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
                     const VF segDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
                     const VF alpha = opacityFromDepth(segDepth);

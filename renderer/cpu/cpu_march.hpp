@@ -17,6 +17,7 @@ struct Features {
     bool clipPlanes = false;
     bool emptySpaceSkipping = false;
     bool shading = false;
+    bool cubic = false; // prefiltered tricubic B-spline from padded coefficients
 };
 
 struct FrameParams {
@@ -37,11 +38,13 @@ struct FrameParams {
     uint32_t seed = 0, pass = 0;
     int maxSamples = 0;
 
-    // The sampled level, padded by one voxel after the last on each axis (an edge copy), so
-    // the trilinear taps of any clamped position need no further clamps. Index with int32.
+    // The sampled level, padded so that the taps of any clamped position need no further
+    // clamps: trilinear, voxels with one edge copy after the last on each axis; cubic, its
+    // B-spline coefficients with one mirrored before and two after (as the kernel's buffer).
+    // Index with int32.
     const float *voxels = nullptr;
     int levelDims[3];               // samples per axis of the level (unpadded)
-    int rowStride = 0, sliceStride = 0; // padded: (n.x + 1), (n.x + 1)·(n.y + 1)
+    int rowStride = 0, sliceStride = 0; // of the padded array
 
     // Transfer-function table (tf_table.hpp): entries × (r, g, b, sigma).
     const float *tf = nullptr;

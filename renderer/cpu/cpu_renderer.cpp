@@ -1,5 +1,6 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 
+#include "renderer/bspline_prefilter.hpp"
 #include "renderer/cpu/cpu_march.hpp"
 #include "renderer/tf_table.hpp"
 
@@ -24,12 +25,17 @@ constexpr int kTileEdge = 16;
 
 // Samples with one edge copy after the last on each axis: the trilinear taps of a position
 // clamped to [0, n − 1] then stay inside without a second clamp.
-std::vector<float> padAfter(const std::vector<float> &v, Vec3i n) {
-    const size_t px = size_t(n.x) + 1, py = size_t(n.y) + 1, pz = size_t(n.z) + 1;
-    if (px * py * pz > size_t(std::numeric_limits<int32_t>::max()))
+void checkIndexable(Vec3i n, int pad) {
+    const size_t count = size_t(n.x + pad) * size_t(n.y + pad) * size_t(n.z + pad);
+    if (count > size_t(std::numeric_limits<int32_t>::max()))
         throw std::invalid_argument("volume of " + std::to_string(n.x) + "×" + std::to_string(n.y) + "×" +
                                     std::to_string(n.z) + " samples is too large for the cpu device's 32-bit "
-                                    "voxel indices (at most 2^31 samples)");
+                                    "voxel indices (at most 2^31 padded samples)");
+}
+
+std::vector<float> padAfter(const std::vector<float> &v, Vec3i n) {
+    checkIndexable(n, 1);
+    const size_t px = size_t(n.x) + 1, py = size_t(n.y) + 1, pz = size_t(n.z) + 1;
     std::vector<float> out(px * py * pz);
     for (size_t k = 0; k < pz; ++k)
         for (size_t j = 0; j < py; ++j) {
@@ -40,6 +46,33 @@ std::vector<float> padAfter(const std::vector<float> &v, Vec3i n) {
             dst[n.x] = src[n.x - 1];
         }
     return out;
+}
+
+// B-spline coefficients padded by one before and two after on each axis with the mirror
+// boundary, so the 4×4×4 footprint around any clamped position stays inside (as the OpenCL
+// back end's buffer).
+std::vector<float> padMirror(const std::vector<float> &c, Vec3i n) {
+    checkIndexable(n, 3);
+    const Vec3i p{n.x + 3, n.y + 3, n.z + 3};
+    std::vector<float> out(size_t(p.x) * size_t(p.y) * size_t(p.z));
+    for (int64_t k = 0; k < p.z; ++k)
+        for (int64_t j = 0; j < p.y; ++j)
+            for (int64_t i = 0; i < p.x; ++i)
+                out[(size_t(k) * size_t(p.y) + size_t(j)) * size_t(p.x) + size_t(i)] =
+                    c[(size_t(mirrorIndex(k - 1, n.z)) * size_t(n.y) + size_t(mirrorIndex(j - 1, n.y))) * size_t(n.x) +
+                      size_t(mirrorIndex(i - 1, n.x))];
+    return out;
+}
+
+std::vector<float> unpadMirror(const std::vector<float> &padded, Vec3i n) {
+    const size_t px = size_t(n.x) + 3, py = size_t(n.y) + 3;
+    std::vector<float> c(size_t(n.x) * size_t(n.y) * size_t(n.z));
+    for (size_t k = 0; k < size_t(n.z); ++k)
+        for (size_t j = 0; j < size_t(n.y); ++j) {
+            const float *src = padded.data() + ((k + 1) * py + (j + 1)) * px + 1;
+            std::copy(src, src + n.x, c.data() + (k * size_t(n.y) + j) * size_t(n.x));
+        }
+    return c;
 }
 
 void set3(float *out, const Vec3d &v) {
@@ -57,7 +90,7 @@ CpuRenderer::CpuRenderer(std::shared_ptr<const Volume> volume, CpuRendererOption
     threads_ = options_.threads > 0 ? options_.threads : int(std::max(1u, std::thread::hardware_concurrency()));
     // Level 0's padded copy now: every frame but a coarser level's needs it.
     RenderStats unused;
-    dataSet(0, unused);
+    dataSet(0, false, unused);
 }
 
 CpuRenderer::CpuRenderer(const Volume &volume, CpuRendererOptions options)
@@ -86,8 +119,9 @@ PreprocessCounts CpuRenderer::preprocessCounts() const {
     return counts_;
 }
 
-CpuRenderer::DataSet &CpuRenderer::dataSet(int level, RenderStats &st) {
-    if (auto it = dataSets_.find(level); it != dataSets_.end()) return it->second;
+CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &st) {
+    const auto key = std::make_pair(level, cubic);
+    if (auto it = dataSets_.find(key); it != dataSets_.end()) return it->second;
     const auto t = Clock::now();
     const int levelsBefore = pyramid_.levelsBuilt();
     const std::vector<float> &voxels = pyramid_.level(level);
@@ -98,14 +132,29 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, RenderStats &st) {
     }
     DataSet data;
     data.dims = pyramid_.dims(level);
-    data.padded = padAfter(voxels, data.dims);
-    return dataSets_.emplace(level, std::move(data)).first->second;
+    data.cubic = cubic;
+    if (!cubic) {
+        data.padded = padAfter(voxels, data.dims);
+    } else {
+        const auto tc = Clock::now();
+        std::vector<float> coefficients = voxels;
+        bsplinePrefilterMultithreaded(coefficients.data(), data.dims, threads_);
+        data.padded = padMirror(coefficients, data.dims);
+        st.coefficientSeconds = secondsSince(tc);
+        std::lock_guard lock(countsMutex_);
+        ++counts_.coefficientVolumes;
+    }
+    return dataSets_.emplace(key, std::move(data)).first->second;
 }
 
 void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st) {
     if (!data.bricks) {
         const auto t = Clock::now();
-        data.bricks = buildMinMaxBricks(pyramid_.level(level).data(), data.dims, options_.brickSize, 1);
+        // Spline values are bounded by the coefficients around a brick, two on each side
+        // (minmax_bricks.hpp); only the padded copy is kept, so its interior is taken out.
+        if (data.cubic) data.bricks = buildMinMaxBricks(unpadMirror(data.padded, data.dims).data(), data.dims,
+                                                        options_.brickSize, 2);
+        else data.bricks = buildMinMaxBricks(pyramid_.level(level).data(), data.dims, options_.brickSize, 1);
         st.brickGridSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
         ++counts_.brickGrids;
@@ -129,9 +178,6 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
 Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
     validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
-    if (quality.interpolation == Interpolation::Cubic)
-        throw std::invalid_argument("quality.interpolation: cubic is not supported by the cpu device yet "
-                                    "(use linear, or --device opencl)");
     if (quality.preintegrated)
         throw std::invalid_argument("quality.preintegrated: pre-integration is not supported by the cpu device yet "
                                     "(turn it off, or use --device opencl)");
@@ -139,7 +185,8 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
     st.buildOptions = featureNames(quality, !clipPlanes.empty());
-    DataSet &data = dataSet(quality.mipLevel, st);
+    const bool cubic = quality.interpolation == Interpolation::Cubic;
+    DataSet &data = dataSet(quality.mipLevel, cubic, st);
     if (quality.emptySpaceSkipping) classify(data, quality.mipLevel, tf, st);
 
     const double smallest = minComponent(volume_->spacing);
@@ -175,6 +222,7 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     p.features.clipPlanes = !clipPlanes.empty();
     p.features.emptySpaceSkipping = quality.emptySpaceSkipping;
     p.features.shading = quality.shading;
+    p.features.cubic = cubic;
     set3(p.eye, camera.eye);
     set3(p.forward, rays.forward);
     set3(p.right, rays.right * rays.halfWidth());
@@ -208,8 +256,9 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     p.seed = uint32_t(quality.seed ^ (quality.seed >> 32));
     p.maxSamples = kMaxSamplesPerRay;
     p.voxels = data.padded.data();
-    p.rowStride = int(data.dims.x + 1); // padAfter checked that the padded count fits int32
-    p.sliceStride = int((data.dims.x + 1) * (data.dims.y + 1));
+    const int pad = cubic ? 3 : 1; // padMirror and padAfter checked that the padded count fits int32
+    p.rowStride = int(data.dims.x + pad);
+    p.sliceStride = int((data.dims.x + pad) * (data.dims.y + pad));
     p.tf = tfTable_.data();
     p.tfMin = float(tfMin_);
     p.tfScale = float(tfScale_);

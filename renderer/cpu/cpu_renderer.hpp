@@ -5,8 +5,8 @@
 // tiles, dispatched at run time to the widest instruction set the CPU has.
 //
 // Supported quality switches: step with opacity correction, jitter, boundary segments,
-// clip planes, early termination, empty-space skipping, mip levels, image scale, shading.
-// Not yet: cubic B-spline and pre-integration; asking for them throws, naming the switch.
+// clip planes, early termination, empty-space skipping, mip levels, image scale, shading,
+// cubic B-spline. Not yet: pre-integration; asking for it throws, naming the switch.
 
 #include "renderer/frame_renderer.hpp"
 #include "renderer/minmax_bricks.hpp"
@@ -40,16 +40,18 @@ class CpuRenderer : public FrameRenderer {
     static std::string featureNames(const Quality &quality, bool hasClipPlanes);
 
   private:
+    // The data a frame samples: a mip level's voxels, or its B-spline coefficients.
     struct DataSet {
         Vec3i dims;
-        std::vector<float> padded; // one edge copy after the last sample on each axis
+        bool cubic = false;
+        std::vector<float> padded; // voxels: one edge copy after; coefficients: mirrored 1 before, 2 after
         std::optional<MinMaxBricks> bricks;
         std::optional<TransferFunction> classifiedFor;
         std::vector<int32_t> brickVisible;
         double emptyFraction = 0;
     };
 
-    DataSet &dataSet(int level, RenderStats &st);
+    DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st);
 
     std::shared_ptr<const Volume> volume_;
@@ -57,7 +59,7 @@ class CpuRenderer : public FrameRenderer {
     int threads_ = 1;
     MipPyramid pyramid_;
     std::mutex mutex_;
-    std::map<int, DataSet> dataSets_; // by mip level
+    std::map<std::pair<int, bool>, DataSet> dataSets_; // by (mip level, cubic)
     std::optional<TransferFunction> tfTableFor_;
     std::vector<float> tfTable_;
     double tfMin_ = 0, tfScale_ = 0, tfError_ = 0;

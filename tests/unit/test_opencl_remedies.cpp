@@ -92,23 +92,6 @@ TEST(OpenClRemedies, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
     EXPECT_EQ(counts().mipLevels, 2);
 }
 
-TEST(OpenClRemedies, CubicBSplineMatchesTheReferenceSpline) {
-    const Camera cam = test::obliqueCamera(blob().volume, 30);
-    const Image exactCubic = reference(blob().volume, blobTf(), Reconstruction::Cubic, cam, 32, 32);
-    OpenClRenderer r(cl(), blob().volume);
-    Quality q = plain(0.125);
-    const double linearError = compareImages(r.render(blobTf(), cam, 32, 32, q, {}), exactCubic).rmse;
-    q.interpolation = Interpolation::Cubic;
-    RenderStats st;
-    const double cubicError = compareImages(r.render(blobTf(), cam, 32, 32, q, {}, &st), exactCubic).rmse;
-    // Step 0.125 leaves a midpoint-rule error below 1e-3 (the trilinear convergence test);
-    // the same spline on both sides leaves nothing else but float rounding.
-    EXPECT_LT(cubicError, 1e-3);
-    // And the kernel really reconstructs the spline: trilinear is far from it on a σ = 4 blob.
-    EXPECT_GT(linearError, 5 * cubicError);
-    EXPECT_GT(st.coefficientSeconds, 0);
-}
-
 TEST(OpenClRemedies, CubicFromEightTrilinearFetchesEqualsSixtyFourTaps) {
     OpenClRendererOptions taps, fetches;
     taps.cubicFetch = CubicFetch::Taps64;
