@@ -41,8 +41,8 @@ int main(int argc, char **argv) {
         ->required();
     std::string device = "opencl", kernelCache;
     app.add_flag("--reference", reference, "Use the exact double-precision reference integrator instead of OpenCL");
-    // The default stays OpenCL until the native path has every quality switch (cubic and
-    // pre-integration are missing): scenes that use them keep rendering.
+    // The default stays OpenCL while the documents and remedies.py describe OpenCL output;
+    // the native path has every switch, so `auto` is the candidate default.
     app.add_option("--device", device,
                    "Back end: cpu (native SIMD), opencl ($VOLCAST_DEVICE or OpenCL's choice), "
                    "opencl:<part of a device name, gpu or cpu>, or auto (an OpenCL GPU, else cpu)")

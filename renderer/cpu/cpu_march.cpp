@@ -187,6 +187,44 @@ void classify(const FrameParams &P, VF value, VF rgbs[4]) {
         rgbs[c] = lerp(hn::GatherIndex(df, P.tf + c, i4), hn::GatherIndex(df, P.tf + 4 + c, i4), f);
 }
 
+// Fractional node coordinate of value v: the locator gives the node intervals a uniform
+// bucket overlaps, a binary search per lane the one holding v (raycast.cl's nodeCoordinate).
+VF nodeCoordinate(const FrameParams &P, VF v) {
+    const DF df;
+    const DI di;
+    v = hn::Min(hn::Max(v, hn::Set(df, P.preNodes[0])), hn::Set(df, P.preNodes[P.preNodeCount - 1]));
+    VI b = hn::ConvertTo(di, hn::Mul(hn::Sub(v, hn::Set(df, P.preLocatorMin)), hn::Set(df, P.preLocatorScale)));
+    b = hn::Min(hn::Max(b, hn::Zero(di)), hn::Set(di, P.preLocatorSize - 1));
+    VI i = hn::GatherIndex(di, P.preLocator, b), last = hn::GatherIndex(di, P.preLocator, hn::Add(b, hn::Set(di, 1)));
+    for (auto open = hn::Lt(i, last); !hn::AllFalse(di, open); open = hn::Lt(i, last)) {
+        const VI m = hn::ShiftRight<1>(hn::Add(hn::Add(i, last), hn::Set(di, 1)));
+        const auto above = hn::RebindMask(di, hn::Ge(v, hn::GatherIndex(df, P.preNodes, m)));
+        i = hn::IfThenElse(hn::And(open, above), m, i);
+        last = hn::IfThenElse(hn::AndNot(above, open), hn::Sub(m, hn::Set(di, 1)), last);
+    }
+    const VF lo = hn::GatherIndex(df, P.preNodes, i), hi = hn::GatherIndex(df, P.preNodes, hn::Add(i, hn::Set(di, 1)));
+    const VF f = hn::Min(hn::Max(hn::Div(hn::Sub(v, lo), hn::Sub(hi, lo)), hn::Zero(df)), hn::Set(df, 1.0f));
+    return hn::Add(hn::ConvertTo(df, i), f);
+}
+
+// Segment from value sf to sb of a full step: premultiplied colour and opacity, bilinear in
+// the table (raycast.cl's preintegratedSegment).
+void preintegratedSegment(const FrameParams &P, VF sf, VF sb, VF out[4]) {
+    const DF df;
+    const DI di;
+    const int n = P.preNodeCount;
+    const VF x = nodeCoordinate(P, sf), y = nodeCoordinate(P, sb);
+    const VI i = hn::Min(hn::ConvertTo(di, x), hn::Set(di, n - 2)), j = hn::Min(hn::ConvertTo(di, y), hn::Set(di, n - 2));
+    const VF fx = hn::Sub(x, hn::ConvertTo(df, i)), fy = hn::Sub(y, hn::ConvertTo(df, j));
+    const VI c00 = hn::ShiftLeft<2>(hn::Add(hn::Mul(j, hn::Set(di, n)), i)), c01 = hn::Add(c00, hn::Set(di, 4 * n));
+    for (int c = 0; c < 4; ++c) {
+        const float *t = P.preRgba + c;
+        const VF a = lerp(hn::GatherIndex(df, t, c00), hn::GatherIndex(df, t + 4, c00), fx);
+        const VF b = lerp(hn::GatherIndex(df, t, c01), hn::GatherIndex(df, t + 4, c01), fx);
+        out[c] = lerp(a, b, fy);
+    }
+}
+
 // 1 − exp(−x): the kernel's Taylor polynomial below 1/2, exp above.
 VF opacityFromDepth(VF x) {
     const DF df;
@@ -289,6 +327,10 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
             VF depth = zero, depthCarry = zero, T = one;
             VF color[3] = {zero, zero, zero}, colorCarry[3] = {zero, zero, zero};
             VI samples = hn::Zero(di);
+            VF sf = zero; // pre-integration: the value at the segment's front
+            if (F.preintegrated)
+                sf = sampleVolume(P, hn::MulAdd(t0, dq[0], q0[0]), hn::MulAdd(t0, dq[1], q0[1]),
+                                  hn::MulAdd(t0, dq[2], q0[2]));
             while (!hn::AllFalse(df, alive)) {
                 if (F.emptySpaceSkipping) {
                     const MF entering = hn::And(alive, hn::Ge(segStart, visibleUntil));
@@ -324,6 +366,11 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                             for (int l = 0; l < lanes; ++l) skippedTotal += uint64_t(jumped[l]);
                             k = hn::IfThenElse(jump, hn::Add(kLast, one), k);
                             segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(kLast, j), d, t0), segStart);
+                            if (F.preintegrated)
+                                sf = hn::IfThenElse(jump, sampleVolume(P, hn::MulAdd(segStart, dq[0], q0[0]),
+                                                                       hn::MulAdd(segStart, dq[1], q0[1]),
+                                                                       hn::MulAdd(segStart, dq[2], q0[2])),
+                                                    sf);
                             visibleUntil = hn::IfThenElse(skip, segStart, visibleUntil); // look again from here
                         }
                     }
@@ -332,11 +379,9 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                 const VF segEnd = hn::Min(boundary, t1);
                 const VF len = hn::Sub(segEnd, segStart);
                 MF take = hn::And(alive, hn::Gt(len, zero));
-                if (!F.boundarySegment) {
-                    // A partial segment: the first one under jitter, or the last at the exit.
-                    const MF partial = hn::Or(hn::Gt(boundary, t1), hn::Eq(k, zero));
-                    take = hn::AndNot(partial, take);
-                }
+                // A partial segment: the first one under jitter, or the last at the exit.
+                const MF partial = hn::Or(hn::Gt(boundary, t1), hn::Eq(k, zero));
+                if (!F.boundarySegment) take = hn::AndNot(partial, take);
                 if (!hn::AllFalse(df, take)) {
                     const MF truncated =
                         hn::AndNot(hn::RebindMask(df, hn::Lt(samples, hn::Set(di, P.maxSamples))), take);
@@ -346,26 +391,74 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                         take = hn::AndNot(truncated, take);
                     }
                     samples = hn::Add(samples, hn::IfThenElseZero(hn::RebindMask(di, take), hn::Set(di, 1)));
-                    // Sample the segment at its centre and classify.
                     const VF tMid = hn::MulAdd(hn::Set(df, 0.5f), len, segStart);
                     const VF q[3] = {hn::MulAdd(tMid, dq[0], q0[0]), hn::MulAdd(tMid, dq[1], q0[1]),
                                      hn::MulAdd(tMid, dq[2], q0[2])};
-                    VF c[4];
-                    classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
-                    // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
-                    const VF segDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
-                    const VF alpha = opacityFromDepth(segDepth);
-                    if (F.shading) {
-                        const MF lit = hn::And(take, hn::Gt(alpha, zero));
-                        if (!hn::AllFalse(df, lit)) {
+                    // Contribution T·weight·segColor: weight is alpha for a sampled segment
+                    // (the kernel's T·alpha·rgb, in its order), 1 for a premultiplied one.
+                    VF segDepth, alpha, segColor[3], weight = one;
+                    if (F.preintegrated) {
+                        // The segment from the table for a full step; a partial one scales the
+                        // depth by len/step (Eq. 3) and the colour with its opacity, unless the
+                        // full step's alpha is too close to 1 to hold its depth: then it is
+                        // classified at its centre (raycast.cl, VC_ALPHA_HOLDS_DEPTH).
+                        const VF sb = sampleVolume(P, hn::MulAdd(segEnd, dq[0], q0[0]), hn::MulAdd(segEnd, dq[1], q0[1]),
+                                                   hn::MulAdd(segEnd, dq[2], q0[2]));
+                        VF seg[4];
+                        preintegratedSegment(P, sf, sb, seg);
+                        sf = hn::IfThenElse(take, sb, sf);
+                        const MF opaque = hn::Ge(seg[3], one); // −log1p(−1) = +inf: T becomes 0
+                        segDepth = hn::IfThenElse(opaque, hn::Set(df, kInf),
+                                                  hn::Neg(hn::Log1p(df, hn::Neg(hn::IfThenZeroElse(opaque, seg[3])))));
+                        alpha = seg[3];
+                        for (int a = 0; a < 3; ++a) segColor[a] = seg[a];
+                        const MF partialHere = hn::And(take, partial);
+                        if (!hn::AllFalse(df, partialHere)) {
+                            const VF fraction = hn::Div(len, d);
+                            const MF holds = hn::And(partialHere, hn::Le(seg[3], hn::Set(df, 1.0f - 1.0f / 4096.0f)));
+                            const VF scaledDepth = hn::Mul(segDepth, fraction);
+                            const VF scaledAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(holds), scaledDepth));
+                            const VF colourScale =
+                                hn::IfThenElse(hn::Gt(seg[3], zero), hn::Div(scaledAlpha, seg[3]), fraction);
+                            VF c[4];
+                            classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
+                            const VF centreDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
+                            const MF centre = hn::AndNot(holds, partialHere);
+                            const VF centreAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(centre), centreDepth));
+                            segDepth = hn::IfThenElse(holds, scaledDepth, hn::IfThenElse(centre, centreDepth, segDepth));
+                            alpha = hn::IfThenElse(holds, scaledAlpha, hn::IfThenElse(centre, centreAlpha, alpha));
+                            for (int a = 0; a < 3; ++a)
+                                segColor[a] = hn::IfThenElse(holds, hn::Mul(segColor[a], colourScale),
+                                                             hn::IfThenElse(centre, hn::Mul(centreAlpha, c[a]), segColor[a]));
+                        }
+                        if (F.shading) {
+                            // Light the premultiplied colour; the highlight is weighted by the opacity.
                             VF diffuse, specular;
                             phong(P, q, dir, diffuse, specular);
                             for (int a = 0; a < 3; ++a)
-                                c[a] = hn::IfThenElse(lit, hn::Min(hn::MulAdd(c[a], diffuse, specular), one), c[a]);
+                                segColor[a] = hn::Min(hn::MulAdd(segColor[a], diffuse, hn::Mul(specular, alpha)), alpha);
                         }
+                    } else {
+                        // Sample the segment at its centre and classify.
+                        VF c[4];
+                        classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
+                        // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
+                        segDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
+                        alpha = opacityFromDepth(segDepth);
+                        if (F.shading) {
+                            const MF lit = hn::And(take, hn::Gt(alpha, zero));
+                            if (!hn::AllFalse(df, lit)) {
+                                VF diffuse, specular;
+                                phong(P, q, dir, diffuse, specular);
+                                for (int a = 0; a < 3; ++a)
+                                    c[a] = hn::IfThenElse(lit, hn::Min(hn::MulAdd(c[a], diffuse, specular), one), c[a]);
+                            }
+                        }
+                        for (int a = 0; a < 3; ++a) segColor[a] = c[a];
+                        weight = alpha;
                     }
-                    const VF weight = hn::Mul(T, alpha);
-                    for (int a = 0; a < 3; ++a) addCompensated(take, color[a], colorCarry[a], hn::Mul(weight, c[a]), false);
+                    const VF tw = hn::Mul(T, weight);
+                    for (int a = 0; a < 3; ++a) addCompensated(take, color[a], colorCarry[a], hn::Mul(tw, segColor[a]), false);
                     addCompensated(take, depth, depthCarry, segDepth, true);
                     // T = exp(−depth), kept by products and made exact every 16 samples.
                     VF nextT = hn::Mul(T, hn::Sub(one, alpha));

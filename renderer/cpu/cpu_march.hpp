@@ -18,6 +18,7 @@ struct Features {
     bool emptySpaceSkipping = false;
     bool shading = false;
     bool cubic = false; // prefiltered tricubic B-spline from padded coefficients
+    bool preintegrated = false;
 };
 
 struct FrameParams {
@@ -50,6 +51,13 @@ struct FrameParams {
     const float *tf = nullptr;
     float tfMin = 0, tfScale = 1;
     int tfEntries = 0;
+
+    // Pre-integration table (preintegration.hpp): N nodes, N·N·4 rgba by (back·N + front),
+    // and the uniform locator into the nodes.
+    const float *preRgba = nullptr, *preNodes = nullptr;
+    const int32_t *preLocator = nullptr;
+    int preNodeCount = 0, preLocatorSize = 0;
+    float preLocatorMin = 0, preLocatorScale = 0;
 
     // Empty-space skipping: per brick 1 if visible, as int32 so that lanes gather it.
     const int32_t *brickVisible = nullptr;

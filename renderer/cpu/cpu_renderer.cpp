@@ -2,6 +2,7 @@
 
 #include "renderer/bspline_prefilter.hpp"
 #include "renderer/cpu/cpu_march.hpp"
+#include "renderer/preintegration.hpp"
 #include "renderer/tf_table.hpp"
 
 #include <algorithm>
@@ -178,9 +179,6 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
 Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
     validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
-    if (quality.preintegrated)
-        throw std::invalid_argument("quality.preintegrated: pre-integration is not supported by the cpu device yet "
-                                    "(turn it off, or use --device opencl)");
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -205,8 +203,30 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
         std::lock_guard lock(countsMutex_);
         ++counts_.tfTables;
     }
-    st.tfTableEntries = tfEntries_;
-    st.tfTableError = tfError_;
+    if (!quality.preintegrated) {
+        st.tfTableEntries = tfEntries_;
+        st.tfTableError = tfError_;
+    }
+    if (quality.preintegrated) {
+        // Rebuilt when the transfer function or the step changes (the table holds whole steps).
+        if (!preintegration_ || !(preintegrationFor_ == tf) || preintegration_->step != step ||
+            preintegration_->opacityUnit != opacityUnit) {
+            const auto t = Clock::now();
+            // A constant volume has no range to tabulate; any range starting at its value
+            // serves, with that value exactly on the first node (as the OpenCL back end).
+            const double lo = volume_->range.min;
+            const double hi = volume_->range.max > lo ? double(volume_->range.max)
+                                                      : lo + std::max(1.0, std::fabs(lo)) * 1e-3;
+            preintegration_ = std::make_shared<PreintegrationTable>(
+                buildPreintegrationTable(tf, step, opacityUnit, lo, hi));
+            preintegrationFor_ = tf;
+            st.preintegrationSeconds = secondsSince(t);
+            std::lock_guard lock(countsMutex_);
+            ++counts_.preintegrationTables;
+        }
+        st.preintegrationNodes = int(preintegration_->nodes.size());
+        st.preintegrationError = preintegration_->maxError;
+    }
 
     const int raysWide = raysForScale(width, quality.imageScale);
     const int raysHigh = raysForScale(height, quality.imageScale);
@@ -223,6 +243,17 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     p.features.emptySpaceSkipping = quality.emptySpaceSkipping;
     p.features.shading = quality.shading;
     p.features.cubic = cubic;
+    p.features.preintegrated = quality.preintegrated;
+    if (quality.preintegrated) {
+        const PreintegrationTable &table = *preintegration_;
+        p.preRgba = table.rgba.data();
+        p.preNodes = table.nodes.data();
+        p.preLocator = table.locator.data();
+        p.preNodeCount = int(table.nodes.size());
+        p.preLocatorSize = table.locatorBuckets;
+        p.preLocatorMin = table.locatorMin;
+        p.preLocatorScale = table.locatorScale;
+    }
     set3(p.eye, camera.eye);
     set3(p.forward, rays.forward);
     set3(p.right, rays.right * rays.halfWidth());

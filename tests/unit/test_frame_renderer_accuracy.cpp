@@ -2,8 +2,8 @@
 // (value-parameterised: .../OpenCl is the OpenCL ray caster on whatever device OpenCL offers,
 // PoCL's CPU device in CI; .../Cpu is the native SIMD path), with closed forms and the
 // double-precision reference integrator as the judge. Checks that only concern one back end
-// (OpenCL build options, the cubic fetch variants, pre-integration while the CPU path lacks
-// it) stay in test_opencl_renderer.cpp and test_opencl_remedies.cpp.
+// (OpenCL build options and its two cubic fetch paths) stay in test_opencl_renderer.cpp and
+// test_opencl_remedies.cpp.
 
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/error_metrics.hpp"
@@ -30,11 +30,6 @@ std::string backendName(const testing::TestParamInfo<Backend> &info) {
 std::unique_ptr<FrameRenderer> makeRenderer(Backend b, const Volume &v) {
     if (b == Backend::Cpu) return std::make_unique<CpuRenderer>(v);
     return std::make_unique<OpenClRenderer>(test::sharedOpenClContext(), v);
-}
-
-// The switches the native path does not have yet (cpu_renderer.hpp); its tests leave them off.
-bool supports(Backend b, const Quality &q) {
-    return b == Backend::OpenCl || !q.preintegrated;
 }
 
 class FrameRendererAccuracy : public testing::TestWithParam<Backend> {
@@ -200,7 +195,6 @@ TEST_P(FrameRendererAccuracy, EmptySpaceSkippingChangesTheWorkNotTheImage) {
             Quality q = plain(0.5);
             q.interpolation = interpolation;
             q.preintegrated = preintegrated;
-            if (!supports(GetParam(), q)) continue;
             RenderStats without, with;
             const Image full = r->render(tf, cam, 32, 32, q, {}, &without);
             q.emptySpaceSkipping = true;
@@ -247,6 +241,45 @@ TEST_P(FrameRendererAccuracy, CubicBSplineMatchesTheReferenceSpline) {
     // And the back end really reconstructs the spline: trilinear is far from it on a σ = 4 blob.
     EXPECT_GT(linearError, 5 * cubicError);
     EXPECT_GT(st.coefficientSeconds, 0);
+}
+
+// A linear ramp crossed by a transfer-function spike one data unit wide: the thin slab the
+// paper's onion rings come from. Trilinear reconstruction of a linear field is exact, so the
+// value along each segment is linear and pre-integration has only its table's error.
+TEST_P(FrameRendererAccuracy, PreintegrationCatchesASpikeThatSamplingMisses) {
+    const SyntheticVolume ramp = makeLinearRamp({32, 24, 24}, {1, 1, 1}, 0, 248); // 8 units per voxel
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {99.5, 0, 0, 0, 0}, {100, 1, 0.8, 0.3, 0.9}, {100.5, 0, 0, 0, 0}};
+    const Camera cam = test::obliqueCamera(ramp.volume, 30);
+    const Image exact = reference(ramp.volume, tf, Reconstruction::Linear, cam, 32, 32, false, 1e-7);
+    const auto r = renderer(ramp.volume);
+    Quality q = plain(2);
+    const double sampledError = compareImages(r->render(tf, cam, 32, 32, q, {}), exact).rmse;
+    q.preintegrated = true;
+    RenderStats st;
+    const double preError = compareImages(r->render(tf, cam, 32, 32, q, {}, &st), exact).rmse;
+    // Each ray crosses the slab once: one or two table lookups at ≤ 1e-3 each, plus float.
+    EXPECT_LT(preError, 2e-3);
+    EXPECT_LE(st.preintegrationError, 1e-3);
+    EXPECT_GT(sampledError, 10 * preError); // step 2 (16 data units) mostly misses the spike
+}
+
+TEST_P(FrameRendererAccuracy, PreintegrationConvergesOnASmoothVolume) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const Image exact = reference(blob().volume, blobTf(), Reconstruction::Linear, cam, 32, 32);
+    const auto r = renderer(blob().volume);
+    Quality q = plain(2);
+    q.preintegrated = true;
+    const double coarse = compareImages(r->render(blobTf(), cam, 32, 32, q, {}), exact).rmse;
+    q.step = 0.5;
+    RenderStats st;
+    const double fine = compareImages(r->render(blobTf(), cam, 32, 32, q, {}, &st), exact).rmse;
+    // The value is not linear along a segment here: that error is second order in the step
+    // (measured 3.5e-3 at step 2, 1.5e-4 at 0.5). Below that the table's own error (≤ 1e-3
+    // per segment, absolute) adds up over more, fainter segments and sets the floor.
+    EXPECT_LT(fine, coarse / 8);
+    EXPECT_LT(fine, 1e-3);
+    EXPECT_LE(st.preintegrationError, 1e-3);
 }
 
 TEST_P(FrameRendererAccuracy, MipLevelsKeepAConstantBoxExact) {
@@ -327,8 +360,7 @@ TEST_P(FrameRendererAccuracy, JitteredPassesAveragedBeatOnionRings) {
 
 // Every pair of switches on together at least once: ten binary factors in six runs. Column
 // c is on in the rows of one 3-subset of {0..5} containing row 0 (ten such subsets): any two
-// share row 0 (both on), together leave a row out (both off) and differ somewhere. A back end
-// without a switch (supports()) runs the design with that column off.
+// share row 0 (both on), together leave a row out (both off) and differ somewhere.
 TEST_P(FrameRendererAccuracy, EveryPairOfSwitchesWorksTogether) {
     std::vector<std::array<int, 3>> subsets;
     for (int a = 1; a < 6; ++a)
@@ -347,7 +379,6 @@ TEST_P(FrameRendererAccuracy, EveryPairOfSwitchesWorksTogether) {
         q.jitter = on[0];
         q.preintegrated = on[1];
         q.interpolation = on[2] ? Interpolation::Cubic : Interpolation::Linear;
-        if (!supports(GetParam(), q)) q.preintegrated = on[1] = false;
         q.boundarySegment = on[3];
         q.earlyTermination = on[4] ? 0.98 : 1;
         q.emptySpaceSkipping = on[5];
@@ -395,6 +426,13 @@ TEST(CpuRenderer, DrawsTheOpenClImageToFloatRounding) {
     q.interpolation = Interpolation::Cubic;
     q.mipLevel = 0;
     cases.push_back({"cubic, shading, jitter, skipping", q, clip});
+    q.preintegrated = true;
+    q.boundarySegment = true;
+    cases.push_back({"pre-integrated cubic, shading, jitter, skipping, clip plane", q, clip});
+    q.interpolation = Interpolation::Linear;
+    q.shading = false;
+    q.step = 1.3;
+    cases.push_back({"pre-integrated at step 1.3, partial segments", q, clip});
     for (const Case &c : cases) {
         RenderStats sc, so;
         const Image a = cpu.render(blobTf(), cam, 40, 40, c.q, c.planes, &sc);
@@ -406,19 +444,6 @@ TEST(CpuRenderer, DrawsTheOpenClImageToFloatRounding) {
         EXPECT_LT(compareImages(a, b).maxAbs, 2e-5) << c.what;
         EXPECT_EQ(sc.raysHit, so.raysHit) << c.what;
         EXPECT_NEAR(sc.meanSamplesPerRay, so.meanSamplesPerRay, 1e-3 * so.meanSamplesPerRay) << c.what;
-    }
-}
-
-TEST(CpuRenderer, ASwitchItLacksIsAClearErrorNamingIt) {
-    CpuRenderer r(blob().volume);
-    const Camera cam = test::obliqueCamera(blob().volume, 30);
-    Quality q = plain(1);
-    q.preintegrated = true;
-    try {
-        r.render(blobTf(), cam, 8, 8, q, {});
-        FAIL() << "pre-integration was rendered as something else";
-    } catch (const std::invalid_argument &e) {
-        EXPECT_NE(std::string(e.what()).find("quality.preintegrated"), std::string::npos) << e.what();
     }
 }
 
@@ -449,6 +474,14 @@ TEST(CpuRenderer, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
     r.render(tf, cam, 8, 8, q, {});
     EXPECT_EQ(r.preprocessCounts().coefficientVolumes, 1);
     EXPECT_EQ(r.preprocessCounts().brickGrids, 4); // levels 0, 2 and 1, and level 1's spline
+    EXPECT_EQ(r.preprocessCounts().preintegrationTables, 0);
+    q.preintegrated = true;
+    r.render(tf, cam, 8, 8, q, {});
+    r.render(tf, cam, 8, 8, q, {});
+    EXPECT_EQ(r.preprocessCounts().preintegrationTables, 1); // same transfer function and step: reused
+    q.step = 0.7;
+    r.render(tf, cam, 8, 8, q, {});
+    EXPECT_EQ(r.preprocessCounts().preintegrationTables, 2); // the table depends on the step
 }
 
 TEST(CpuRenderer, ThreadCountDoesNotChangeTheImage) {

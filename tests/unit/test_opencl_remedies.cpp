@@ -1,17 +1,14 @@
-// The paper's remedies that only the OpenCL ray caster has so far (cubic B-spline and its two
-// fetch paths, pre-integration), measured against the double-precision reference integrator;
-// and its lazy preprocessing. The remedies both back ends have are checked against both in
-// test_frame_renderer_accuracy.cpp.
+// What only the OpenCL ray caster's remedies have: its two cubic fetch paths, and its lazy
+// preprocessing on the device. The remedies themselves are checked against the reference
+// integrator on both back ends in test_frame_renderer_accuracy.cpp.
 
 #include "renderer/error_metrics.hpp"
 #include "renderer/opencl_renderer.hpp"
-#include "renderer/reference_renderer.hpp"
 #include "renderer/synthetic.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>
 
-#include <cmath>
 
 namespace volcast {
 namespace {
@@ -30,15 +27,6 @@ TransferFunction blobTf() {
 const SyntheticVolume &blob() {
     static const SyntheticVolume v = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 4, 220);
     return v;
-}
-
-Image reference(const Volume &v, const TransferFunction &tf, Reconstruction rec, const Camera &cam, int w, int h,
-                bool shading = false, double tolerance = 1e-6) {
-    ReferenceRenderer ref(v, tf, rec);
-    ref.setShading(shading);
-    ReferenceOptions o;
-    o.tolerance = tolerance;
-    return ref.render(cam, w, h, {}, o);
 }
 
 TEST(OpenClRemedies, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
@@ -105,45 +93,6 @@ TEST(OpenClRemedies, CubicFromEightTrilinearFetchesEqualsSixtyFourTaps) {
     // PoCL filters 3-D images in float (PLATFORM.md: 1.2e-7 of a trilinear); GPUs use ~8-bit
     // weights, 1/256 of a coefficient step, which an opacity of 0.7 turns into ~1e-2.
     EXPECT_LT(compareImages(ia, ib).maxAbs, cl().isGpu() ? 2e-2 : 1e-4);
-}
-
-// A linear ramp crossed by a transfer-function spike one data unit wide: the thin slab the
-// paper's onion rings come from. Trilinear reconstruction of a linear field is exact, so the
-// value along each segment is linear and pre-integration has only its table's error.
-TEST(OpenClRemedies, PreintegrationCatchesASpikeThatSamplingMisses) {
-    const SyntheticVolume ramp = makeLinearRamp({32, 24, 24}, {1, 1, 1}, 0, 248); // 8 units per voxel
-    TransferFunction tf;
-    tf.points = {{0, 0, 0, 0, 0}, {99.5, 0, 0, 0, 0}, {100, 1, 0.8, 0.3, 0.9}, {100.5, 0, 0, 0, 0}};
-    const Camera cam = test::obliqueCamera(ramp.volume, 30);
-    const Image exact = reference(ramp.volume, tf, Reconstruction::Linear, cam, 32, 32, false, 1e-7);
-    OpenClRenderer r(cl(), ramp.volume);
-    Quality q = plain(2);
-    const double sampledError = compareImages(r.render(tf, cam, 32, 32, q, {}), exact).rmse;
-    q.preintegrated = true;
-    RenderStats st;
-    const double preError = compareImages(r.render(tf, cam, 32, 32, q, {}, &st), exact).rmse;
-    // Each ray crosses the slab once: one or two table lookups at ≤ 1e-3 each, plus float.
-    EXPECT_LT(preError, 2e-3);
-    EXPECT_LE(st.preintegrationError, 1e-3);
-    EXPECT_GT(sampledError, 10 * preError); // step 2 (16 data units) mostly misses the spike
-}
-
-TEST(OpenClRemedies, PreintegrationConvergesOnASmoothVolume) {
-    const Camera cam = test::obliqueCamera(blob().volume, 30);
-    const Image exact = reference(blob().volume, blobTf(), Reconstruction::Linear, cam, 32, 32);
-    OpenClRenderer r(cl(), blob().volume);
-    Quality q = plain(2);
-    q.preintegrated = true;
-    const double coarse = compareImages(r.render(blobTf(), cam, 32, 32, q, {}), exact).rmse;
-    q.step = 0.5;
-    RenderStats st;
-    const double fine = compareImages(r.render(blobTf(), cam, 32, 32, q, {}, &st), exact).rmse;
-    // The value is not linear along a segment here: that error is second order in the step
-    // (measured 3.5e-3 at step 2, 1.5e-4 at 0.5). Below that the table's own error (≤ 1e-3
-    // per segment, absolute) adds up over more, fainter segments and sets the floor.
-    EXPECT_LT(fine, coarse / 8);
-    EXPECT_LT(fine, 1e-3);
-    EXPECT_LE(st.preintegrationError, 1e-3);
 }
 
 } // namespace
