@@ -225,6 +225,79 @@ void preintegratedSegment(const FrameParams &P, VF sf, VF sb, VF out[4]) {
     }
 }
 
+// The incremental brick walk (DDA) over the 8³ brick grid, per lane: the brick holding the
+// point the ray has reached, whether the transfer function leaves it visible, and the t at
+// which the ray crosses each of its walls. Moving on costs a comparison per segment and a
+// division per brick crossed, instead of recomputing the brick and its exit per segment.
+// A point reached within float rounding of a wall may be put in either brick: harmless, as
+// each brick's value range covers half a voxel beyond its box (minmax_bricks.hpp, border).
+struct BrickWalk {
+    VI b[3];
+    VF wall[3]; // t where the ray leaves the brick across its wall on each axis (inf if parallel)
+    MF visible;
+
+    BrickWalk() : visible(hn::FirstN(DF(), 0)) {
+        for (int a = 0; a < 3; ++a) {
+            b[a] = hn::Zero(DI());
+            wall[a] = hn::Set(DF(), kInf);
+        }
+    }
+
+    VF wallAt(const FrameParams &P, const VF q0[3], const VF dq[3], int a) const {
+        const DF df;
+        const float B = float(P.brickSize);
+        const VF lo = hn::Sub(hn::Mul(hn::ConvertTo(df, b[a]), hn::Set(df, B)), hn::Set(df, 0.5f));
+        const VF w = hn::IfThenElse(hn::Gt(dq[a], hn::Zero(df)), hn::Add(lo, hn::Set(df, B)), lo);
+        return hn::IfThenElse(hn::Ne(dq[a], hn::Zero(df)), hn::Div(hn::Sub(w, q0[a]), dq[a]), hn::Set(df, kInf));
+    }
+    void lookUp(const FrameParams &P, MF lanes) {
+        const DI di;
+        VI c[3];
+        for (int a = 0; a < 3; ++a) c[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
+        const VI brick =
+            hn::Add(hn::Mul(hn::Add(hn::Mul(c[2], hn::Set(di, P.bricks[1])), c[1]), hn::Set(di, P.bricks[0])), c[0]);
+        const VI flag = hn::GatherIndex(di, P.brickVisible, brick); // clamped: valid in every lane
+        const MF now = hn::RebindMask(DF(), hn::Ne(flag, hn::Zero(di)));
+        visible = hn::Or(hn::And(lanes, now), hn::AndNot(lanes, visible));
+    }
+    // The brick of q(t) for the ray entering at t.
+    void start(const FrameParams &P, const VF q0[3], const VF dq[3], VF t, MF lanes) {
+        const DF df;
+        const DI di;
+        const VF inverseB = hn::Set(df, 1.0f / float(P.brickSize));
+        for (int a = 0; a < 3; ++a) {
+            const VF q = hn::MulAdd(t, dq[a], q0[a]);
+            b[a] = hn::ConvertTo(di, hn::Floor(hn::Mul(hn::Add(q, hn::Set(df, 0.5f)), inverseB)));
+            b[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
+            wall[a] = wallAt(P, q0, dq, a);
+        }
+        visible = hn::FirstN(df, 0);
+        lookUp(P, lanes);
+    }
+    VF exit() const { return hn::Min(wall[0], hn::Min(wall[1], wall[2])); }
+    // Moves the lanes of `lanes` on to the brick holding q(t), t not before where they are.
+    void advance(const FrameParams &P, const VF q0[3], const VF dq[3], VF t, MF lanes) {
+        const DF df;
+        const DI di;
+        MF moved = hn::FirstN(df, 0);
+        for (;;) {
+            const VF first = exit();
+            const MF move = hn::And(lanes, hn::Ge(t, first));
+            if (hn::AllFalse(df, move)) break;
+            moved = hn::Or(moved, move);
+            MF done = hn::FirstN(df, 0);
+            for (int a = 0; a < 3; ++a) {
+                const MF here = hn::AndNot(done, hn::And(move, hn::Eq(wall[a], first)));
+                done = hn::Or(done, here);
+                const VI stepA = hn::IfThenElse(hn::RebindMask(di, hn::Gt(dq[a], hn::Zero(df))), hn::Set(di, 1), hn::Set(di, -1));
+                b[a] = hn::IfThenElse(hn::RebindMask(di, here), hn::Add(b[a], stepA), b[a]);
+                wall[a] = hn::IfThenElse(here, wallAt(P, q0, dq, a), wall[a]);
+            }
+        }
+        if (!hn::AllFalse(df, moved)) lookUp(P, moved);
+    }
+};
+
 // 1 − exp(−x): the kernel's Taylor polynomial below 1/2, exp above.
 VF opacityFromDepth(VF x) {
     const DF df;
@@ -323,7 +396,10 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
             MF alive = hn::RebindMask(df, hn::Ne(hn::Load(di, hita), hn::Zero(di)));
 
             VF k = hn::IfThenElse(hn::Gt(j, zero), zero, one); // the first boundary past t0
-            VF segStart = t0, visibleUntil = t0;
+            VF segStart = t0;
+            BrickWalk walk;
+            if (F.emptySpaceSkipping) walk.start(P, q0, dq, t0, alive);
+            MF sfStale = hn::Not(alive); // pre-integration: sf must be sampled at segStart first
             VF depth = zero, depthCarry = zero, T = one;
             VF color[3] = {zero, zero, zero}, colorCarry[3] = {zero, zero, zero};
             VI samples = hn::Zero(di);
@@ -332,56 +408,40 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                 sf = sampleVolume(P, hn::MulAdd(t0, dq[0], q0[0]), hn::MulAdd(t0, dq[1], q0[1]),
                                   hn::MulAdd(t0, dq[2], q0[2]));
             while (!hn::AllFalse(df, alive)) {
-                if (F.emptySpaceSkipping) {
-                    const MF entering = hn::And(alive, hn::Ge(segStart, visibleUntil));
-                    if (!hn::AllFalse(df, entering)) {
-                        // The brick holding q just past segStart, whether it is visible, and
-                        // where the ray leaves it (raycast.cl's brickExit).
-                        const VF t = hn::Add(segStart, hn::Set(df, 1e-3f * P.step));
-                        const float B = float(P.brickSize);
-                        VI b[3];
-                        VF exit = hn::Set(df, kInf);
-                        for (int a = 0; a < 3; ++a) {
-                            const VF q = hn::MulAdd(t, dq[a], q0[a]);
-                            b[a] = hn::ConvertTo(di, hn::Floor(hn::Div(hn::Add(q, hn::Set(df, 0.5f)), hn::Set(df, B))));
-                            b[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
-                            const VF lo = hn::Sub(hn::Mul(hn::ConvertTo(df, b[a]), hn::Set(df, B)), hn::Set(df, 0.5f));
-                            const VF hi = hn::Add(lo, hn::Set(df, B));
-                            const VF wall = hn::IfThenElse(hn::Gt(dq[a], zero), hi, lo);
-                            const VF at = hn::Div(hn::Sub(wall, q0[a]), dq[a]);
-                            exit = hn::IfThenElse(hn::Ne(dq[a], zero), hn::Min(exit, at), exit);
-                        }
-                        const VI brick = hn::Add(
-                            hn::Mul(hn::Add(hn::Mul(b[2], hn::Set(di, P.bricks[1])), b[1]), hn::Set(di, P.bricks[0])), b[0]);
-                        const MF visible = hn::RebindMask(df, hn::Ne(hn::GatherIndex(di, P.brickVisible, brick), hn::Zero(di)));
-                        const MF keep = hn::And(entering, hn::Or(visible, hn::Not(hn::Gt(exit, segStart))));
-                        visibleUntil = hn::IfThenElse(keep, hn::Max(exit, segStart), visibleUntil);
-                        const MF skip = hn::AndNot(keep, entering);
-                        if (!hn::AllFalse(df, skip)) {
-                            // Last boundary t0 + (k' + j)·d at or before the exit.
-                            const VF kLast = hn::Floor(hn::Sub(hn::Div(hn::Sub(hn::Min(exit, t1), t0), d), j));
-                            const MF jump = hn::And(skip, hn::Ge(kLast, k));
-                            HWY_ALIGN float jumped[kMaxLanes];
-                            hn::Store(hn::IfThenElseZero(jump, hn::Add(hn::Sub(kLast, k), one)), df, jumped);
-                            for (int l = 0; l < lanes; ++l) skippedTotal += uint64_t(jumped[l]);
-                            k = hn::IfThenElse(jump, hn::Add(kLast, one), k);
-                            segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(kLast, j), d, t0), segStart);
-                            if (F.preintegrated)
-                                sf = hn::IfThenElse(jump, sampleVolume(P, hn::MulAdd(segStart, dq[0], q0[0]),
-                                                                       hn::MulAdd(segStart, dq[1], q0[1]),
-                                                                       hn::MulAdd(segStart, dq[2], q0[2])),
-                                                    sf);
-                            visibleUntil = hn::IfThenElse(skip, segStart, visibleUntil); // look again from here
-                        }
-                    }
-                }
                 const VF boundary = hn::MulAdd(hn::Add(k, j), d, t0);
                 const VF segEnd = hn::Min(boundary, t1);
                 const VF len = hn::Sub(segEnd, segStart);
+                const VF tMid = hn::MulAdd(hn::Set(df, 0.5f), len, segStart);
                 MF take = hn::And(alive, hn::Gt(len, zero));
                 // A partial segment: the first one under jitter, or the last at the exit.
                 const MF partial = hn::Or(hn::Gt(boundary, t1), hn::Eq(k, zero));
                 if (!F.boundarySegment) take = hn::AndNot(partial, take);
+                // Empty-space skipping by sample position: a segment is not taken when the
+                // point that decides it lies in a brick the transfer function makes empty. A
+                // sampled segment is decided by its sample (its centre): there it would
+                // classify to opacity 0 and add nothing. A pre-integrated one reads the values
+                // at both ends and everything between, so it is skipped only when the whole
+                // segment lies in the empty brick (both ends before the brick's exit).
+                MF skipped = hn::FirstN(df, 0);
+                VF jumpTo = zero; // last segment, from k, that lies in the empty brick too
+                if (F.emptySpaceSkipping) {
+                    walk.advance(P, q0, dq, F.preintegrated ? segStart : tMid, take);
+                    const VF exit = walk.exit();
+                    skipped = hn::AndNot(walk.visible, take);
+                    if (F.preintegrated) skipped = hn::And(skipped, hn::Le(segEnd, exit));
+                    if (!hn::AllFalse(df, skipped)) {
+                        take = hn::AndNot(skipped, take);
+                        sfStale = hn::Or(sfStale, skipped);
+                        // Later full segments k' whose deciding point (centre t0 + (k' + j − ½)·d,
+                        // or end t0 + (k' + j)·d) is before the exit, one fewer for rounding, and
+                        // ending before t1: skipped at once instead of one per iteration.
+                        const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, t0), d), j),
+                                                                    hn::Set(df, F.preintegrated ? 0.0f : 0.5f))),
+                                                  one);
+                        const VF byEnd = hn::Sub(hn::Floor(hn::Sub(hn::Div(hn::Sub(t1, t0), d), j)), one);
+                        jumpTo = hn::IfThenElse(skipped, hn::Min(byExit, byEnd), zero);
+                    }
+                }
                 if (!hn::AllFalse(df, take)) {
                     const MF truncated =
                         hn::AndNot(hn::RebindMask(df, hn::Lt(samples, hn::Set(di, P.maxSamples))), take);
@@ -391,7 +451,16 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                         take = hn::AndNot(truncated, take);
                     }
                     samples = hn::Add(samples, hn::IfThenElseZero(hn::RebindMask(di, take), hn::Set(di, 1)));
-                    const VF tMid = hn::MulAdd(hn::Set(df, 0.5f), len, segStart);
+                    if (F.preintegrated) {
+                        const MF fresh = hn::And(take, sfStale);
+                        if (!hn::AllFalse(df, fresh)) {
+                            sf = hn::IfThenElse(fresh, sampleVolume(P, hn::MulAdd(segStart, dq[0], q0[0]),
+                                                                    hn::MulAdd(segStart, dq[1], q0[1]),
+                                                                    hn::MulAdd(segStart, dq[2], q0[2])),
+                                                sf);
+                            sfStale = hn::AndNot(fresh, sfStale);
+                        }
+                    }
                     const VF q[3] = {hn::MulAdd(tMid, dq[0], q0[0]), hn::MulAdd(tMid, dq[1], q0[1]),
                                      hn::MulAdd(tMid, dq[2], q0[2])};
                     // Contribution T·weight·segColor: weight is alpha for a sampled segment
@@ -478,6 +547,17 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                 alive = hn::AndNot(hn::Ge(boundary, t1), alive);
                 segStart = hn::IfThenElse(alive, segEnd, segStart);
                 k = hn::IfThenElse(alive, hn::Add(k, one), k);
+                if (F.emptySpaceSkipping && !hn::AllFalse(df, skipped)) {
+                    // Segments k … jumpTo are skipped; the next to look at is jumpTo + 1.
+                    const MF jump = hn::And(alive, hn::Ge(jumpTo, k));
+                    HWY_ALIGN float count[kMaxLanes];
+                    hn::Store(hn::IfThenElse(jump, hn::Add(hn::Sub(jumpTo, k), hn::Set(df, 2.0f)),
+                                             hn::IfThenElseZero(skipped, one)),
+                              df, count);
+                    for (int l = 0; l < lanes; ++l) skippedTotal += uint64_t(count[l]);
+                    segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(jumpTo, j), d, t0), segStart);
+                    k = hn::IfThenElse(jump, hn::Add(jumpTo, one), k);
+                }
             }
 
             for (int a = 0; a < 3; ++a) hn::Store(hn::Sub(color[a], colorCarry[a]), df, outa[a]);

@@ -16,6 +16,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 
 namespace volcast {
@@ -445,6 +446,49 @@ TEST(CpuRenderer, DrawsTheOpenClImageToFloatRounding) {
         EXPECT_EQ(sc.raysHit, so.raysHit) << c.what;
         EXPECT_NEAR(sc.meanSamplesPerRay, so.meanSamplesPerRay, 1e-3 * so.meanSamplesPerRay) << c.what;
     }
+}
+
+// The native path skips by sample position (a segment whose sample lies in an empty brick is
+// not taken; a pre-integrated one when it lies wholly in one), the OpenCL kernel per segment
+// (only segments wholly inside an empty brick): the native path takes fewer samples, and every
+// segment it leaves out would have added exactly 0, so the image is the one without skipping
+// and the kernel's, to float rounding. Every segment is either taken or counted as skipped.
+TEST(CpuRenderer, SkipsBySamplePositionFewerSamplesSameImage) {
+    const SyntheticVolume sphere = makeSphere({48, 40, 44}, {1, 1, 1.2}, 9, 2, 200);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {60, 0, 0, 0, 0}, {120, 1, 0.6, 0.3, 0.3}, {200, 1, 1, 1, 0.5}};
+    const Camera cam = test::obliqueCamera(sphere.volume, 40);
+    CpuRenderer cpu(sphere.volume);
+    OpenClRenderer ocl(test::sharedOpenClContext(), sphere.volume);
+    for (bool preintegrated : {false, true})
+        for (bool jitter : {false, true}) {
+            Quality q = plain(0.7);
+            q.preintegrated = preintegrated;
+            q.jitter = jitter;
+            RenderStats none, byPosition, perSegment;
+            const Image full = cpu.render(tf, cam, 40, 40, q, {}, &none);
+            q.emptySpaceSkipping = true;
+            const Image a = cpu.render(tf, cam, 40, 40, q, {}, &byPosition);
+            const Image b = ocl.render(tf, cam, 40, 40, q, {}, &perSegment);
+            const std::string what = std::string(preintegrated ? "pre-integrated" : "sampled") + (jitter ? ", jitter" : "");
+            // Float rounding, as in DrawsTheOpenClImageToFloatRounding (2e-5); a segment
+            // wrongly skipped at the sphere's edge (opacity ≥ 0.05 there) would be ≥ 1e-3.
+            EXPECT_LT(compareImages(a, full).maxAbs, 2e-5) << what;
+            EXPECT_LT(compareImages(a, b).maxAbs, 2e-5) << what;
+            const auto count = [](double perRay, const RenderStats &s) { return std::llround(perRay * double(s.raysHit)); };
+            EXPECT_EQ(count(byPosition.meanSamplesPerRay, byPosition) + count(byPosition.skippedSegmentsPerRay, byPosition),
+                      count(none.meanSamplesPerRay, none))
+                << what << ": taken + skipped must be every segment";
+            if (preintegrated) {
+                EXPECT_LE(byPosition.meanSamplesPerRay, perSegment.meanSamplesPerRay) << what;
+            } else {
+                // Each empty brick the ray enters costs the kernel the segment that straddles
+                // into it; with bricks of 8 voxels and a step of 0.7 that is several percent.
+                EXPECT_LT(byPosition.meanSamplesPerRay, 0.97 * perSegment.meanSamplesPerRay) << what;
+            }
+            std::printf("%s: samples per ray %.2f by position, %.2f per segment (OpenCL), %.2f without skipping\n",
+                        what.c_str(), byPosition.meanSamplesPerRay, perSegment.meanSamplesPerRay, none.meanSamplesPerRay);
+        }
 }
 
 TEST(CpuRenderer, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
