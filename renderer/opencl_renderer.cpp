@@ -16,6 +16,7 @@
 namespace volcast {
 
 static_assert(sizeof(RayCastParams) == 352, "RayCastParams must match the kernel's layout");
+static_assert(VC_MAX_CLIP_PLANES == FrameRenderer::kMaxClipPlanes);
 
 namespace {
 
@@ -93,6 +94,8 @@ std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) c
     if (q.shading) o += " -DSHADING";
     return o.empty() ? o : o.substr(1);
 }
+
+std::string OpenClRenderer::description() const { return "opencl: " + cl_.deviceName(); }
 
 PreprocessCounts OpenClRenderer::preprocessCounts() const {
     std::lock_guard lock(countsMutex_);
@@ -202,19 +205,7 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
 
 Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                              const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
-    camera.validate();
-    tf.validate();
-    validateImageSize(width, height); // before anything is allocated
-    if (clipPlanes.size() > VC_MAX_CLIP_PLANES)
-        throw std::invalid_argument("clip_planes: at most " + std::to_string(VC_MAX_CLIP_PLANES) + " are supported");
-    for (size_t c = 0; c < clipPlanes.size(); ++c)
-        if (!(length(clipPlanes[c].normal) > 0))
-            throw std::invalid_argument("clip_planes[" + std::to_string(c) + "].normal: zero length");
-    if (quality.mipLevel < 0 || quality.mipLevel > pyramid_.maxLevel())
-        throw std::invalid_argument("quality.mip_level: " + std::to_string(quality.mipLevel) + " is outside 0…" +
-                                    std::to_string(pyramid_.maxLevel()) + " for volume " + volume_->name);
-    if (!(quality.imageScale > 0 && quality.imageScale <= 1))
-        throw std::invalid_argument("quality.image_scale: must be in (0, 1]");
+    validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -227,21 +218,7 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     if (quality.emptySpaceSkipping) classify(data, tf, st);
 
     const double smallest = minComponent(volume_->spacing);
-    double step = quality.step * smallest;
-    // A step so short that a ray across the whole volume would take more than
-    // kMaxSamplesPerRay segments is raised to the shortest that does not (the 16 spare cover
-    // a jittered first segment and rounding). Rays are then never cut off by the kernel's
-    // bound, which would drop the back of the volume from the image, and a frame costs at most
-    // rays × kMaxSamplesPerRay samples; the step used is reported and logged.
-    const double shortestStep = length(volume_->extent()) / (kMaxSamplesPerRay - 16);
-    if (step < shortestStep) {
-        spdlog::warn("{}: quality.step {:g} voxels would take more than {} samples per ray across the volume; "
-                     "using {:g} voxels",
-                     volume_->name, quality.step, kMaxSamplesPerRay, shortestStep / smallest);
-        step = shortestStep;
-        st.stepRaised = true;
-    }
-    st.stepUsed = step / smallest;
+    const double step = frameStep(*volume_, quality, st);
     const double opacityUnit = tf.opacityUnit ? *tf.opacityUnit : smallest;
     if (quality.preintegrated) {
         if (!preintegration_ || !(preintegration_->tf == tf) || preintegration_->step != step ||
@@ -295,8 +272,8 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     }
 
     // Fewer rays for image_scale < 1, on the full image's plane, then upsampled.
-    const int raysWide = std::max(1, int(std::lround(width * quality.imageScale)));
-    const int raysHigh = std::max(1, int(std::lround(height * quality.imageScale)));
+    const int raysWide = raysForScale(width, quality.imageScale);
+    const int raysHigh = raysForScale(height, quality.imageScale);
     st.raysWide = raysWide;
     st.raysHigh = raysHigh;
     // Camera frame exactly as RayGenerator builds it, so both renderers cast the same rays.

@@ -208,7 +208,7 @@ bool RenderScheduler::stale(const Work &work) {
 void RenderScheduler::render(const Work &work) {
     const ViewJob &job = *work.job;
     const Level &level = job.ladder[size_t(work.level)];
-    OpenClRenderer &renderer = *job.volume->renderer;
+    FrameRenderer &renderer = *job.volume->renderer;
     const bool firstOfView = [&] {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(work.slot);
