@@ -25,7 +25,7 @@ double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(
 cl_float4 f4(const Vec3d &v, double w = 0) { return {{float(v.x), float(v.y), float(v.z), float(w)}}; }
 
 // Work-group edge: one fixed size, so PoCL compiles one launch configuration per program
-// (a new size costs it 0.25–2 s, PLATFORM.md) and the global size is rounded up to it.
+// (a new size costs it 0.25–2 s, docs/platform.md) and the global size is rounded up to it.
 constexpr size_t kGroupEdge = 8;
 size_t roundUp(int n) { return (size_t(n) + kGroupEdge - 1) / kGroupEdge * kGroupEdge; }
 

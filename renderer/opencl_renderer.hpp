@@ -59,7 +59,7 @@ struct PreprocessCounts {
 
 // Where the tricubic B-spline reads its 64 coefficients from: a buffer, tap by tap, or a
 // 3-D image, as 8 trilinear fetches (Sigg and Hadwiger). Auto: images on GPUs, whose
-// texture units filter for free (with ~8-bit weights), buffers elsewhere (PLATFORM.md).
+// texture units filter for free (with ~8-bit weights), buffers elsewhere (docs/platform.md).
 enum class CubicFetch { Auto, Taps64, Trilinear8 };
 
 struct OpenClRendererOptions {

@@ -30,7 +30,7 @@ nlohmann::json finiteOrNull(double x) { return std::isfinite(x) ? nlohmann::json
 } // namespace
 
 int main(int argc, char **argv) {
-    CLI::App app{"Render a volcast scene file (DESIGN.md's scene contract) to an image."};
+    CLI::App app{"Render a volcast scene file (docs/design.md's scene contract) to an image."};
     std::string scenePath, outPath, comparePath, errorImagePath;
     bool reference = false, analytic = false;
     double tolerance = 1e-7;

@@ -1,6 +1,6 @@
 #pragma once
 // Accepts TCP connections (Beast advanced_server's listener); each gets its own strand,
-// TCP_NODELAY (PLATFORM.md: without it every frame waits ~40 ms for a delayed ACK) and an
+// TCP_NODELAY (docs/platform.md: without it every frame waits ~40 ms for a delayed ACK) and an
 // HttpSession.
 
 #include "server/shared_state.hpp"

@@ -1,5 +1,5 @@
 // Error against run time: every configuration at every step, its median frame time next to
-// its error against the exact reference (DESIGN.md: RMSE over premultiplied RGBA, PSNR), on
+// its error against the exact reference (docs/design.md: RMSE over premultiplied RGBA, PSNR), on
 // real scans, with the Pareto front (no other point both faster and more accurate) marked.
 
 #include "renderer/error_metrics.hpp"

@@ -2,7 +2,7 @@
 """Before/after pictures of the paper's three artifacts on real scans, and a per-switch table.
 
 Follows ../shared/seed/common-artifacts-in-volume-rendering.md and the quality switches of
-../shared/DESIGN.md ("Quality and the remedies"):
+docs/design.md ("Quality and the remedies"):
 
   onion rings      engine, a narrow strong opacity peak, step 2: plain / jitter / pre-integrated
   stars            aneurism, thin vessels seen very close, step 0.25: linear / cubic
@@ -175,7 +175,7 @@ class Runner:
         self.calls = 0
 
     def volume(self, name):
-        """A scan's path relative to the scene folder, as DESIGN.md's scene file resolves it."""
+        """A scan's path relative to the scene folder, as docs/design.md's scene file resolves it."""
         path = self.data_dir / f"{name}.nhdr"
         if not path.is_file():
             sys.exit(f"remedies.py: {path} not found (give the shared volumes folder with --data-dir)")

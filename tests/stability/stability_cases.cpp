@@ -189,7 +189,7 @@ Camera oblique(const Volume &v, Vec3d offset, double fovYDeg) {
 
 Volume constantBox(Vec3i dims, Vec3d spacing = {1, 1, 1}) { return makeConstantBox(dims, spacing, 1).volume; }
 
-// The ray's interval inside an axis-aligned volume's cell-extent box (closed, DESIGN.md) and
+// The ray's interval inside an axis-aligned volume's cell-extent box (closed, docs/design.md) and
 // the clip half-spaces, in double: the closed forms' chord. Empty: t1 ≤ t0.
 struct Interval {
     double t0 = 0, t1 = 0;

@@ -14,7 +14,7 @@ namespace {
 
 using json = nlohmann::json;
 
-// The example of DESIGN.md's "Scene file", verbatim.
+// The example of docs/design.md's "Scene file", verbatim.
 constexpr const char *kExample = R"({
   "volume": "data/head.nhdr",
   "transfer_function": {
