@@ -14,7 +14,7 @@ namespace volcast::bench {
 
 struct StudyOptions {
     std::filesystem::path out = "out/bench";
-    std::filesystem::path data;        // the real scans (../shared/data/volumes)
+    std::filesystem::path data;        // the real scans (VOLCAST_DATA_DIR, tests/README.md)
     RepeatOptions repeat{0, 5, 20};    // warm-up is a small frame of its own, see warmUp()
     bool quick = false;                // tiny sizes: checks the command works, times nothing
     std::vector<std::string> volumes = {"small", "tooth", "large"}; // Table 1's volumes
