@@ -7,7 +7,7 @@
 #include "renderer/scene.hpp"
 #include "renderer/synthetic.hpp"
 #include "renderer/volume_io.hpp"
-#include "tests/unit/test_scenes.hpp"
+#include "tests/renderer/test_scenes.hpp"
 
 #include <algorithm>
 #include <chrono>

@@ -1,7 +1,7 @@
-// Issue 4: numerical stability on stiff and extreme cases. The cases live in
+// Numerical stability on stiff and extreme cases. The cases live in
 // tests/stability/stability_cases.cpp, shared with volcast-stability, which prints the same
-// rows as the README's "Numerical stability" table; here each case is one test, and every
-// row must stay within its bound with no NaN or Inf in any output.
+// rows as docs/accuracy.md's "Numerical stability" table; here each case is one test, and
+// every row must stay within its bound with no NaN or Inf in any output.
 
 #include "tests/stability/stability_cases.hpp"
 #include "test_scenes.hpp"
@@ -11,9 +11,9 @@
 namespace volcast {
 namespace {
 
-class Stability : public ::testing::TestWithParam<size_t> {};
+class NumericalStability : public ::testing::TestWithParam<size_t> {};
 
-TEST_P(Stability, StaysWithinItsBoundsWithoutNaNOrInf) {
+TEST_P(NumericalStability, StaysWithinItsBoundsWithoutNaNOrInf) {
     const stability::Case &c = stability::cases()[GetParam()];
     const std::vector<stability::Row> rows = c.run(test::sharedOpenClContext());
     ASSERT_FALSE(rows.empty());
@@ -27,7 +27,7 @@ TEST_P(Stability, StaysWithinItsBoundsWithoutNaNOrInf) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Issue4, Stability, ::testing::Range(size_t(0), stability::cases().size()),
+INSTANTIATE_TEST_SUITE_P(StiffAndExtremeCases, NumericalStability, ::testing::Range(size_t(0), stability::cases().size()),
                          [](const ::testing::TestParamInfo<size_t> &param) { return stability::cases()[param.param].id; });
 
 } // namespace
