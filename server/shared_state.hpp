@@ -4,7 +4,7 @@
 // open WebSocket sessions (to refuse past max_sessions and to close them all at shutdown).
 
 #include "protocol/server_messages.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "server/config.hpp"
 #include "server/metrics.hpp"
 #include "server/render_scheduler.hpp"

@@ -3,7 +3,7 @@
 // ran on, the peers' camera and transfer function, and the files a study writes.
 
 #include "renderer/camera.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "renderer/transfer_function.hpp"
 #include "renderer/volume.hpp"
 

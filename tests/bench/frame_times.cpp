@@ -3,8 +3,8 @@
 // (kernel, read-back to the host, and any upsampling: what a server pays before encoding).
 
 #include "renderer/image.hpp"
-#include "renderer/opencl_renderer.hpp"
-#include "renderer/volume_io.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
+#include "renderer/io/volume_io.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"
 #include "tests/bench/svg_plot.hpp"

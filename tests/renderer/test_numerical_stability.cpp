@@ -4,6 +4,7 @@
 // every row must stay within its bound with no NaN or Inf in any output.
 
 #include "tests/stability/stability_cases.hpp"
+#include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>

@@ -1,7 +1,8 @@
 // OpenClContext's program cache: a program is reused only for the same source and the same
 // build options, never for another source that happens to share the options.
 
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
+#include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>

@@ -3,9 +3,10 @@
 // second to build, so the tests share one context and few combinations.
 
 #include "renderer/error_metrics.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/synthetic.hpp"
+#include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>

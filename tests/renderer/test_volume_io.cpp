@@ -1,7 +1,7 @@
-// Tests of the volume loader (renderer/volume_io.cpp): the real scans of MANIFEST.md, every
+// Tests of the volume loader (renderer/io/volume_io.cpp): the real scans of MANIFEST.md, every
 // format and voxel type written by the test itself, damaged files, and the NaN/Inf policy.
 
-#include "renderer/volume_io.hpp"
+#include "renderer/io/volume_io.hpp"
 
 #include <gtest/gtest.h>
 #include <zlib.h>

@@ -8,7 +8,7 @@
 // command that prints docs/accuracy.md's "Numerical stability" table, run this same code, so
 // the table shows what the tests check.
 
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 
 #include <cstddef>
 #include <functional>

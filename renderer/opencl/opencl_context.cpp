@@ -1,4 +1,4 @@
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 
 #include <algorithm>
 #include <chrono>

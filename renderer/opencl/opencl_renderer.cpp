@@ -1,10 +1,10 @@
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 
 #include "renderer/bspline_prefilter.hpp"
-#include "renderer/bspline_prefilter_opencl.hpp"
+#include "renderer/opencl/bspline_prefilter_opencl.hpp"
 #include "renderer/camera.hpp"
-#include "renderer/embedded_kernels.hpp"
-#include "renderer/kernels/raycast_shared.h"
+#include "renderer/opencl/embedded_kernels.hpp"
+#include "renderer/opencl/kernels/raycast_shared.h"
 #include "renderer/preintegration.hpp"
 #include "renderer/tf_table.hpp"
 

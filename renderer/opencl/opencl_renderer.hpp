@@ -9,7 +9,7 @@
 #include "renderer/image.hpp"
 #include "renderer/minmax_bricks.hpp"
 #include "renderer/mip_pyramid.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/volume.hpp"
 

@@ -4,10 +4,10 @@
 
 #include "renderer/error_metrics.hpp"
 #include "renderer/image.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/scene.hpp"
-#include "renderer/volume_source.hpp"
+#include "renderer/io/volume_source.hpp"
 
 #include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>

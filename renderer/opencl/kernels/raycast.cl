@@ -12,7 +12,7 @@
  *   SHADING              gradient Phong lighting with a headlight
  */
 #ifndef VOLCAST_EMBEDDED
-#include "../phong_constants.h"
+#include "../../phong_constants.h"
 #include "raycast_shared.h"
 #endif
 
