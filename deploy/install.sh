@@ -23,8 +23,15 @@ packages=(
   # Web client tests: Debian's Chromium driven by playwright-core
   chromium
   # Container tests: podman with runc and netavark's bridge network (iptables),
-  # podman-compose, debootstrap for the base image (no registry is reachable), curl
-  podman runc netavark iptables podman-compose debootstrap curl
+  # podman-compose, debootstrap for the base image (no registry is reachable), curl.
+  # podman's recommended packages are not installed (--no-install-recommends), so the ones
+  # the tests use are named here: catatonit is the pause binary of every pod
+  # (`podman kube play` fails without it).
+  podman runc netavark iptables podman-compose debootstrap curl catatonit
+  # Vectorised CPU ray casting: Highway's SIMD headers
+  libhwy-dev
+  # Fuzzing the parsers: clang with libFuzzer and its sanitizers
+  clang-14 libfuzzer-14-dev
 )
 # Node.js and npm only where the machine has none: a machine may already carry a newer Node.js
 # (NodeSource's, which bundles npm), and Debian's npm package conflicts with it.

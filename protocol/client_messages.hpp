@@ -1,7 +1,7 @@
 #pragma once
 // Client -> server messages: one JSON text message each, {"type": ..., "id": ..., fields}.
 // protocol/README.md documents every field. Scene pieces (camera, transfer function,
-// image size, quality switches, clip planes) travel in exactly the JSON form of DESIGN.md's
+// image size, quality switches, clip planes) travel in exactly the JSON form of docs/design.md's
 // scene file, under the same keys, so a session's state can be saved as a scene file. Here
 // only their JSON kind is checked (camera must be an object, ...): their detailed checks
 // belong to renderer/scene.cpp's parseScene, which the server runs on the assembled scene.

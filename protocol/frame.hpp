@@ -34,7 +34,7 @@ enum class Codec {
 std::string_view codecName(Codec codec);
 
 // The server's estimate of the frame's error: RMSE over premultiplied RGBA in [0, 1]
-// against the exact image (DESIGN.md's error), and how it was estimated:
+// against the exact image (docs/design.md's error), and how it was estimated:
 //   "rmse_vs_next_level"       measured against the next refined level of the same view
 //   "calibrated_vs_reference"  predicted from this level's measured error against the
 //                              reference integrator on this volume and transfer function

@@ -100,7 +100,7 @@ struct StateMessage {
     static constexpr std::string_view kType = "state";
     RequestId id;
     std::optional<VolumeInfo> volume;   // the open volume, nullopt before open_volume
-    // DESIGN.md's scene-file form ("volume", "transfer_function", "camera", "image",
+    // docs/design.md's scene-file form ("volume", "transfer_function", "camera", "image",
     // "quality", "clip_planes"); keys not set yet are absent. Saved as is, it is a scene file
     // for volcast-render (with "volume" the name in the server's data folders).
     nlohmann::json scene = nlohmann::json::object();

@@ -1,5 +1,5 @@
 #pragma once
-// Camera of DESIGN.md: eye, target, up; perspective (full vertical angle) or orthographic
+// Camera of docs/design.md: eye, target, up; perspective (full vertical angle) or orthographic
 // (full view height in world units). Image x = forward × up, y up, pixel centres sampled,
 // row 0 at the top.
 

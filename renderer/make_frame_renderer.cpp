@@ -1,7 +1,7 @@
 #include "renderer/make_frame_renderer.hpp"
 
 #include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 
 #include <stdexcept>
 

@@ -1,5 +1,5 @@
 #pragma once
-// Min-max brick grid for empty-space skipping (DESIGN.md `empty_space_skipping`; Open VKL's
+// Min-max brick grid for empty-space skipping (docs/design.md `empty_space_skipping`; Open VKL's
 // value ranges). The grid is built once per data array; classifying it against a transfer
 // function is the cheap step redone on every transfer-function change.
 //

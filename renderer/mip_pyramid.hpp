@@ -1,5 +1,5 @@
 #pragma once
-// Mip pyramid of a volume (DESIGN.md `mip_level`): coarser data for interactive frames,
+// Mip pyramid of a volume (docs/design.md `mip_level`): coarser data for interactive frames,
 // each level built on first request and cached.
 //
 // Level L + 1 averages 2×2×2 blocks of level L; on an odd axis the last block repeats the

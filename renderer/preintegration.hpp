@@ -1,5 +1,5 @@
 #pragma once
-// Pre-integration (Engel, Kraus & Ertl 2001; the `preintegrated` switch of DESIGN.md).
+// Pre-integration (Engel, Kraus & Ertl 2001; the `preintegrated` switch of docs/design.md).
 //
 // A ray segment of length `step` whose reconstructed value goes linearly from sf (front)
 // to sb (back) has an emission–absorption integral that depends only on (sf, sb): the

@@ -1,6 +1,6 @@
 #pragma once
 // Continuous reconstruction of a volume in double precision, in index space, with the
-// clamp-to-edge rule of DESIGN.md: coordinates are clamped to [0, n − 1] per axis before
+// clamp-to-edge rule of docs/design.md: coordinates are clamped to [0, n − 1] per axis before
 // interpolating, so the outer half-cells repeat the edge value.
 
 #include "renderer/volume.hpp"

@@ -1,5 +1,5 @@
 #pragma once
-// The exact reference: the emission–absorption integral of DESIGN.md evaluated in double
+// The exact reference: the emission–absorption integral of docs/design.md evaluated in double
 // precision to a requested tolerance, against which every fast configuration is measured.
 //
 //   I = ∫ c(v(t)) τ(v(t)) exp(−∫₀ᵗ τ(v(t')) dt') dt,   A = 1 − exp(−∫ τ dt)

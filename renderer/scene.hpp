@@ -1,5 +1,5 @@
 #pragma once
-// The scene contract of DESIGN.md: volume + transfer function + camera + image size +
+// The scene contract of docs/design.md: volume + transfer function + camera + image size +
 // quality + clip planes. One JSON form, read by volcast-render and the server alike.
 
 #include "renderer/camera.hpp"
@@ -16,7 +16,7 @@ namespace volcast {
 
 enum class Interpolation { Linear, Cubic };
 
-// The quality switches of DESIGN.md's table, each measurable alone.
+// The quality switches of docs/design.md's table, each measurable alone.
 struct Quality {
     double step = 0.5;                 // segment length in units of the smallest spacing
     bool jitter = false;

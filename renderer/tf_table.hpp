@@ -4,7 +4,7 @@
 // sigma rather than a saves the kernel a logarithm per sample (PoCL spends most of a sample's
 // time in transcendentals); a = 1 is stored as kOpaqueSigma, finite so that interpolation
 // never meets inf·0. Its size is chosen so that its own error
-// against the exact piecewise-linear function stays below a bound (DESIGN.md: a table must
+// against the exact piecewise-linear function stays below a bound (docs/design.md: a table must
 // be fine enough that its error stays below the quality tolerance).
 
 #include "renderer/transfer_function.hpp"

@@ -1,5 +1,5 @@
 #pragma once
-// Transfer function of DESIGN.md: control points {value, r, g, b, a} in data units,
+// Transfer function of docs/design.md: control points {value, r, g, b, a} in data units,
 // piecewise linear between points and clamped outside. `a` is the opacity of a segment
 // of length opacityUnit (world units), so the extinction is tau = -ln(1 - a) / opacityUnit.
 

@@ -1,5 +1,5 @@
 #pragma once
-// A scalar volume on a regular grid, in the coordinates of DESIGN.md: voxel (i, j, k) is a
+// A scalar volume on a regular grid, in the coordinates of docs/design.md: voxel (i, j, k) is a
 // sample at world = origin + D·(i·sx, j·sy, k·sz), and owns the cell of size s around it.
 
 #include "renderer/math.hpp"

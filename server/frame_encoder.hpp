@@ -1,5 +1,5 @@
 #pragma once
-// Frames encoded in memory with OpenImageIO (PLATFORM.md: ImageOutput::create with an
+// Frames encoded in memory with OpenImageIO (docs/platform.md: ImageOutput::create with an
 // IOVecOutput proxy, no disk). The renderer's images are premultiplied float RGBA.
 //  - JPEG has no alpha: the premultiplied colour is the image composited over black, as
 //    volcast-render's .png writer does (renderer/image.cpp).
@@ -21,7 +21,7 @@ std::vector<uint8_t> toStraightRgba8(const Image &image);
 
 // Throws std::runtime_error with OIIO's message on failure.
 std::vector<uint8_t> encodeJpeg(const Image &image, int quality);
-// zlib level 1: ~5x faster than the default for ~20 % more bytes (PLATFORM.md).
+// zlib level 1: ~5x faster than the default for ~20 % more bytes (docs/platform.md).
 std::vector<uint8_t> encodePng(const Image &image, int compressionLevel = 1);
 
 } // namespace volcast::server

@@ -1,6 +1,6 @@
 #pragma once
 // Accepts TCP connections (Beast advanced_server's listener); each gets its own strand,
-// TCP_NODELAY (PLATFORM.md: without it every frame waits ~40 ms for a delayed ACK) and an
+// TCP_NODELAY (docs/platform.md: without it every frame waits ~40 ms for a delayed ACK) and an
 // HttpSession, unless its address already has its cap of connections open. An accept error
 // (EMFILE when the open-file limit is reached) backs off instead of retrying at once, and its
 // log line is rate-limited.

@@ -24,7 +24,7 @@ int main(int argc, char **argv) {
         volcast::server::Server server(*config);
         // Signals are waited for on a context of their own, so that stopping the server's
         // network from the handler cannot deadlock on it. As PID 1 in a container nothing
-        // else would handle SIGTERM (PLATFORM.md).
+        // else would handle SIGTERM (docs/platform.md).
         boost::asio::io_context signals;
         boost::asio::signal_set set(signals, SIGINT, SIGTERM);
         set.async_wait([&](const boost::system::error_code &ec, int signal) {

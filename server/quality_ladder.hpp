@@ -44,7 +44,7 @@ double predictedSamples(const Volume &volume, const Quality &q, int width, int h
 // Measured cost per sample, per level, for one session.
 class LevelTimer {
   public:
-    static constexpr double kInitialMsPerSample = 1.0 / 50e3;   // 50 M samples/s (PLATFORM.md: 30-150 M)
+    static constexpr double kInitialMsPerSample = 1.0 / 50e3;   // 50 M samples/s (docs/platform.md: 30-150 M)
     static constexpr double kSmoothing = 0.3;                   // weight of the newest frame in the EMA
     void reset(size_t levels) { msPerSample_.assign(levels, 0); }
     void record(size_t level, double ms, double samples);

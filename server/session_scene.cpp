@@ -1,6 +1,6 @@
 #include "server/session_scene.hpp"
 
-#include "renderer/volume_source.hpp"
+#include "renderer/io/volume_source.hpp"
 
 #include <cmath>
 

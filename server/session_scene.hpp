@@ -1,5 +1,5 @@
 #pragma once
-// A session's scene as the client built it: DESIGN.md's scene-file pieces (camera, transfer
+// A session's scene as the client built it: docs/design.md's scene-file pieces (camera, transfer
 // function, image, quality, clip planes) kept in their JSON form, plus the quality policy.
 // Every change is checked by assembling the whole scene and running the scene-file parser,
 // so the server refuses exactly what volcast-render would; a refused change (SceneError,

@@ -9,7 +9,7 @@
 // have their own bound (max_pending_sessions) and a hello deadline.
 
 #include "protocol/server_messages.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "server/config.hpp"
 #include "server/metrics.hpp"
 #include "server/render_scheduler.hpp"

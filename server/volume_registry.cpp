@@ -1,8 +1,8 @@
 #include "server/volume_registry.hpp"
 
 #include "renderer/synthetic.hpp"
-#include "renderer/volume_io.hpp"
-#include "renderer/volume_source.hpp"
+#include "renderer/io/volume_io.hpp"
+#include "renderer/io/volume_source.hpp"
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>

@@ -16,7 +16,7 @@
 
 #include "protocol/errors.hpp"
 #include "protocol/server_messages.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/volume.hpp"
 #include "server/metrics.hpp"
 

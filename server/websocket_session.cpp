@@ -1,7 +1,7 @@
 #include "server/websocket_session.hpp"
 
 #include "protocol/protocol.hpp"
-#include "renderer/volume_source.hpp"
+#include "renderer/io/volume_source.hpp"
 
 #include <boost/asio/post.hpp>
 #include <spdlog/fmt/fmt.h>

@@ -178,7 +178,7 @@ def open_volume(name: str, id: RequestId = None) -> dict:
 
 
 def camera(camera: dict, id: RequestId = None) -> dict:
-    """camera: DESIGN.md's scene-file camera, e.g. {"eye", "target", "up", "projection", "fov_y_deg"}."""
+    """camera: docs/design.md's scene-file camera, e.g. {"eye", "target", "up", "projection", "fov_y_deg"}."""
     return _message("camera", id, camera=camera)
 
 
@@ -207,7 +207,7 @@ def quality_automatic(target_frame_ms: float = 40, quality: Optional[dict] = Non
 
 
 def quality_explicit(quality: dict, id: RequestId = None) -> dict:
-    """Every frame rendered with exactly these DESIGN.md switches."""
+    """Every frame rendered with exactly these docs/design.md switches."""
     return _message("quality_policy", id, mode="explicit", quality=quality)
 
 

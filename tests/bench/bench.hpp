@@ -3,7 +3,7 @@
 // ran on, the peers' camera and transfer function, and the files a study writes.
 
 #include "renderer/camera.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "renderer/transfer_function.hpp"
 #include "renderer/volume.hpp"
 
@@ -40,7 +40,7 @@ Timing repeat(const RepeatOptions &options, const std::function<void(int k)> &on
 // The machine and OpenCL device, written into every study's JSON.
 nlohmann::json machineInfo(const OpenClContext *cl);
 
-// The peers' framing (../shared/peers/vtk_bench.py, camera_orbit): VTK's ResetCamera for a
+// The peers' framing (the peers' harness, vtk_bench.py's camera_orbit): VTK's ResetCamera for a
 // 30° view angle, i.e. the bounding sphere of the sample points fits the view height, at
 // `elevationDeg` above the xy plane; frame k orbits the z axis by k·orbitDeg. The sample
 // points' box is VTK's image bounds: [origin, origin + (n − 1)·s].

@@ -1,11 +1,11 @@
 // Error against run time: every configuration at every step, its median frame time next to
-// its error against the exact reference (DESIGN.md: RMSE over premultiplied RGBA, PSNR), on
+// its error against the exact reference (docs/design.md: RMSE over premultiplied RGBA, PSNR), on
 // real scans, with the Pareto front (no other point both faster and more accurate) marked.
 
 #include "renderer/error_metrics.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
-#include "renderer/volume_io.hpp"
+#include "renderer/io/volume_io.hpp"
 #include "tests/bench/configurations.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"

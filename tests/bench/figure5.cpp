@@ -1,8 +1,8 @@
 // Figure 5: frame rate against samples per voxel for the paper's configurations A–F, first
 // as the paper measured (no empty-space skipping, no early termination), then with both.
 
-#include "renderer/opencl_renderer.hpp"
-#include "renderer/volume_io.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
+#include "renderer/io/volume_io.hpp"
 #include "tests/bench/configurations.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"

@@ -4,8 +4,8 @@
 
 #include "renderer/image.hpp"
 #include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/opencl_renderer.hpp"
-#include "renderer/volume_io.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
+#include "renderer/io/volume_io.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"
 #include "tests/bench/svg_plot.hpp"

@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
 """The side-by-side table with the ratio to each peer per cell.
 
-Reads what ../shared/peers/run_table.py wrote (results_merged.jsonl) after a run with our
+Reads what the peers' harness, $PEERS/run_table.py (outside this repository; see
+docs/performance.md), wrote (results_merged.jsonl) after a run with our
 command as an --extra peer named "ours", and prints a Markdown table per volume: each peer's
 median ms and, beside it, ours divided by theirs (below 1: we are faster).
 
-  /usr/bin/python3 ../shared/peers/run_table.py --peers vtk91-fixed,vtk91-gpu,volpack \\
+  /usr/bin/python3 $PEERS/run_table.py --peers vtk91-fixed,vtk91-gpu,volpack \\
       --extra 'ours=build/tests/bench/volcast-bench peers --volume {volume} --size {sizes} \\
                --frames {frames} --sample-distance {sample_distance}' --out-dir out/peers
   python3 tests/bench/peer_ratios.py out/peers/results_merged.jsonl > out/peers/RATIOS.md

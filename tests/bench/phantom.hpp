@@ -1,5 +1,5 @@
 #pragma once
-// The peers' benchmark phantom (../shared/peers/vtk_bench.py, make_phantom), made here so
+// The peers' benchmark phantom (the peers' harness, vtk_bench.py's make_phantom), made here so
 // volcast-bench needs no Python: a noisy low background, an ellipsoidal "soft tissue"
 // interior with a smooth 3-D ripple, a shell, a dense tube along z and four dense blobs, in
 // [0, 1] scaled to 0..255 (8-bit) or 0..4095 (16-bit). The same shapes and values; the noise

@@ -3,7 +3,7 @@
 // issue sets: reading and writing the volume three times (one pass per axis).
 
 #include "renderer/bspline_prefilter.hpp"
-#include "renderer/bspline_prefilter_opencl.hpp"
+#include "renderer/opencl/bspline_prefilter_opencl.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"
 #include "tests/bench/svg_plot.hpp"

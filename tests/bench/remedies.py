@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Before/after pictures of the paper's three artifacts on real scans, and a per-switch table.
 
-Follows ../shared/seed/common-artifacts-in-volume-rendering.md and the quality switches of
-../shared/DESIGN.md ("Quality and the remedies"):
+Follows the paper "Common artifacts in volume rendering" and the quality switches of
+docs/design.md ("The quality switches"); the pictures and table are in docs/remedies.md:
 
   onion rings      engine, a narrow strong opacity peak, step 2: plain / jitter / pre-integrated
   stars            aneurism, thin vessels seen very close, step 0.25: linear / cubic
@@ -175,7 +175,7 @@ class Runner:
         self.calls = 0
 
     def volume(self, name):
-        """A scan's path relative to the scene folder, as DESIGN.md's scene file resolves it."""
+        """A scan's path relative to the scene folder, as docs/design.md's scene file resolves it."""
         path = self.data_dir / f"{name}.nhdr"
         if not path.is_file():
             sys.exit(f"remedies.py: {path} not found (give the shared volumes folder with --data-dir)")
@@ -498,7 +498,7 @@ def main():
     ap.add_argument("--out", default="out/remedies", help="output folder (default: out/remedies)")
     ap.add_argument("--render-exe", default="build/renderer/volcast-render", help="the volcast-render executable")
     ap.add_argument("--data-dir", default=os.environ.get("VOLCAST_DATA_DIR", str(DEFAULT_DATA)),
-                    help="the shared volumes folder (default: $VOLCAST_DATA_DIR or ../shared/data/volumes)")
+                    help="the shared volumes folder (default: $VOLCAST_DATA_DIR, else shared/data/volumes beside the checkout)")
     ap.add_argument("--docs", default=None, help="also copy the pictures into this folder (e.g. docs/images)")
     ap.add_argument("--only", choices=["artifacts", "table"], default=None, help="run one part only")
     ap.add_argument("--size", type=int, default=256, help="artifact pictures' size in pixels (default 256)")

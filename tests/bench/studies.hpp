@@ -3,7 +3,7 @@
 // its JSON, CSV, Markdown table and SVG plot into options.out and prints the table.
 
 #include "renderer/frame_renderer.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "renderer/scene.hpp"
 #include "tests/bench/bench.hpp"
 
@@ -16,7 +16,7 @@ namespace volcast::bench {
 
 struct StudyOptions {
     std::filesystem::path out = "out/bench";
-    std::filesystem::path data;        // the real scans (../shared/data/volumes)
+    std::filesystem::path data;        // the real scans (VOLCAST_DATA_DIR, tests/README.md)
     RepeatOptions repeat{0, 5, 20};    // warm-up is a small frame of its own, see warmUp()
     bool quick = false;                // tiny sizes: checks the command works, times nothing
     std::vector<std::string> volumes = {"small", "tooth", "large"}; // Table 1's volumes

@@ -59,7 +59,7 @@ int main(int argc, char **argv) {
 
     PeerModeOptions peer;
     std::string sizes = "512x512";
-    auto *peers = app.add_subcommand("peers", "../shared/peers/run_table.py's --extra interface: one JSON line per size");
+    auto *peers = app.add_subcommand("peers", "the peers' run_table.py --extra interface: one JSON line per size");
     peers->add_option("--volume", peer.volume, "Volume file (NRRD)")->required()->check(CLI::ExistingFile);
     peers->add_option("--size", sizes, "Comma list of WxH")->capture_default_str();
     peers->add_option("--frames", peer.frames, "Frames per size, the first a warm-up")->check(CLI::Range(2, 1000));

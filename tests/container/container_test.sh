@@ -15,24 +15,34 @@
 # 4. deploy/compose.yaml with podman-compose (where installed): the same checks, then `down`.
 #
 # Prints the figures deploy/README.md reports (image size, build and start-up times) and keeps
-# them in $VOLCAST_CONTAINER_WORK/figures.txt. Exits 77
-# (CTest: skipped) where podman cannot run containers: not root, podman/runc/debootstrap
-# missing, or inside a container (../shared/tools/fresh-debian.sh). Environment:
+# them in $VOLCAST_CONTAINER_WORK/figures.txt. Exits 77 (CTest: skipped) only where podman
+# cannot run containers for a reason no install fixes: not root, or inside a container. A tool
+# deploy/install.sh installs (podman, runc, catatonit, debootstrap, curl) that is missing fails
+# the test, naming it. Every failure prints its reason, and the tail of podman's log, here.
+# Environment:
 # VOLCAST_CONTAINER_WORK (default /var/tmp/volcast-container), JOBS (compile jobs, default 2),
 # VOLCAST_CONTAINER_SKIP_BUILD=1 (test the image built last instead of building it).
-set -euo pipefail
+set -Eeuo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 repo=$(cd "$here/../.." && pwd)
 
 skip() { echo "container test SKIPPED: $*" >&2; exit 77; }
 [ "$(id -u)" = 0 ] || skip "needs root (rootful podman)"
-for tool in podman runc debootstrap curl; do
-  command -v "$tool" >/dev/null 2>&1 || skip "$tool is not installed (deploy/install.sh installs it)"
-done
-# podman marks its containers so (fresh-debian.sh runs the tests in one); nested podman fails
-# there. Not /.dockerenv: this sandbox has one, and podman works in it.
+# podman marks its containers so; nested podman fails there. Not /.dockerenv: this sandbox has
+# one, and podman works in it.
 if [ -e /run/.containerenv ]; then
   skip "running inside a podman container, where podman cannot start containers of its own"
+fi
+# Not skips: deploy/install.sh installs these, so a missing one is a broken install.
+missing=()
+for tool in podman runc debootstrap curl; do
+  command -v "$tool" >/dev/null 2>&1 || missing+=("$tool")
+done
+# The pods' pause binary (`podman kube play`); podman looks in /usr/libexec/podman first.
+[ -x /usr/libexec/podman/catatonit ] || command -v catatonit >/dev/null 2>&1 || missing+=(catatonit)
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "container_test: FAILED: not installed: ${missing[*]} (run deploy/install.sh as root)" >&2
+  exit 1
 fi
 
 . "$here/podman_env.sh"
@@ -46,7 +56,20 @@ project=volcast-test-compose-$$
 podman_log=$work/podman.log
 : > "$podman_log"
 log() { echo "container_test: $*"; }
-fail() { tail -20 "$podman_log" >&2; echo "container_test: FAILED: $*" >&2; exit 1; }
+fail() {
+  trap - ERR
+  echo "container_test: podman's log ($podman_log), last 20 lines:" >&2
+  tail -20 "$podman_log" >&2
+  echo "container_test: FAILED: $*" >&2
+  exit 1
+}
+# Any other failing command (set -e) still says which one it was and why before the exit.
+on_error() {
+  local rc=$? line=$1 command=$2
+  [ "$BASH_SUBSHELL" = 0 ] || return 0  # the command substitution's caller reports it
+  fail "line $line exited $rc: $command"
+}
+trap 'on_error $LINENO "$BASH_COMMAND"' ERR
 cleanup() {
   podman rm -f -t 0 "$name" >/dev/null 2>&1 || true
   [ -f "$work/deployment.yaml" ] && podman kube down "$work/deployment.yaml" >/dev/null 2>&1 || true
@@ -111,7 +134,8 @@ check_service() {
 # ---- 2. podman run -------------------------------------------------------------------
 port=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 t0=$(date +%s.%N)
-podman run -d --name "$name" --pull=never -p "127.0.0.1:$port:8080" -v "$data:/data:ro" "$image" >/dev/null 2>>"$podman_log"
+podman run -d --name "$name" --pull=never -p "127.0.0.1:$port:8080" -v "$data:/data:ro" "$image" >/dev/null 2>>"$podman_log" ||
+  fail "podman run"
 run_ready_s=$(wait_ready "http://127.0.0.1:$port/readyz" "$t0") ||
   { podman logs "$name" | tail -20; fail "podman run: /readyz not 200 within 180 s"; }
 log "podman run: ready ${run_ready_s} s after the run command (port 127.0.0.1:$port)"
@@ -124,7 +148,7 @@ log "HEALTHCHECK: healthy"
 [ "$(podman inspect --format '{{.State.ExitCode}}' "$name")" = 0 ] || fail "the container did not exit 0 after SIGTERM"
 grep -q 'stopping: server shutting down (SIGTERM)' <<<"$(podman logs "$name" 2>&1)" || fail "the log does not show the SIGTERM"
 log "podman stop: session closed 1001, exit 0"
-podman rm "$name" >/dev/null 2>>"$podman_log"
+podman rm "$name" >/dev/null 2>>"$podman_log" || fail "podman rm"
 
 # ---- 3. podman kube play -------------------------------------------------------------
 # The manifest as written, but for the image (the test's build), the claim (a throw-away podman
@@ -138,10 +162,10 @@ sed -e "s|^\( *image:\) volcast$|\1 $image|" -e "s|claimName: volcast-data$|clai
 grep -q "image: $image" "$work/deployment.yaml" && grep -q "claimName: $claim" "$work/deployment.yaml" &&
   grep -q "hostPort: $kport" "$work/deployment.yaml" && grep -q "^  replicas: 1$" "$work/deployment.yaml" ||
   fail "deployment.yaml no longer has the image, claim, replicas or containerPort lines this test rewrites"
-podman volume create "$claim" >/dev/null
-tar -C "$data" -c . | podman volume import "$claim" -
+podman volume create "$claim" >/dev/null 2>>"$podman_log" || fail "podman volume create $claim"
+tar -C "$data" -c . | podman volume import "$claim" - 2>>"$podman_log" || fail "podman volume import $claim"
 t0=$(date +%s.%N)
-podman kube play --replace "$work/deployment.yaml" >/dev/null 2>>"$podman_log"
+podman kube play --replace "$work/deployment.yaml" >/dev/null 2>>"$podman_log" || fail "podman kube play"
 pod=$(podman pod ps --format '{{.Name}}' | grep '^volcast-pod' | head -1)
 [ -n "$pod" ] || fail "podman kube play made no volcast pod"
 server=$(podman ps --filter "pod=$pod" --format '{{.Names}}' | grep -- '-server$' | head -1)
@@ -156,7 +180,7 @@ check_service "http://127.0.0.1:$kport" "$server"
   fail "podman pod stop with a session open"
 [ "$(podman inspect --format '{{.State.ExitCode}}' "$server")" = 0 ] || fail "the pod's server did not exit 0 after SIGTERM"
 log "kube play: session closed 1001, exit 0"
-podman kube down "$work/deployment.yaml" >/dev/null 2>>"$podman_log"
+podman kube down "$work/deployment.yaml" >/dev/null 2>>"$podman_log" || fail "podman kube down"
 
 # ---- 4. compose ----------------------------------------------------------------------
 # deploy/compose.yaml as a user runs it (podman-compose; its image is the one built above).

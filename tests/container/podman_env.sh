@@ -1,4 +1,4 @@
-# Sourced by the container scripts: podman settings this kind of sandbox needs (PLATFORM.md):
+# Sourced by the container scripts: podman settings this kind of sandbox needs (docs/platform.md):
 # it cannot raise ulimits, and crun fails on its hybrid cgroups, so runc with fixed limits.
 # Harmless on an ordinary machine.
 VOLCAST_CONTAINER_WORK=${VOLCAST_CONTAINER_WORK:-/var/tmp/volcast-container}

@@ -14,7 +14,7 @@ namespace {
 
 using json = nlohmann::json;
 
-// The scene pieces as DESIGN.md's scene file writes them.
+// The scene pieces as docs/design.md's scene file writes them.
 const json kCamera = json::parse(R"({"eye": [300, 200, 400], "target": [128, 128, 64], "up": [0, 1, 0],
                                      "projection": "perspective", "fov_y_deg": 30})");
 const json kTransferFunction = json::parse(

@@ -3,10 +3,10 @@
 // built-in ones, so each test takes well under a few seconds on the 2-core PoCL machine.
 
 #include "client/ws_client.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/scene.hpp"
-#include "renderer/volume_io.hpp"
-#include "renderer/volume_source.hpp"
+#include "renderer/io/volume_io.hpp"
+#include "renderer/io/volume_source.hpp"
 #include "server/frame_encoder.hpp"
 #include "server/server.hpp"
 #include "tests/server/server_fixture.hpp"

@@ -2,8 +2,8 @@
 // the load time limit, and the messages clients get. Built-in volumes (64³: 1.2 MiB counted
 // each, float32 plus 20 %) and small files the tests write; budgets of a few MiB.
 
-#include "renderer/opencl_context.hpp"
-#include "renderer/volume_io.hpp"
+#include "renderer/opencl/opencl_context.hpp"
+#include "renderer/io/volume_io.hpp"
 #include "server/metrics.hpp"
 #include "server/volume_registry.hpp"
 

@@ -2,13 +2,13 @@
 
 #include "renderer/camera.hpp"
 #include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/preintegration.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/synthetic.hpp"
-#include "renderer/volume_io.hpp"
-#include "tests/unit/test_scenes.hpp"
+#include "renderer/io/volume_io.hpp"
+#include "tests/renderer/test_scenes.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -190,7 +190,7 @@ Camera oblique(const Volume &v, Vec3d offset, double fovYDeg) {
 
 Volume constantBox(Vec3i dims, Vec3d spacing = {1, 1, 1}) { return makeConstantBox(dims, spacing, 1).volume; }
 
-// The ray's interval inside an axis-aligned volume's cell-extent box (closed, DESIGN.md) and
+// The ray's interval inside an axis-aligned volume's cell-extent box (closed, docs/design.md) and
 // the clip half-spaces, in double: the closed forms' chord. Empty: t1 ≤ t0.
 struct Interval {
     double t0 = 0, t1 = 0;

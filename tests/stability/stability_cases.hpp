@@ -1,15 +1,15 @@
 #pragma once
-// The numerical-stability cases of issue 4: stiff scenes (optical depth per step far above 1)
+// The numerical-stability cases: stiff scenes (optical depth per step far above 1)
 // and extreme ones (the other ends of every range). Each case renders through a back end (the
 // OpenCL ray caster or the native CPU one) and the double-precision reference where both apply, compares with a closed form
 // where one exists and with the reference otherwise, and counts NaN and Inf in every output.
 //
-// The unit tests (tests/unit/test_stability.cpp) and volcast-stability, the command that
-// prints the README's "Numerical stability" table, run this same code, so the table shows
-// what the tests check.
+// The renderer tests (tests/renderer/test_numerical_stability.cpp) and volcast-stability, the
+// command that prints docs/accuracy.md's "Numerical stability" table, run this same code, so
+// the table shows what the tests check.
 
 #include "renderer/frame_renderer.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 
 #include <cstddef>
 #include <functional>

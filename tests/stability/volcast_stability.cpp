@@ -1,4 +1,4 @@
-// volcast-stability: run issue 4's numerical-stability cases and print the README's
+// volcast-stability: run the numerical-stability cases and print docs/accuracy.md's
 // "Numerical stability" table (Markdown). Exit status 1 if any case fails its bound.
 //
 //   volcast-stability [--backend opencl|cpu] [--device cpu] [--case OpaqueMedia]

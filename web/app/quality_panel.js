@@ -1,4 +1,4 @@
-// The quality panel (automatic policy with a target frame time, or DESIGN.md's explicit
+// The quality panel (automatic policy with a target frame time, or docs/design.md's explicit
 // switches), the render resolution, and the clip plane.
 
 import { volumeBounds } from "../core/camera.js";

@@ -1,4 +1,4 @@
-// Camera navigation on DESIGN.md's scene-file camera {eye, target, up, projection,
+// Camera navigation on docs/design.md's scene-file camera {eye, target, up, projection,
 // fov_y_deg | height}: orbit, pan, zoom. Pure functions returning new cameras; the up
 // vector is kept orthonormal to the view direction, so that the server never sees
 // "camera.up: is parallel to the view direction".
@@ -25,7 +25,7 @@ export function rotate(v, k, angle) {
 }
 
 // The camera's orthonormal frame: forward (eye → target), right (forward × up, the image
-// x axis of DESIGN.md), up (image y), and the eye–target distance.
+// x axis of docs/design.md), up (image y), and the eye–target distance.
 export function cameraFrame(cam) {
   const toTarget = sub(cam.target, cam.eye);
   const distance = length(toTarget);
@@ -97,7 +97,7 @@ export function zoomFactorForWheel(deltaPx) {
 }
 
 // Axis-aligned bounds of a volume object (protocol `volumes`): the cell extent of
-// DESIGN.md, origin − s/2 to origin + (n − ½)·s.
+// docs/design.md, origin − s/2 to origin + (n − ½)·s.
 export function volumeBounds(volume) {
   if (!volume?.dims) return null;
   const s = volume.spacing ?? [1, 1, 1];

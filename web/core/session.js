@@ -218,7 +218,7 @@ export class Session extends Emitter {
 
   // --- saving ---------------------------------------------------------------------------
 
-  // The scene as a file volcast-render accepts (DESIGN.md's scene file), from the server's
+  // The scene as a file volcast-render accepts (docs/design.md's scene file), from the server's
   // own view of the session (get_state). When a final frame of the current view is on
   // screen, its quality switches and size are used, so that the file reproduces exactly
   // that frame. The volume is the server's name for it (see web/README.md).

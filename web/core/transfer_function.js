@@ -1,4 +1,4 @@
-// Transfer functions as DESIGN.md defines them: control points [value, r, g, b, a] in data
+// Transfer functions as docs/design.md defines them: control points [value, r, g, b, a] in data
 // units, strictly increasing values, components in [0, 1], piecewise linear, clamped
 // outside. Pure functions over arrays of points (rows), for the editor and its tests.
 
@@ -119,7 +119,7 @@ export function applyWindowLevel(points, window, level) {
   return points.map(([v, ...c]) => [level + (v - from.level) * s, ...c]);
 }
 
-// Check the DESIGN.md contract; returns a list of problems (empty when valid).
+// Check the docs/design.md contract; returns a list of problems (empty when valid).
 export function problems(points) {
   const out = [];
   if (!Array.isArray(points) || points.length < 1) return ["needs at least one point"];

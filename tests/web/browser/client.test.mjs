@@ -309,7 +309,7 @@ test("after the server restarts, the page reconnects by itself and restores the 
   assert.deepEqual(problems.filter((p) => !/WebSocket|ERR_CONNECTION_REFUSED/.test(p)), []);
 });
 
-// The README's screenshot: a real CT scan from ../shared/data/volumes, opened from the
+// The README's screenshot: a real CT scan from VOLCAST_DATA_DIR, opened from the
 // picker. Skipped where the scans are not there (they live beside the repository).
 const CT_SCAN = "cranium_ct.nhdr";
 const haveScan = Boolean(DATA_DIR) && existsSync(path.join(DATA_DIR, CT_SCAN));

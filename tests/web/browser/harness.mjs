@@ -28,7 +28,7 @@ export const READY_TIMEOUT_MS = 120000;   // ms for /readyz: the demo volume loa
 export const FRAME_TIMEOUT_MS = 90000;    // ms for a final frame on a 2-core CPU device (~2 s typical)
 export const VIEWPORT = { width: 1100, height: 680 };   // CSS px of the browser window
 
-// Flags that work as root in a container (PLATFORM.md).
+// Flags that work as root in a container (docs/platform.md).
 const CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
   "--disable-background-networking", "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage"];
 

@@ -79,7 +79,7 @@ test("a degenerate up is repaired rather than sent", () => {
   assert.ok(Math.abs(vec.dot(vec.normalize(fixed.up), cameraFrame(fixed).forward)) < 1e-9);
 });
 
-test("volume bounds are the cell extent of DESIGN.md", () => {
+test("volume bounds are the cell extent of docs/design.md", () => {
   const b = volumeBounds({ dims: [256, 256, 128], spacing: [1, 1, 2], origin: [0, 0, 0] });
   assert.deepEqual(b.lo, [-0.5, -0.5, -1]);
   assert.deepEqual(b.hi, [255.5, 255.5, 255]);

@@ -1,4 +1,4 @@
-// core/transfer_function.js: the editor's operations keep DESIGN.md's contract (strictly
+// core/transfer_function.js: the editor's operations keep docs/design.md's contract (strictly
 // increasing values, components in [0, 1]), and its preset table is the renderer's.
 import { test } from "node:test";
 import assert from "node:assert/strict";

@@ -1,4 +1,4 @@
-#include "renderer/volume_source.hpp"
+#include "renderer/io/volume_source.hpp"
 
 #include "renderer/synthetic.hpp"
 

@@ -3,7 +3,7 @@
 // (kernels/bspline_prefilter.cl), kept apart so that header stays free of OpenCL.
 
 #include "renderer/math.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 
 #include <vector>
 

@@ -1,6 +1,6 @@
-#include "renderer/bspline_prefilter_opencl.hpp"
+#include "renderer/opencl/bspline_prefilter_opencl.hpp"
 
-#include "renderer/embedded_kernels.hpp"
+#include "renderer/opencl/embedded_kernels.hpp"
 
 namespace volcast {
 

@@ -1,7 +1,8 @@
 #pragma once
 // The OpenCL device volcast renders on, and the programs built for it. Programs are built
-// per feature set (a string of -D options) and cached for the life of the process; PoCL's
-// own on-disk cache makes a restart cheap (its folder is set by kernelCacheDir).
+// per kernel source and feature set (a string of -D options) and cached for the life of the
+// process; PoCL's own on-disk cache makes a restart cheap (its folder is set by
+// kernelCacheDir).
 
 #ifndef CL_HPP_TARGET_OPENCL_VERSION
 #define CL_HPP_TARGET_OPENCL_VERSION 120
@@ -14,6 +15,7 @@
 #include <mutex>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace volcast {
 
@@ -45,7 +47,7 @@ class OpenClContext {
         cl::Program program;
         double buildSeconds = 0; // 0 when it came from this process's cache
     };
-    // Build `source` with `options` (e.g. "-DCUBIC=1"), or return the cached program.
+    // Build `source` with `options` (e.g. "-DCUBIC=1"), or return the program cached for both.
     // A failure becomes an OpenClError carrying every device's build log.
     BuiltProgram program(const std::string &source, const std::string &options);
     size_t programsBuilt() const { return programsBuilt_; }
@@ -55,7 +57,8 @@ class OpenClContext {
     cl::Device device_;
     cl::CommandQueue queue_;
     std::mutex mutex_;
-    std::map<std::string, cl::Program> programs_;
+    // Keyed on (source, options): two kernels' sources may share an option string.
+    std::map<std::pair<std::string, std::string>, cl::Program> programs_;
     size_t programsBuilt_ = 0;
 };
 

@@ -14,7 +14,7 @@ namespace {
 
 using json = nlohmann::json;
 
-// The example of DESIGN.md's "Scene file", verbatim.
+// The example of docs/design.md's "Scene file", verbatim.
 constexpr const char *kExample = R"({
   "volume": "data/head.nhdr",
   "transfer_function": {
@@ -222,7 +222,7 @@ TEST(SceneRoundTrip, WritesDesignKeys) {
 
 // ---- every kind of mistake names its key ----
 
-TEST(SceneErrors, MalformedJsonGivesPosition) {
+TEST(SceneRefuses, MalformedJsonIsNamedWithItsLine) {
     const std::string message = errorOf("{\n  \"volume\": \"a.nrrd\",\n  oops\n}");
     EXPECT_TRUE(contains(message, "line 3")) << message;
     EXPECT_TRUE(contains(message, "malformed JSON")) << message;
@@ -230,12 +230,12 @@ TEST(SceneErrors, MalformedJsonGivesPosition) {
     EXPECT_SCENE_ERROR((""), "malformed JSON");
 }
 
-TEST(SceneErrors, TopLevelNotObject) {
+TEST(SceneRefuses, TopLevelThatIsNotAnObject) {
     EXPECT_SCENE_ERROR(("[1, 2]"), "scene: must be a JSON object");
     EXPECT_SCENE_ERROR(("\"scene\""), "scene: must be a JSON object");
 }
 
-TEST(SceneErrors, MissingRequiredKey) {
+TEST(SceneRefuses, MissingRequiredKeyIsNamedByItsPath) {
     for (const char *key : {"volume", "transfer_function", "camera", "image"})
         EXPECT_SCENE_ERROR(without(example(), std::string("/") + key), std::string(key) + ": is required");
     for (const char *key : {"eye", "target", "up"})
@@ -253,7 +253,7 @@ struct Mistake {
     json value;
 };
 
-TEST(SceneErrors, WrongType) {
+TEST(SceneRefuses, ValueOfTheWrongTypeIsNamedByItsPath) {
     const std::vector<Mistake> cases = {
         {"/volume", "volume", 3},
         {"/transfer_function", "transfer_function", json::array()},
@@ -291,33 +291,33 @@ TEST(SceneErrors, WrongType) {
     }
 }
 
-TEST(SceneErrors, FractionalWhereIntegerSaysSo) {
+TEST(SceneRefuses, FractionalNumberWhereAnIntegerBelongs) {
     EXPECT_SCENE_ERROR(with(example(), "/image/width", 512.5), "image.width: must be a positive integer");
 }
 
-TEST(SceneErrors, UnsortedPoints) {
+TEST(SceneRefuses, PointValuesNotIncreasing) {
     json j = with(example(), "/transfer_function/points/2/0", 40);
     EXPECT_SCENE_ERROR(j, "transfer_function.points[2]: values must be strictly increasing");
 }
 
-TEST(SceneErrors, DuplicatePointValues) {
+TEST(SceneRefuses, TwoPointsWithTheSameValue) {
     json j = with(example(), "/transfer_function/points/2/0", 80);
     EXPECT_SCENE_ERROR(j, "transfer_function.points[2]: values must be strictly increasing");
 }
 
-TEST(SceneErrors, PointRowNotFiveNumbers) {
+TEST(SceneRefuses, PointRowThatIsNotFiveNumbers) {
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function/points/1", json::array({80, 1, 1, 1})),
                        "transfer_function.points[1]: must be a [value, r, g, b, a] row of 5");
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function/points/0", json::array({0, 0, 0, 0, 0, 0})),
                        "transfer_function.points[0]");
 }
 
-TEST(SceneErrors, ColourOrOpacityOutsideUnitRange) {
+TEST(SceneRefuses, ColourOrOpacityOutsideZeroToOne) {
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function/points/1/1", 1.5), "transfer_function.points[1]");
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function/points/2/4", -0.1), "transfer_function.points[2]");
 }
 
-TEST(SceneErrors, NoPointsOrBothPointsAndPreset) {
+TEST(SceneRefuses, NeitherOrBothOfPointsAndPreset) {
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function/points", json::array()),
                        "transfer_function.points: needs at least one point");
     EXPECT_SCENE_ERROR(without(example(), "/transfer_function/points"), "transfer_function: needs points or preset");
@@ -325,12 +325,12 @@ TEST(SceneErrors, NoPointsOrBothPointsAndPreset) {
                        "transfer_function: give either points or preset");
 }
 
-TEST(SceneErrors, UnknownPreset) {
+TEST(SceneRefuses, UnknownPresetName) {
     const json tf = {{"preset", "ct_lungs"}};
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function", tf), "transfer_function.preset: unknown");
 }
 
-TEST(SceneErrors, NonFiniteNumber) {
+TEST(SceneRefuses, NonFiniteNumber) {
     std::string text = kExample;
     text.replace(text.find("[300, 200, 400]"), 15, "[300, 1e400, 400]");
     EXPECT_SCENE_ERROR(text, "camera.eye[1]");
@@ -343,46 +343,46 @@ TEST(SceneErrors, NonFiniteNumber) {
     EXPECT_SCENE_ERROR(text, "quality.step");
 }
 
-TEST(SceneErrors, NonPositiveOpacityUnit) {
+TEST(SceneRefuses, ZeroOrNegativeOpacityUnit) {
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function/opacity_unit", 0), "transfer_function.opacity_unit");
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function/opacity_unit", -2), "transfer_function.opacity_unit");
     const json tf = {{"preset", "mr"}, {"opacity_unit", 0}};
     EXPECT_SCENE_ERROR(with(example(), "/transfer_function", tf), "transfer_function.opacity_unit");
 }
 
-TEST(SceneErrors, UnknownProjection) {
+TEST(SceneRefuses, UnknownProjection) {
     EXPECT_SCENE_ERROR(with(example(), "/camera/projection", "fisheye"),
                        "camera.projection: must be one of \"perspective\", \"orthographic\"");
 }
 
-TEST(SceneErrors, OrthographicWithoutHeight) {
+TEST(SceneRefuses, OrthographicCameraWithoutHeight) {
     json j = without(with(example(), "/camera/projection", "orthographic"), "/camera/fov_y_deg");
     EXPECT_SCENE_ERROR(j, "camera.height: is required");
 }
 
-TEST(SceneErrors, KeyOfTheOtherProjection) {
+TEST(SceneRefuses, KeyOfTheOtherProjection) {
     // Most likely a forgotten "projection": refused rather than silently ignored.
     EXPECT_SCENE_ERROR(with(example(), "/camera/height", 300), "camera.height: is only for an orthographic");
     json j = with(with(example(), "/camera/projection", "orthographic"), "/camera/height", 300);
     EXPECT_SCENE_ERROR(j, "camera.fov_y_deg: is only for a perspective");
 }
 
-TEST(SceneErrors, FovOutOfRange) {
+TEST(SceneRefuses, FieldOfViewOutsideItsRange) {
     for (double fov : {0.0, -10.0, 180.0, 200.0})
         EXPECT_SCENE_ERROR(with(example(), "/camera/fov_y_deg", fov), "camera.fov_y_deg");
 }
 
-TEST(SceneErrors, OrthographicHeightNotPositive) {
+TEST(SceneRefuses, ZeroOrNegativeOrthographicHeight) {
     json j = without(with(example(), "/camera/projection", "orthographic"), "/camera/fov_y_deg");
     EXPECT_SCENE_ERROR(with(j, "/camera/height", 0), "camera.height");
 }
 
-TEST(SceneErrors, ImageSizeNotPositive) {
+TEST(SceneRefuses, ZeroOrNegativeImageSize) {
     EXPECT_SCENE_ERROR(with(example(), "/image/width", 0), "image.width: must be a positive integer");
     EXPECT_SCENE_ERROR(with(example(), "/image/height", -3), "image.height: must be a positive integer");
 }
 
-TEST(SceneErrors, ImageSizeTooLarge) {
+TEST(SceneRefuses, ImageLargerThanTheLimit) {
     EXPECT_SCENE_ERROR(with(example(), "/image/width", kMaxImageSide + 1), "image.width");
     EXPECT_SCENE_ERROR(with(example(), "/image/height", 1'000'000'000'000), "image.height");
     EXPECT_SCENE_ERROR(with(example(), "/image/width", 18446744073709551615u), "image.width");
@@ -390,25 +390,25 @@ TEST(SceneErrors, ImageSizeTooLarge) {
     EXPECT_SCENE_ERROR(with(example(), "/image", big), "image: ");
 }
 
-TEST(SceneErrors, EyeEqualsTarget) {
+TEST(SceneRefuses, EyeEqualToTarget) {
     EXPECT_SCENE_ERROR(with(example(), "/camera/eye", json::array({128, 128, 64})), "camera.target");
 }
 
-TEST(SceneErrors, UpZeroLength) {
+TEST(SceneRefuses, UpOfZeroLength) {
     EXPECT_SCENE_ERROR(with(example(), "/camera/up", json::array({0, 0, 0})), "camera.up: has zero length");
 }
 
-TEST(SceneErrors, UpParallelToView) {
+TEST(SceneRefuses, UpParallelToTheViewDirection) {
     // View direction is target - eye = (-172, -72, -336).
     EXPECT_SCENE_ERROR(with(example(), "/camera/up", json::array({172, 72, 336})),
                        "camera.up: is parallel to the view direction");
 }
 
-TEST(SceneErrors, VectorNotThreeNumbers) {
+TEST(SceneRefuses, VectorThatIsNotThreeNumbers) {
     EXPECT_SCENE_ERROR(with(example(), "/camera/eye", json::array({1, 2})), "camera.eye: must be an array of 3");
 }
 
-TEST(SceneErrors, QualityOutOfRange) {
+TEST(SceneRefuses, QualitySwitchOutsideItsRange) {
     const std::vector<std::pair<std::string, json>> cases = {
         {"step", 0},      {"step", -0.5},  {"step", 1e-9},
         {"early_termination", 0}, {"early_termination", 1.01}, {"early_termination", -1},
@@ -422,23 +422,23 @@ TEST(SceneErrors, QualityOutOfRange) {
     }
 }
 
-TEST(SceneErrors, QualityLimitsAccepted) {
+TEST(SceneParse, QualitySwitchesAtTheirLimitsAreAccepted) {
     const json q = {{"step", 1e-6}, {"early_termination", 1}, {"mip_level", 16}, {"image_scale", 1},
                     {"seed", 18446744073709551615u}};
     EXPECT_NO_THROW((void)parseScene(with(example(), "/quality", q).dump()));
 }
 
-TEST(SceneErrors, UnknownInterpolation) {
+TEST(SceneRefuses, UnknownInterpolation) {
     EXPECT_SCENE_ERROR(with(example(), "/quality/interpolation", "nearest"),
                        "quality.interpolation: must be one of \"linear\", \"cubic\"");
 }
 
-TEST(SceneErrors, ClipPlaneNormalZeroLength) {
+TEST(SceneRefuses, ClipPlaneNormalOfZeroLength) {
     EXPECT_SCENE_ERROR(with(example(), "/clip_planes/0/normal", json::array({0, 0, 0})),
                        "clip_planes[0].normal: has zero length");
 }
 
-TEST(SceneErrors, UnknownKeyAnywhere) {
+TEST(SceneRefuses, UnknownKeyAtAnyLevel) {
     const std::vector<Mistake> cases = {
         {"/volumes", "volumes", 1},
         {"/camera/fov_deg", "camera.fov_deg", 1},
@@ -451,13 +451,13 @@ TEST(SceneErrors, UnknownKeyAnywhere) {
         EXPECT_SCENE_ERROR(with(example(), pointer, value), path + ": unknown key");
 }
 
-TEST(SceneErrors, DuplicateKey) {
+TEST(SceneRefuses, DuplicateKey) {
     std::string text = kExample;
     text.replace(text.find("\"fov_y_deg\": 30"), 15, "\"fov_y_deg\": 30, \"fov_y_deg\": 60");
     EXPECT_SCENE_ERROR(text, "camera.fov_y_deg: duplicate key");
 }
 
-TEST(SceneErrors, EmptyVolume) {
+TEST(SceneRefuses, EmptyVolumeName) {
     EXPECT_SCENE_ERROR(with(example(), "/volume", ""), "volume: must not be empty");
 }
 

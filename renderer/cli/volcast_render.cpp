@@ -7,7 +7,7 @@
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/scene.hpp"
-#include "renderer/volume_source.hpp"
+#include "renderer/io/volume_source.hpp"
 
 #include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -31,7 +31,7 @@ nlohmann::json finiteOrNull(double x) { return std::isfinite(x) ? nlohmann::json
 } // namespace
 
 int main(int argc, char **argv) {
-    CLI::App app{"Render a volcast scene file (DESIGN.md's scene contract) to an image."};
+    CLI::App app{"Render a volcast scene file (docs/design.md's scene contract) to an image."};
     std::string scenePath, outPath, comparePath, errorImagePath;
     bool reference = false, analytic = false;
     double tolerance = 1e-7;

@@ -21,13 +21,6 @@ typedef cl_uint vc_uint;
 
 #define VC_MAX_CLIP_PLANES 6
 
-/* Gradient Phong shading (quality.shading) with a headlight: the same constants in the
- * kernel and in the reference integrator (shading.hpp). */
-#define VC_PHONG_AMBIENT 0.3f
-#define VC_PHONG_DIFFUSE 0.7f
-#define VC_PHONG_SPECULAR 0.2f
-#define VC_PHONG_SHININESS 20.0f
-
 typedef struct {
     vc_float4 eye;                  /* world; orthographic: the centre of the image plane */
     vc_float4 forward;              /* unit view direction */

@@ -1,10 +1,11 @@
-// Issue 4: numerical stability on stiff and extreme cases. The cases live in
+// Numerical stability on stiff and extreme cases. The cases live in
 // tests/stability/stability_cases.cpp, shared with volcast-stability, which prints the same
-// rows as the README's "Numerical stability" table; here each case is one test, and every
-// row must stay within its bound with no NaN or Inf in any output, on both back ends
-// (Issue4/Stability.<case>/OpenCl and …/Cpu).
+// rows as docs/accuracy.md's "Numerical stability" table; here each case is one test, and
+// every row must stay within its bound with no NaN or Inf in any output, on both back ends
+// (StiffAndExtremeCases/NumericalStability.<case>_OpenCl and …_Cpu).
 
 #include "tests/stability/stability_cases.hpp"
+#include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>
@@ -16,9 +17,9 @@ namespace {
 
 enum class Backend { OpenCl, Cpu };
 
-class Stability : public ::testing::TestWithParam<std::tuple<size_t, Backend>> {};
+class NumericalStability : public ::testing::TestWithParam<std::tuple<size_t, Backend>> {};
 
-TEST_P(Stability, StaysWithinItsBoundsWithoutNaNOrInf) {
+TEST_P(NumericalStability, StaysWithinItsBoundsWithoutNaNOrInf) {
     const auto [index, backend] = GetParam();
     const stability::Case &c = stability::cases()[index];
     const stability::Backend be =
@@ -35,7 +36,7 @@ TEST_P(Stability, StaysWithinItsBoundsWithoutNaNOrInf) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Issue4, Stability,
+INSTANTIATE_TEST_SUITE_P(StiffAndExtremeCases, NumericalStability,
                          ::testing::Combine(::testing::Range(size_t(0), stability::cases().size()),
                                             ::testing::Values(Backend::OpenCl, Backend::Cpu)),
                          [](const ::testing::TestParamInfo<std::tuple<size_t, Backend>> &param) {

@@ -3,8 +3,10 @@
 // integrator on both back ends in test_frame_renderer_accuracy.cpp.
 
 #include "renderer/error_metrics.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
+#include "renderer/reference_renderer.hpp"
 #include "renderer/synthetic.hpp"
+#include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>
@@ -90,7 +92,7 @@ TEST(OpenClRemedies, CubicFromEightTrilinearFetchesEqualsSixtyFourTaps) {
     const Camera cam = test::obliqueCamera(blob().volume, 30);
     const Image ia = a.render(blobTf(), cam, 24, 24, q, {}), ib = b.render(blobTf(), cam, 24, 24, q, {});
     EXPECT_NE(a.buildOptions(q, false), b.buildOptions(q, false));
-    // PoCL filters 3-D images in float (PLATFORM.md: 1.2e-7 of a trilinear); GPUs use ~8-bit
+    // PoCL filters 3-D images in float (docs/platform.md: 1.2e-7 of a trilinear); GPUs use ~8-bit
     // weights, 1/256 of a coefficient step, which an opacity of 0.7 turns into ~1e-2.
     EXPECT_LT(compareImages(ia, ib).maxAbs, cl().isGpu() ? 2e-2 : 1e-4);
 }

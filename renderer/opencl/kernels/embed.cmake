@@ -6,8 +6,8 @@ foreach(file IN LISTS FILES)
   file(READ "${file}" text)
   string(APPEND source "${text}\n")
 endforeach()
-file(WRITE "${OUT}" "// Generated from renderer/kernels by embed.cmake; do not edit.
-#include \"renderer/embedded_kernels.hpp\"
+file(WRITE "${OUT}" "// Generated from renderer/opencl/kernels by embed.cmake; do not edit.
+#include \"renderer/opencl/embedded_kernels.hpp\"
 namespace volcast {
 const char *const ${NAME} = R\"volcast_cl(#define VOLCAST_EMBEDDED 1
 ${source})volcast_cl\";

@@ -1,4 +1,4 @@
-#include "renderer/volume_io.hpp"
+#include "renderer/io/volume_io.hpp"
 
 #include <itkCommand.h>
 #include <itkGDCMImageIO.h>

@@ -10,7 +10,7 @@
 #include "renderer/image.hpp"
 #include "renderer/minmax_bricks.hpp"
 #include "renderer/mip_pyramid.hpp"
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/volume.hpp"
 
@@ -24,7 +24,7 @@ namespace volcast {
 
 // Where the tricubic B-spline reads its 64 coefficients from: a buffer, tap by tap, or a
 // 3-D image, as 8 trilinear fetches (Sigg and Hadwiger). Auto: images on GPUs, whose
-// texture units filter for free (with ~8-bit weights), buffers elsewhere (PLATFORM.md).
+// texture units filter for free (with ~8-bit weights), buffers elsewhere (docs/platform.md).
 enum class CubicFetch { Auto, Taps64, Trilinear8 };
 
 struct OpenClRendererOptions {

@@ -2,19 +2,11 @@
 // Small scene pieces several test files use.
 
 #include "renderer/camera.hpp"
-#include "renderer/opencl_context.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/transfer_function.hpp"
 #include "renderer/volume.hpp"
 
 namespace volcast::test {
-
-// One OpenCL context for every test file: each new feature set costs PoCL about a second to
-// build, and the program cache lives in the context.
-inline OpenClContext &sharedOpenClContext() {
-    static OpenClContext cl;
-    return cl;
-}
 
 // Every quality switch off but the partial boundary segment, at `step`: a test turns on
 // only what it measures.

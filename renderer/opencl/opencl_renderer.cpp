@@ -1,10 +1,10 @@
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 
 #include "renderer/bspline_prefilter.hpp"
-#include "renderer/bspline_prefilter_opencl.hpp"
+#include "renderer/opencl/bspline_prefilter_opencl.hpp"
 #include "renderer/camera.hpp"
-#include "renderer/embedded_kernels.hpp"
-#include "renderer/kernels/raycast_shared.h"
+#include "renderer/opencl/embedded_kernels.hpp"
+#include "renderer/opencl/kernels/raycast_shared.h"
 #include "renderer/preintegration.hpp"
 #include "renderer/tf_table.hpp"
 
@@ -26,7 +26,7 @@ double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(
 cl_float4 f4(const Vec3d &v, double w = 0) { return {{float(v.x), float(v.y), float(v.z), float(w)}}; }
 
 // Work-group edge: one fixed size, so PoCL compiles one launch configuration per program
-// (a new size costs it 0.25–2 s, PLATFORM.md) and the global size is rounded up to it.
+// (a new size costs it 0.25–2 s, docs/platform.md) and the global size is rounded up to it.
 constexpr size_t kGroupEdge = 8;
 size_t roundUp(int n) { return (size_t(n) + kGroupEdge - 1) / kGroupEdge * kGroupEdge; }
 

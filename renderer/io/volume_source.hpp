@@ -3,7 +3,7 @@
 // volume, which also brings its continuous field.
 
 #include "renderer/volume.hpp"
-#include "renderer/volume_io.hpp"
+#include "renderer/io/volume_io.hpp"
 
 #include <functional>
 #include <string_view>

@@ -1,5 +1,5 @@
 #pragma once
-// Kernel sources compiled into the library from renderer/kernels/*.cl at build time.
+// Kernel sources compiled into the library from renderer/opencl/kernels/*.cl at build time.
 
 namespace volcast {
 extern const char *const kRaycastKernelSource;

@@ -8,7 +8,7 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/error_metrics.hpp"
 #include "renderer/minmax_bricks.hpp"
-#include "renderer/opencl_renderer.hpp"
+#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/synthetic.hpp"
 #include "test_scenes.hpp"

@@ -1,4 +1,4 @@
-#include "renderer/opencl_context.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -131,7 +131,7 @@ bool OpenClContext::isGpu() const { return (device_.getInfo<CL_DEVICE_TYPE>() & 
 
 OpenClContext::BuiltProgram OpenClContext::program(const std::string &source, const std::string &options) {
     std::lock_guard lock(mutex_);
-    if (auto it = programs_.find(options); it != programs_.end()) return {it->second, 0};
+    if (auto it = programs_.find({source, options}); it != programs_.end()) return {it->second, 0};
     const auto start = std::chrono::steady_clock::now();
     cl::Program program(context_, source);
     try {
@@ -142,7 +142,7 @@ OpenClContext::BuiltProgram OpenClContext::program(const std::string &source, co
             log += "\n--- build log for " + device.getInfo<CL_DEVICE_NAME>() + " ---\n" + text;
         throw OpenClError("OpenCL program failed to build with options '" + options + "':" + log);
     }
-    programs_.emplace(options, program);
+    programs_.emplace(std::pair{source, options}, program);
     ++programsBuilt_;
     return {program, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()};
 }

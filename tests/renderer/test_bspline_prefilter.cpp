@@ -1,5 +1,5 @@
 #include "renderer/bspline_prefilter.hpp"
-#include "renderer/bspline_prefilter_opencl.hpp"
+#include "renderer/opencl/bspline_prefilter_opencl.hpp"
 #include "renderer/reconstruction.hpp"
 
 #include <gtest/gtest.h>

@@ -13,6 +13,7 @@
  *   SHADING              gradient Phong lighting with a headlight
  */
 #ifndef VOLCAST_EMBEDDED
+#include "../../phong_constants.h"
 #include "raycast_shared.h"
 #endif
 
@@ -24,7 +25,7 @@
 #define VOLUME volume
 #endif
 
-/* Reconstruction at level index coordinate p, clamped to the outermost samples (DESIGN.md). */
+/* Reconstruction at level index coordinate p, clamped to the outermost samples (docs/design.md). */
 #if defined(CUBIC)
 /* Coefficients padded by one before and two after on each axis (mirror boundary, written by
  * the host), so the 4×4×4 footprint never needs a bounds check. */
@@ -87,7 +88,7 @@ inline float voxel(__global const float *volume, int4 n, int i, int j, int k) {
     return volume[((size_t)k * n.y + j) * n.x + i];
 }
 
-/* Trilinear from a buffer: on CPUs several times faster than a 3-D image (PLATFORM.md). */
+/* Trilinear from a buffer: on CPUs several times faster than a 3-D image (docs/platform.md). */
 float sampleVolume(__global const float *volume, int4 n, float3 p) {
     p = clamp(p, (float3)(0.0f), convert_float3(n.xyz - 1));
     const int3 i0 = min(convert_int3(p), max(n.xyz - 2, (int3)(0)));
@@ -274,7 +275,7 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= P->width || y >= P->height) return;
 
-    /* Ray through the pixel centre (DESIGN.md's camera), world space. */
+    /* Ray through the pixel centre (docs/design.md's camera), world space. */
     const float u = 2.0f * ((float)x + 0.5f) / (float)P->width - 1.0f;
     const float v = 1.0f - 2.0f * ((float)y + 0.5f) / (float)P->height;
     const float3 offset = u * P->right.xyz + v * P->up.xyz;
