@@ -20,6 +20,8 @@ packages=(
   zlib1g-dev
   # Tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
+  # Fuzz targets (fuzz/README.md): clang with libFuzzer, ASan and UBSan
+  clang-14 libfuzzer-14-dev
   # Web client tests: Debian's Chromium driven by playwright-core
   chromium
   # Container tests: podman with runc and netavark's bridge network (iptables),
