@@ -1,6 +1,7 @@
 #include "protocol/client_messages.hpp"
 
 #include "protocol/json_reader.hpp"
+#include "protocol/utf8.hpp"
 #include "protocol/version.hpp"
 
 #include <array>
@@ -82,8 +83,8 @@ ClientMessage readOpenVolume(const json &root, const RequestId &id, const Limits
     // keeps an absurd string out of the error message.
     m.name = detail::string(f.require("name"), "name", std::string::npos);
     if (const auto problem = validateVolumeName(m.name, limits.maxVolumeNameBytes)) {
-        const std::string shown = m.name.size() <= 200 ? json(m.name).dump() : "the name";
-        fail(ErrorCode::BadVolumeName, "volume name " + shown + " " + *problem);
+        fail(ErrorCode::BadVolumeName,
+             "volume name " + json(quotableText(m.name, detail::kMaxQuotedBytes)).dump() + " " + *problem);
     }
     return m;
 }
@@ -206,17 +207,19 @@ ParsedClientMessage parseClientMessage(std::string_view text, const Limits &limi
         for (const ReaderEntry &e : kReaders)
             if (e.type == name) entry = &e;
         if (!entry) {
-            const std::string shown = name.size() <= 64 ? json(name).dump() : "of " + std::to_string(name.size()) + " bytes";
-            fail(ErrorCode::UnknownType, "unknown message type " + shown + " (known: " + knownTypes() + ")");
+            fail(ErrorCode::UnknownType,
+                 "unknown message type " + json(quotableText(name, 64)).dump() + " (known: " + knownTypes() + ")");
         }
         type = name;
         if (!parsed.duplicateKey.empty()) badField(parsed.duplicateKey, "duplicate key");
         return entry->read(root, id, limits);
     } catch (const ReadError &e) {
-        return ProtocolError{e.code, e.what(), id, type};
+        // Each message above quotes client text through quotableText already; this is the
+        // last check that the answer is valid UTF-8 whatever a future message quotes.
+        return ProtocolError{e.code, quotableText(e.what()), id, type};
     } catch (const std::exception &e) {
         // Out of memory or a bug in this file; still an answer, never a dropped connection.
-        return ProtocolError{ErrorCode::Internal, std::string("reading the message failed: ") + e.what(), id, type};
+        return ProtocolError{ErrorCode::Internal, "reading the message failed: " + quotableText(e.what()), id, type};
     }
 }
 

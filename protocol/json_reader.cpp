@@ -1,5 +1,7 @@
 #include "protocol/json_reader.hpp"
 
+#include "protocol/utf8.hpp"
+
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -12,7 +14,8 @@ namespace volcast::protocol::detail {
 void fail(ErrorCode code, const std::string &message) { throw ReadError(code, message); }
 
 void badField(const std::string &path, const std::string &message) {
-    fail(ErrorCode::BadField, path.empty() ? message : path + ": " + message);
+    // A path is made of the client's keys: a 60 KiB key is quoted by its start only.
+    fail(ErrorCode::BadField, path.empty() ? message : quotableText(path, kMaxQuotedBytes) + ": " + message);
 }
 
 std::string member(const std::string &path, std::string_view key) {
@@ -99,7 +102,9 @@ ParsedText parseText(std::string_view text, int maxDepth) {
             return (*tracker)(depth, event, parsed);
         });
     } catch (const json::exception &e) {
-        std::string message = e.what();
+        // The library's message quotes the last bytes it read, which may stop inside a
+        // character (the text "é" fails at its first byte): quoted as valid UTF-8 only.
+        std::string message = quotableText(e.what(), kMaxQuotedBytes);
         // Drop the library's "[json.exception.parse_error.101] " tag; keep line and column.
         if (const auto close = message.find("] "); message.starts_with("[json.") && close != std::string::npos)
             message.erase(0, close + 2);
@@ -108,7 +113,8 @@ ParsedText parseText(std::string_view text, int maxDepth) {
         // syntax, for which the field is only a hint next to the line and column.
         if (e.id == 406) badField(near, "must be a finite number (" + message + ")");
         fail(ErrorCode::MalformedJson,
-             "malformed JSON: " + message + (near.empty() ? "" : " (near " + near + ")"));
+             "malformed JSON: " + message +
+                 (near.empty() ? "" : " (near " + quotableText(near, kMaxQuotedBytes) + ")"));
     }
     out.duplicateKey = tracker->duplicateKey();
     return out;

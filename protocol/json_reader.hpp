@@ -23,6 +23,9 @@ struct ReadError : std::runtime_error {
     ErrorCode code;
 };
 
+// The most bytes of client text (a key path, a parser's excerpt) an error message quotes.
+constexpr size_t kMaxQuotedBytes = 200;
+
 [[noreturn]] void fail(ErrorCode code, const std::string &message);
 // Throws bad_field with "path: message" (just the message at the top level).
 [[noreturn]] void badField(const std::string &path, const std::string &message);

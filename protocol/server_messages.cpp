@@ -35,14 +35,18 @@ json volumeToJson(const VolumeInfo &v) {
 
 // The fields of each message besides "type" and "id".
 json fieldsOf(const ServerHello &m) {
+    json limits{{"max_message_bytes", m.limits.maxMessageBytes},
+                {"max_image_side", m.limits.maxImageSide},
+                {"max_image_pixels", m.limits.maxImagePixels},
+                {"max_volume_name_bytes", m.limits.maxVolumeNameBytes}};
+    // The admission limits, added later: 0 means not stated, and is left out.
+    if (m.limits.maxSamplesPerFrame) limits["max_samples_per_frame"] = m.limits.maxSamplesPerFrame;
+    if (m.limits.maxStillPixels) limits["max_still_pixels"] = m.limits.maxStillPixels;
+    if (m.limits.maxRequestBytes) limits["max_request_bytes"] = m.limits.maxRequestBytes;
     return {{"protocol", m.protocol},
             {"server", m.server},
             {"device", {{"name", m.device.name}, {"type", m.device.type}}},
-            {"limits",
-             {{"max_message_bytes", m.limits.maxMessageBytes},
-              {"max_image_side", m.limits.maxImageSide},
-              {"max_image_pixels", m.limits.maxImagePixels},
-              {"max_volume_name_bytes", m.limits.maxVolumeNameBytes}}}};
+            {"limits", std::move(limits)}};
 }
 
 json fieldsOf(const VolumesMessage &m) {
@@ -138,6 +142,11 @@ ServerMessage readHello(const Fields &f, RequestId id) {
                                                 limits.pathOf("max_image_side"), 0, 1 << 30));
     m.limits.maxImagePixels = count("max_image_pixels");
     m.limits.maxVolumeNameBytes = size_t(count("max_volume_name_bytes"));
+    // Added later: absent from older servers' hello.
+    const auto optionalCount = [&](std::string_view key) { return limits.find(key) ? count(key) : 0; };
+    m.limits.maxSamplesPerFrame = optionalCount("max_samples_per_frame");
+    m.limits.maxStillPixels = optionalCount("max_still_pixels");
+    m.limits.maxRequestBytes = optionalCount("max_request_bytes");
     return m;
 }
 
@@ -204,7 +213,9 @@ std::string toJsonText(const ServerMessage &message) {
     j["type"] = messageType(message);
     // Always present, null when the message answers no request, so clients can rely on it.
     j["id"] = idOf(message);
-    return j.dump();
+    // Every string in a message should be valid UTF-8 already (client text is quoted through
+    // quotableText); should one not be, U+FFFD goes out instead of an exception.
+    return j.dump(-1, ' ', false, json::error_handler_t::replace);
 }
 
 ServerMessage parseServerMessage(std::string_view text) {

@@ -31,6 +31,11 @@ struct ServerLimits {
     int maxImageSide = 0;                                // pixels, width or height
     int64_t maxImagePixels = 0;                          // width x height
     size_t maxVolumeNameBytes = kMaxVolumeNameBytes;
+    // Admission control: work one request may start. 0 when the server did not say (an
+    // older server); requests over them get too_large naming the limit.
+    int64_t maxSamplesPerFrame = 0;   // predicted samples of one frame: rays x samples per ray
+    int64_t maxStillPixels = 0;       // width x height of a still
+    int64_t maxRequestBytes = 0;      // image memory of one view: width x height x 16 x passes
     bool operator==(const ServerLimits &) const = default;
 };
 
