@@ -65,6 +65,23 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
         ->check(CLI::Range(1024, 16 << 20));
     app.add_option("--port-file", portFile, "Write the bound port to this file once listening (for scripts)");
     app.add_option("--log-level", c.logLevel, "trace, debug, info, warn, error")->envname("VOLCAST_LOG_LEVEL");
+    // HTTP hardening.
+    app.add_option("--allowed-host", c.allowedHosts,
+                   "Host header name accepted over HTTP; repeat, or '*' for any (default: localhost, 127.0.0.1 and "
+                   "[::1] on a loopback bind, any otherwise; env: ','-separated)")
+        ->envname("VOLCAST_ALLOWED_HOSTS")
+        ->delimiter(',');
+    app.add_option("--metrics-bind", c.metricsBind,
+                   "ADDR:PORT serving /metrics, /healthz and /readyz on a listener of their own; the main port then "
+                   "answers /metrics with 404")
+        ->envname("VOLCAST_METRICS_BIND");
+    app.add_option("--max-connections-per-address", c.maxConnectionsPerAddress,
+                   "Open TCP connections (HTTP and WebSocket) from one IP address; 0: no cap")
+        ->envname("VOLCAST_MAX_CONNECTIONS_PER_ADDRESS")
+        ->check(CLI::Range(0, 1000000));
+    app.add_option("--header-timeout-ms", c.headerTimeoutMs, "ms a client has to send a request's headers")
+        ->envname("VOLCAST_HEADER_TIMEOUT_MS")
+        ->check(CLI::Range(100, 3600000));
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError &e) {

@@ -31,6 +31,12 @@ struct ServerConfig {
     size_t maxMessageBytes = 64 * 1024;       // one text message
     std::filesystem::path portFile;           // write the bound port here once listening
     std::string logLevel = "info";
+
+    // HTTP hardening (server/README.md, "HTTP"; docs/hardening.md).
+    std::vector<std::string> allowedHosts;    // Host names accepted; empty: loopback names on a loopback bind, else any; "*": any
+    std::string metricsBind;                  // "ADDR:PORT": /metrics, /healthz, /readyz there, and /metrics off the main port
+    int maxConnectionsPerAddress = 64;        // open TCP connections from one IP (HTTP and WebSocket); 0: no cap
+    int headerTimeoutMs = 10000;              // ms for a request's headers to arrive (slowloris)
 };
 
 // Parse flags and environment. Returns nullopt after printing help or an error (exitCode set).

@@ -1,12 +1,16 @@
 #include "server/http_session.hpp"
 
+#include "server/listener.hpp"
 #include "server/static_files.hpp"
 #include "server/websocket_session.hpp"
 
 #include <boost/asio/dispatch.hpp>
+#include <boost/asio/ip/address.hpp>
+#include <boost/beast/_experimental/test/stream.hpp>
 #include <boost/beast/websocket.hpp>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 
 namespace volcast::server {
@@ -16,8 +20,13 @@ namespace http = beast::http;
 namespace net = boost::asio;
 
 namespace {
-constexpr auto kReadTimeout = std::chrono::seconds(30);
-constexpr size_t kMaxRequestBodyBytes = 64 * 1024;
+// From the end of the headers to the end of the body (at most kMaxRequestBodyBytes).
+constexpr auto kBodyTimeout = std::chrono::seconds(30);
+// After an answer that closes the connection, what the client still sends is read and
+// dropped for this long (nginx's lingering close): closing with unread input would reset
+// the connection, and the client could lose the answer before reading it.
+constexpr auto kLingerTimeout = std::chrono::seconds(2);
+constexpr size_t kLingerBytes = 1 << 20;
 
 // Shown at / while web/ has no index.html yet.
 constexpr const char *kFallbackPage = R"(<!doctype html>
@@ -29,83 +38,243 @@ The WebSocket endpoint is <code>/ws</code>; see protocol/README.md. Health: <a h
 )";
 
 template <class Body>
-void common(http::response<Body> &res, const http::request<http::string_body> &req) {
+void common(http::response<Body> &res, bool keepAlive) {
     res.set(http::field::server, "volcast/0.1.0");
     res.set("X-Content-Type-Options", "nosniff");
     res.set(http::field::cache_control, "no-cache");
-    res.keep_alive(req.keep_alive());
+    res.keep_alive(keepAlive);
+}
+
+http::response<http::string_body> textResponse(unsigned version, bool head, bool keepAlive, http::status status,
+                                               std::string body,
+                                               std::string_view type = "text/plain; charset=utf-8") {
+    http::response<http::string_body> res{status, version};
+    common(res, keepAlive);
+    res.set(http::field::content_type, type);
+    const size_t size = body.size();
+    if (!head) res.body() = std::move(body);
+    res.prepare_payload();
+    if (head) res.content_length(size);
+    return res;
 }
 
 http::response<http::string_body> textResponse(const http::request<http::string_body> &req, http::status status,
                                                std::string body, std::string_view type = "text/plain; charset=utf-8") {
-    http::response<http::string_body> res{status, req.version()};
-    common(res, req);
-    res.set(http::field::content_type, type);
-    res.body() = req.method() == http::verb::head ? std::string() : std::move(body);
-    res.prepare_payload();
-    if (req.method() == http::verb::head) res.content_length(body.size());
-    return res;
+    return textResponse(req.version(), req.method() == http::verb::head, req.keep_alive(), status, std::move(body),
+                        type);
+}
+
+std::string lower(std::string_view s) {
+    std::string out(s);
+    std::transform(out.begin(), out.end(), out.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return out;
+}
+
+// Printable for a log line or an answer: at most 200 characters, controls replaced.
+std::string printable(std::string_view s) {
+    std::string out(s.substr(0, 200));
+    for (char &c : out)
+        if ((unsigned char)c < 0x20 || (unsigned char)c == 0x7f) c = '?';
+    if (s.size() > 200) out += "...";
+    return out;
+}
+
+// Constant-time, so that the token cannot be guessed a character at a time from timings.
+bool sameSecret(std::string_view given, std::string_view token) {
+    if (given.size() != token.size() || token.empty()) return false;
+    unsigned char diff = 0;
+    for (size_t i = 0; i < token.size(); ++i) diff |= (unsigned char)(given[i] ^ token[i]);
+    return diff == 0;
+}
+
+bool bearerMatches(std::string_view authorization, std::string_view token) {
+    constexpr std::string_view kScheme = "bearer ";
+    if (authorization.size() < kScheme.size() || lower(authorization.substr(0, kScheme.size())) != kScheme)
+        return false;
+    auto given = authorization.substr(kScheme.size());
+    while (!given.empty() && given.front() == ' ') given.remove_prefix(1);
+    return sameSecret(given, token);
+}
+
+// Status for a request the parser refused; `unparsed` is what of it is still in the buffer.
+std::pair<http::status, std::string> parseRefusal(beast::error_code ec, std::string_view unparsed) {
+    if (ec == http::error::body_limit)
+        return {http::status::payload_too_large,
+                "request body over " + std::to_string(kMaxRequestBodyBytes) + " bytes\n"};
+    if (ec == http::error::header_limit) {
+        // The parser takes the request line and the headers as one block: a request line
+        // that alone passes the target limit is a URI too long, anything else too many headers.
+        const size_t lineEnd = std::min(unparsed.find("\r\n"), unparsed.size());
+        if (lineEnd > kMaxTargetBytes)
+            return {http::status::uri_too_long, "request target over " + std::to_string(kMaxTargetBytes) + " bytes\n"};
+        return {http::status::request_header_fields_too_large,
+                "request headers over " + std::to_string(kMaxHeaderBytes) + " bytes\n"};
+    }
+    return {http::status::bad_request, "malformed request: " + ec.message() + "\n"};
 }
 } // namespace
 
-HttpSession::HttpSession(net::ip::tcp::socket &&socket, std::shared_ptr<SharedState> state)
-    : stream_(std::move(socket)), state_(std::move(state)) {}
-
-void HttpSession::run() {
-    net::dispatch(stream_.get_executor(), beast::bind_front_handler(&HttpSession::doRead, shared_from_this()));
+std::optional<std::string> hostName(std::string_view value) {
+    while (!value.empty() && (value.front() == ' ' || value.front() == '\t')) value.remove_prefix(1);
+    while (!value.empty() && (value.back() == ' ' || value.back() == '\t')) value.remove_suffix(1);
+    std::string_view host = value, port;
+    if (value.starts_with('[')) {
+        const size_t close = value.find(']');
+        if (close == std::string_view::npos) return std::nullopt;
+        host = value.substr(0, close + 1);
+        const auto rest = value.substr(close + 1);
+        if (!rest.empty()) {
+            if (rest.front() != ':') return std::nullopt;
+            port = rest.substr(1);
+        }
+        boost::system::error_code ec;
+        net::ip::make_address_v6(std::string(host.substr(1, host.size() - 2)), ec);
+        if (ec) return std::nullopt;
+    } else {
+        const size_t colon = value.find(':');
+        if (colon != std::string_view::npos) {
+            // A second colon: an IPv6 address without brackets, or garbage.
+            if (value.find(':', colon + 1) != std::string_view::npos) return std::nullopt;
+            host = value.substr(0, colon);
+            port = value.substr(colon + 1);
+        }
+        if (host.ends_with('.')) host.remove_suffix(1);
+        if (host.empty()) return std::nullopt;
+        for (const char c : host)
+            if (!std::isalnum((unsigned char)c) && c != '-' && c != '.' && c != '_') return std::nullopt;
+    }
+    if (port.size() > 5 || !std::all_of(port.begin(), port.end(), [](unsigned char c) { return std::isdigit(c); }))
+        return std::nullopt;
+    return lower(host);
 }
 
-void HttpSession::doRead() {
+HttpEndpoint httpEndpointFor(const ServerConfig &config, std::string_view bindAddress, bool metricsOnly) {
+    HttpEndpoint e;
+    e.metricsOnly = metricsOnly;
+    e.serveMetrics = metricsOnly || config.metricsBind.empty();
+    if (!config.allowedHosts.empty()) {
+        for (const auto &h : config.allowedHosts) {
+            if (h == "*") return e.allowedHosts.clear(), e;
+            // Given with a port or in upper case, it still names the same host.
+            e.allowedHosts.push_back(hostName(h).value_or(lower(h)));
+        }
+        return e;
+    }
+    boost::system::error_code ec;
+    const auto address = net::ip::make_address(std::string(bindAddress), ec);
+    if (!ec && address.is_loopback()) e.allowedHosts = {"localhost", "127.0.0.1", "[::1]"};
+    return e;
+}
+
+template <class Stream>
+BasicHttpSession<Stream>::BasicHttpSession(Stream &&stream, std::shared_ptr<SharedState> state,
+                                           std::shared_ptr<const HttpEndpoint> endpoint,
+                                           std::shared_ptr<ConnectionSlot> slot)
+    : stream_(std::move(stream)), state_(std::move(state)), endpoint_(std::move(endpoint)), slot_(std::move(slot)) {}
+
+template <class Stream>
+void BasicHttpSession<Stream>::run() {
+    net::dispatch(stream_.get_executor(), beast::bind_front_handler(&BasicHttpSession::doRead, this->shared_from_this()));
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::doRead() {
     parser_.emplace();
+    parser_->header_limit(uint32_t(kMaxHeaderBytes));
     parser_->body_limit(kMaxRequestBodyBytes);
-    stream_.expires_after(kReadTimeout);
-    http::async_read(stream_, buffer_, *parser_, beast::bind_front_handler(&HttpSession::onRead, shared_from_this()));
+    // The headers must all be there in time (slowloris); also the keep-alive idle limit.
+    if constexpr (std::is_same_v<Stream, beast::tcp_stream>)
+        stream_.expires_after(std::chrono::milliseconds(state_->config().headerTimeoutMs));
+    http::async_read_header(stream_, buffer_, *parser_,
+                            beast::bind_front_handler(&BasicHttpSession::onHeader, this->shared_from_this()));
 }
 
-void HttpSession::onRead(beast::error_code ec, size_t) {
-    if (ec == http::error::end_of_stream || ec == beast::error::timeout || ec == net::error::operation_aborted) {
-        beast::error_code ignored;
-        stream_.socket().shutdown(net::ip::tcp::socket::shutdown_send, ignored);
-        return;
+template <class Stream>
+void BasicHttpSession<Stream>::onHeader(beast::error_code ec, size_t bytes) {
+    if (ec) return onRead(ec, bytes);
+    if (auto refusal = checkHeader()) {
+        const auto &h = parser_->get();
+        return refuse(refusal->first, std::move(refusal->second), h.version(), h.method() == http::verb::head);
+    }
+    if (parser_->is_done()) return onRead({}, bytes);
+    if constexpr (std::is_same_v<Stream, beast::tcp_stream>) stream_.expires_after(kBodyTimeout);
+    http::async_read(stream_, buffer_, *parser_,
+                     beast::bind_front_handler(&BasicHttpSession::onRead, this->shared_from_this()));
+}
+
+template <class Stream>
+std::optional<std::pair<http::status, std::string>> BasicHttpSession<Stream>::checkHeader() const {
+    const auto &req = parser_->get();
+    if (req.target().size() > kMaxTargetBytes)
+        return std::pair{http::status::uri_too_long, "request target over " + std::to_string(kMaxTargetBytes) + " bytes\n"};
+    const auto hosts = req.count(http::field::host);
+    if (hosts > 1) return std::pair{http::status::bad_request, std::string("more than one Host header\n")};
+    if (hosts == 0) {
+        // HTTP/1.1 requires it (RFC 9112 §3.2); an HTTP/1.0 client may not know it.
+        if (req.version() >= 11) return std::pair{http::status::bad_request, std::string("no Host header\n")};
+        return std::nullopt;
+    }
+    const auto value = req[http::field::host];
+    const auto name = hostName(value);
+    if (!name) return std::pair{http::status::bad_request, "malformed Host header: " + printable(value) + "\n"};
+    const auto &allowed = endpoint_->allowedHosts;
+    // A page that rebinds its own DNS name to this server's address sends that name.
+    if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), *name) == allowed.end())
+        return std::pair{http::status::misdirected_request,
+                         "host " + printable(*name) + " is not served here (server flag --allowed-host)\n"};
+    return std::nullopt;
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::onRead(beast::error_code ec, size_t) {
+    if (ec == http::error::end_of_stream || ec == net::error::operation_aborted || ec == net::error::eof ||
+        ec == net::error::connection_reset || ec == http::error::partial_message) {
+        return doClose();
+    }
+    if (ec == beast::error::timeout) {
+        // Idle between requests is a normal end; part of a request is a client too slow.
+        if (parser_->got_some())
+            spdlog::debug("http: closed a connection that sent part of a request for too long");
+        return doClose();
     }
     if (ec) {
-        spdlog::debug("http read: {}", ec.message());
-        return;
+        const auto data = buffer_.data();
+        auto [status, message] =
+            parseRefusal(ec, std::string_view(static_cast<const char *>(data.data()), data.size()));
+        spdlog::debug("http: refused a request ({}): {}", int(status), message);
+        return refuse(status, std::move(message));
     }
-    http::request<http::string_body> req = parser_->release();
+    handle(parser_->release());
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::handle(Request &&req) {
     const std::string target(req.target());
     const std::string path = target.substr(0, target.find('?'));
 
+    if (endpoint_->metricsOnly && path != "/metrics" && path != "/healthz" && path != "/readyz") {
+        auto res = textResponse(req, http::status::not_found,
+                                "not found: " + printable(path) + " (this port serves /metrics, /healthz and /readyz)\n");
+        if (beast::websocket::is_upgrade(req)) res.keep_alive(false);
+        return send(std::move(res));
+    }
     if (beast::websocket::is_upgrade(req)) {
         if (path != kWebSocketPath) {
             auto res = textResponse(req, http::status::not_found, "WebSocket sessions live at /ws\n");
             res.keep_alive(false);
-            return http::async_write(stream_, std::move(res), [self = shared_from_this()](beast::error_code, size_t) {});
+            return send(std::move(res));
         }
         const std::string origin(req[http::field::origin]);
         if (!state_->originAllowed(origin)) {
-            spdlog::warn("refused a WebSocket session from origin {}", origin);
+            spdlog::warn("refused a WebSocket session from origin {}", printable(origin));
             state_->metrics().sessionRefused();
             auto res = textResponse(req, http::status::forbidden,
-                                    "origin " + origin + " is not allowed (server flag --allowed-origin)\n");
+                                    "origin " + printable(origin) + " is not allowed (server flag --allowed-origin)\n");
             res.keep_alive(false);
-            return http::async_write(stream_, std::move(res), [self = shared_from_this()](beast::error_code, size_t) {});
+            return send(std::move(res));
         }
-        // The WebSocket session takes the socket; its own timeouts replace the HTTP one.
-        stream_.expires_never();
-        std::make_shared<WebsocketSession>(stream_.release_socket(), state_)->run(std::move(req));
-        return;
+        return handOff(std::move(req));
     }
-
-    auto send = [this](auto &&res) {
-        using Response = std::decay_t<decltype(res)>;
-        auto sp = std::make_shared<Response>(std::forward<decltype(res)>(res));
-        const bool keepAlive = sp->keep_alive();
-        http::async_write(stream_, *sp,
-                          [self = shared_from_this(), sp, keepAlive](beast::error_code wec, size_t bytes) {
-                              self->onWrite(keepAlive, wec, bytes);
-                          });
-    };
 
     if (req.method() != http::verb::get && req.method() != http::verb::head) {
         auto res = textResponse(req, http::status::method_not_allowed, "only GET and HEAD\n");
@@ -118,44 +287,110 @@ void HttpSession::onRead(beast::error_code ec, size_t) {
         return send(why.empty() ? textResponse(req, http::status::ok, "ready\n")
                                 : textResponse(req, http::status::service_unavailable, "not ready: " + why + "\n"));
     }
-    if (path == "/metrics")
+    if (path == "/metrics" && endpoint_->serveMetrics) {
+        // The metrics listener is the private alternative to the token; on the main port the
+        // token guards them as it guards sessions.
+        const std::string &token = state_->config().token;
+        if (!endpoint_->metricsOnly && !token.empty() && !bearerMatches(req[http::field::authorization], token)) {
+            auto res = textResponse(req, http::status::unauthorized,
+                                    "/metrics needs the server's token: Authorization: Bearer <token>\n");
+            res.set(http::field::www_authenticate, "Bearer realm=\"volcast\"");
+            return send(std::move(res));
+        }
         return send(textResponse(req, http::status::ok, state_->metrics().prometheusText(),
                                  "text/plain; version=0.0.4; charset=utf-8"));
+    }
 
     const auto file = resolveStaticFile(state_->config().webRoot, target);
     if (!file) {
         if (path == "/" || path == "/index.html")
             return send(textResponse(req, http::status::ok, kFallbackPage, "text/html; charset=utf-8"));
-        return send(textResponse(req, http::status::not_found, "not found: " + path + "\n"));
+        return send(textResponse(req, http::status::not_found, "not found: " + printable(path) + "\n"));
     }
     http::file_body::value_type body;
     beast::error_code fec;
     body.open(file->c_str(), beast::file_mode::scan, fec);
-    if (fec) return send(textResponse(req, http::status::not_found, "not found: " + path + "\n"));
+    if (fec) return send(textResponse(req, http::status::not_found, "not found: " + printable(path) + "\n"));
     const auto size = body.size();
     if (req.method() == http::verb::head) {
         http::response<http::empty_body> res{http::status::ok, req.version()};
-        common(res, req);
+        common(res, req.keep_alive());
         res.set(http::field::content_type, mimeType(*file));
         res.content_length(size);
         return send(std::move(res));
     }
     http::response<http::file_body> res{std::piecewise_construct, std::make_tuple(std::move(body)),
                                         std::make_tuple(http::status::ok, req.version())};
-    common(res, req);
+    common(res, req.keep_alive());
     res.set(http::field::content_type, mimeType(*file));
     res.content_length(size);
     send(std::move(res));
 }
 
-void HttpSession::onWrite(bool keepAlive, beast::error_code ec, size_t) {
-    if (ec) return;
-    if (!keepAlive) {
-        beast::error_code ignored;
-        stream_.socket().shutdown(net::ip::tcp::socket::shutdown_send, ignored);
-        return;
+template <class Stream>
+void BasicHttpSession<Stream>::handOff(Request &&req) {
+    if constexpr (std::is_same_v<Stream, beast::tcp_stream>) {
+        // The WebSocket session takes the socket; its own timeouts replace the HTTP ones.
+        stream_.expires_never();
+        auto session = std::make_shared<WebsocketSession>(stream_.release_socket(), state_);
+        if (slot_) slot_->handOff(session);
+        session->run(std::move(req));
+    } else {
+        // Only a socket can carry a WebsocketSession.
+        auto res = textResponse(req, http::status::not_implemented, "no WebSocket over this stream\n");
+        res.keep_alive(false);
+        send(std::move(res));
     }
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::refuse(http::status status, std::string message, unsigned version, bool head) {
+    send(textResponse(version, head, false, status, std::move(message)));
+}
+
+template <class Stream>
+template <class Response>
+void BasicHttpSession<Stream>::send(Response &&res) {
+    // The response lives until its write completes: the write only refers to it.
+    auto sp = std::make_shared<std::decay_t<Response>>(std::forward<Response>(res));
+    const bool keepAlive = sp->keep_alive();
+    if constexpr (std::is_same_v<Stream, beast::tcp_stream>) stream_.expires_after(kBodyTimeout);
+    http::async_write(stream_, *sp, [self = this->shared_from_this(), sp, keepAlive](beast::error_code ec, size_t bytes) {
+        self->onWrite(keepAlive, ec, bytes);
+    });
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::onWrite(bool keepAlive, beast::error_code ec, size_t) {
+    if (ec) return;
+    if (!keepAlive) return doClose();
     doRead();
 }
+
+template <class Stream>
+void BasicHttpSession<Stream>::doClose() {
+    beast::error_code ignored;
+    if constexpr (std::is_same_v<Stream, beast::tcp_stream>) {
+        stream_.socket().shutdown(net::ip::tcp::socket::shutdown_send, ignored);
+        stream_.expires_after(kLingerTimeout);
+        stream_.async_read_some(net::buffer(drain_),
+                                beast::bind_front_handler(&BasicHttpSession::onDrain, this->shared_from_this()));
+    } else {
+        stream_.close();
+    }
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::onDrain(beast::error_code ec, size_t bytes) {
+    drained_ += bytes;
+    // Ends on the client's close, an error, the linger timeout or enough bytes dropped;
+    // the socket closes with the last reference to this session.
+    if (ec || drained_ >= kLingerBytes) return;
+    stream_.async_read_some(net::buffer(drain_),
+                            beast::bind_front_handler(&BasicHttpSession::onDrain, this->shared_from_this()));
+}
+
+template class BasicHttpSession<beast::tcp_stream>;
+template class BasicHttpSession<beast::test::stream>;
 
 } // namespace volcast::server

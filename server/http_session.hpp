@@ -1,34 +1,95 @@
 #pragma once
 // One HTTP connection (Beast advanced_server's http_session): answers GET/HEAD for the
 // health endpoints, the metrics and the static files, and hands a WebSocket upgrade on /ws
-// to a WebsocketSession.
+// to a WebsocketSession. Every bad request gets its status (400, 405, 413, 414, 421, 431)
+// with a line saying what was wrong, then the connection closes.
+//
+// Generic over its stream so that a fuzz target can drive it with beast::test::stream; the
+// server uses HttpSession (a tcp_stream). Only a tcp_stream has timeouts and can become a
+// WebSocket: over any other stream an upgrade that passes every check is answered 501, so
+// the refusals (404, 403) stay reachable without a socket.
 
 #include "server/shared_state.hpp"
 
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 
+#include <array>
 #include <memory>
 #include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
 
 namespace volcast::server {
 
-class HttpSession : public std::enable_shared_from_this<HttpSession> {
+class ConnectionSlot;
+
+// What one listening address serves.
+struct HttpEndpoint {
+    // The --metrics-bind listener: /metrics, /healthz and /readyz only, /metrics without the token.
+    bool metricsOnly = false;
+    // False on the main port once a metrics listener exists.
+    bool serveMetrics = true;
+    // Host names (lower case, no port) accepted; empty: any.
+    std::vector<std::string> allowedHosts;
+};
+
+// The endpoint a listener bound to `bindAddress` serves: config.allowedHosts, or by default
+// only loopback names on a loopback address (DNS rebinding) and any name otherwise.
+HttpEndpoint httpEndpointFor(const ServerConfig &config, std::string_view bindAddress, bool metricsOnly);
+
+// The host name of a Host header value, lower case, without port or trailing dot
+// ("[::1]" keeps its brackets); nullopt when the value is not a valid host[:port].
+std::optional<std::string> hostName(std::string_view hostHeader);
+
+// Request limits, as nginx's defaults order them (large_client_header_buffers 8k for a
+// request line, 16 KiB for all headers, a small body: only 405s carry one).
+inline constexpr size_t kMaxTargetBytes = 8 * 1024;
+inline constexpr size_t kMaxHeaderBytes = 16 * 1024;
+inline constexpr size_t kMaxRequestBodyBytes = 64 * 1024;
+
+template <class Stream>
+class BasicHttpSession : public std::enable_shared_from_this<BasicHttpSession<Stream>> {
   public:
     static constexpr const char *kWebSocketPath = "/ws";
 
-    HttpSession(boost::asio::ip::tcp::socket &&socket, std::shared_ptr<SharedState> state);
+    // `slot` counts this connection against its address's cap (none for a fuzzed stream).
+    BasicHttpSession(Stream &&stream, std::shared_ptr<SharedState> state, std::shared_ptr<const HttpEndpoint> endpoint,
+                     std::shared_ptr<ConnectionSlot> slot = nullptr);
     void run();
 
   private:
-    void doRead();
-    void onRead(boost::beast::error_code ec, size_t bytes);
-    void onWrite(bool keepAlive, boost::beast::error_code ec, size_t bytes);
+    using Request = boost::beast::http::request<boost::beast::http::string_body>;
 
-    boost::beast::tcp_stream stream_;
+    void doRead();
+    void onHeader(boost::beast::error_code ec, size_t bytes);
+    void onRead(boost::beast::error_code ec, size_t bytes);
+    void handle(Request &&req);
+    void handOff(Request &&req);
+    // Answer with `status` and `message`, then close.
+    void refuse(boost::beast::http::status status, std::string message, unsigned version = 11, bool head = false);
+    template <class Response>
+    void send(Response &&res);
+    void onWrite(bool keepAlive, boost::beast::error_code ec, size_t bytes);
+    void doClose();
+    void onDrain(boost::beast::error_code ec, size_t bytes);
+    // Why the request head is refused (status, message), or nullopt.
+    std::optional<std::pair<boost::beast::http::status, std::string>> checkHeader() const;
+
+    Stream stream_;
     boost::beast::flat_buffer buffer_;
     std::shared_ptr<SharedState> state_;
+    std::shared_ptr<const HttpEndpoint> endpoint_;
+    std::shared_ptr<ConnectionSlot> slot_;
     std::optional<boost::beast::http::request_parser<boost::beast::http::string_body>> parser_;
+    std::array<char, 4096> drain_{};
+    size_t drained_ = 0;
 };
+
+// http_session.cpp instantiates it for these two streams only.
+using HttpSession = BasicHttpSession<boost::beast::tcp_stream>;
+extern template class BasicHttpSession<boost::beast::tcp_stream>;
+// and BasicHttpSession<boost::beast::test::stream> (<boost/beast/_experimental/test/stream.hpp>).
 
 } // namespace volcast::server

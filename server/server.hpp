@@ -22,6 +22,8 @@ class Server {
     ~Server();
 
     uint16_t port() const { return listener_->port(); }
+    // The --metrics-bind listener's port; 0 when there is none.
+    uint16_t metricsPort() const { return metricsListener_ ? metricsListener_->port() : 0; }
     SharedState &state() { return *state_; }
     // Start the network threads; returns at once.
     void start();
@@ -34,7 +36,9 @@ class Server {
   private:
     std::shared_ptr<SharedState> state_;
     boost::asio::io_context ioc_;
+    std::shared_ptr<ConnectionLimiter> limiter_;   // shared by both listeners
     std::shared_ptr<Listener> listener_;
+    std::shared_ptr<Listener> metricsListener_;   // --metrics-bind; null without it
     std::vector<std::thread> threads_;
     std::mutex mutex_;
     bool stopped_ = false;

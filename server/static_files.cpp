@@ -29,15 +29,16 @@ std::optional<fs::path> resolveStaticFile(const fs::path &root, std::string_view
     const auto decoded = percentDecode(target);
     if (!decoded || decoded->find('\0') != std::string::npos || decoded->find('\\') != std::string::npos)
         return std::nullopt;
-    // Refuse ".." outright: the canonical check below would catch it too, but a request that
-    // tries it is an attack, not a typo.
+    // Refuse every component starting with a dot: ".." (the canonical check below would
+    // catch it too, but a request that tries it is an attack, not a typo), "." (browsers
+    // never send it) and dotfiles (.git/, .env, .htpasswd: never meant for the web).
     fs::path rel;
     size_t start = 1;
     while (start <= decoded->size()) {
         const size_t end = std::min(decoded->find('/', start), decoded->size());
         const std::string part = decoded->substr(start, end - start);
-        if (part == "..") return std::nullopt;
-        if (!part.empty() && part != ".") rel /= part;
+        if (part.starts_with('.')) return std::nullopt;
+        if (!part.empty()) rel /= part;
         start = end + 1;
     }
     std::error_code ec;
@@ -49,7 +50,11 @@ std::optional<fs::path> resolveStaticFile(const fs::path &root, std::string_view
     p = fs::weakly_canonical(p, ec);
     if (ec) return std::nullopt;
     // Inside the root once every link is followed.
-    if (std::mismatch(base.begin(), base.end(), p.begin(), p.end()).first != base.end()) return std::nullopt;
+    const auto [inBase, inP] = std::mismatch(base.begin(), base.end(), p.begin(), p.end());
+    if (inBase != base.end()) return std::nullopt;
+    // Nor a dotfile reached through a link.
+    for (auto it = inP; it != p.end(); ++it)
+        if (it->string().starts_with('.')) return std::nullopt;
     if (!fs::is_regular_file(p, ec)) return std::nullopt;
     return p;
 }

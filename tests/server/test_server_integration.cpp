@@ -9,6 +9,7 @@
 #include "renderer/volume_source.hpp"
 #include "server/frame_encoder.hpp"
 #include "server/server.hpp"
+#include "tests/server/server_fixture.hpp"
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -40,25 +41,8 @@ constexpr auto kTimeout = 20s;   // generous: a cold PoCL cache builds programs 
 
 // ---- helpers -------------------------------------------------------------------------
 
-struct HttpReply {
-    int status = 0;
-    std::string contentType;
-    std::string body;
-};
-
-HttpReply httpGet(uint16_t port, const std::string &target) {
-    boost::asio::io_context ioc;
-    boost::asio::ip::tcp::resolver resolver(ioc);
-    boost::beast::tcp_stream stream(ioc);
-    stream.connect(resolver.resolve("127.0.0.1", std::to_string(port)));
-    http::request<http::empty_body> req{http::verb::get, target, 11};
-    req.set(http::field::host, "127.0.0.1");
-    http::write(stream, req);
-    boost::beast::flat_buffer buffer;
-    http::response<http::string_body> res;
-    http::read(stream, buffer, res);
-    return {int(res.result_int()), std::string(res[http::field::content_type]), res.body()};
-}
+using volcast::test::HttpReply;
+using volcast::test::httpGet;
 
 const protocol::ProtocolError *asError(const Message &m) {
     return m.decoded ? std::get_if<protocol::ProtocolError>(&*m.decoded) : nullptr;

@@ -1,0 +1,74 @@
+#pragma once
+// HTTP helpers shared by the server's test files: a GET, and a request sent byte for byte
+// as given (for the malformed ones no client library would write).
+
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+
+#include <chrono>
+#include <optional>
+#include <string>
+
+namespace volcast::test {
+
+struct HttpReply {
+    int status = 0;
+    std::string contentType;
+    std::string body;
+};
+
+inline HttpReply httpGet(uint16_t port, const std::string &target, const std::string &host = "127.0.0.1") {
+    namespace http = boost::beast::http;
+    boost::asio::io_context ioc;
+    boost::asio::ip::tcp::resolver resolver(ioc);
+    boost::beast::tcp_stream stream(ioc);
+    stream.connect(resolver.resolve("127.0.0.1", std::to_string(port)));
+    http::request<http::empty_body> req{http::verb::get, target, 11};
+    req.set(http::field::host, host);
+    http::write(stream, req);
+    boost::beast::flat_buffer buffer;
+    http::response<http::string_body> res;
+    http::read(stream, buffer, res);
+    return {int(res.result_int()), std::string(res[http::field::content_type]), res.body()};
+}
+
+// What the server answered to bytes written as they are.
+struct RawExchange {
+    // No value when the server closed (or timed out) without a whole response.
+    std::optional<boost::beast::http::response<boost::beast::http::string_body>> response;
+    std::string error;          // why there is no response
+    bool closedAfter = false;   // the server closed the connection after a response without keep-alive
+};
+
+// Connect, write `bytes`, read one response and see whether the connection closes after it
+// (within `timeout`).
+inline RawExchange rawExchange(uint16_t port, const std::string &bytes,
+                               std::chrono::milliseconds timeout = std::chrono::seconds(5)) {
+    namespace http = boost::beast::http;
+    boost::asio::io_context ioc;
+    boost::beast::tcp_stream stream(ioc);
+    stream.connect(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address("127.0.0.1"), port));
+    stream.expires_after(timeout);
+    RawExchange out;
+    boost::beast::error_code ec;
+    boost::asio::write(stream, boost::asio::buffer(bytes), ec);
+    // A write error (the server closed early) still leaves its answer to read.
+    boost::beast::flat_buffer buffer;
+    http::response_parser<http::string_body> parser;
+    parser.body_limit(1 << 20);
+    http::read(stream, buffer, parser, ec);
+    if (ec) {
+        out.error = ec.message();
+        return out;
+    }
+    out.response = parser.release();
+    // A kept-alive connection stays open: nothing to wait for.
+    if (out.response->keep_alive()) return out;
+    char byte = 0;
+    stream.read_some(boost::asio::buffer(&byte, 1), ec);
+    out.closedAfter = ec == boost::asio::error::eof || ec == boost::asio::error::connection_reset;
+    return out;
+}
+
+} // namespace volcast::test
