@@ -10,7 +10,6 @@ import gzip
 import json
 import pathlib
 import re
-import shutil
 import struct
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -140,9 +139,34 @@ def volume_headers():
     write("fuzz_volume_header", "mha_local.bin", b"\x04" + mha)
 
 
+def http_requests():
+    # The first byte is the read size minus one (fuzz_http_session.cpp); 0xff: 256-byte reads.
+    def req(name, text, read=b"\xff"):
+        write("fuzz_http_session", name, read + text.encode())
+    host = "Host: 127.0.0.1:8080\r\n"
+    req("get_index.bin", "GET / HTTP/1.1\r\n" + host + "\r\n")
+    req("get_js_keepalive_then_head.bin", "GET /app/main.js?v=1 HTTP/1.1\r\n" + host + "\r\n"
+        "HEAD /index.html HTTP/1.1\r\n" + host + "Connection: close\r\n\r\n")
+    req("health_ready_metrics_bytewise.bin", "GET /healthz HTTP/1.1\r\n" + host + "\r\n"
+        "GET /readyz HTTP/1.1\r\n" + host + "\r\nGET /metrics HTTP/1.1\r\n" + host + "\r\n", b"\x00")
+    req("escape_link.bin", "GET /escape.txt HTTP/1.1\r\n" + host + "\r\n")
+    req("dotdot_encoded.bin", "GET /%2e%2e/secret.txt HTTP/1.0\r\n\r\n")
+    req("post_with_body.bin", "POST /ws HTTP/1.1\r\n" + host + "Content-Length: 5\r\n\r\nhello")
+    req("chunked.bin", "GET / HTTP/1.1\r\n" + host + "Transfer-Encoding: chunked\r\n\r\n3\r\nabc\r\n0\r\n\r\n")
+    req("upgrade_ws.bin", "GET /ws HTTP/1.1\r\n" + host + "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+        "Origin: http://127.0.0.1:8080\r\n\r\n")
+    req("upgrade_bad_origin.bin", "GET /ws HTTP/1.1\r\n" + host + "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\nOrigin: http://evil.example\r\n\r\n")
+    req("upgrade_wrong_path.bin", "GET /other HTTP/1.1\r\n" + host + "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+    req("bad_host.bin", "GET / HTTP/1.1\r\nHost: evil.example\r\n\r\n")
+    req("garbage.bin", "\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03")
+    req("long_target.bin", "GET /" + "a" * 9000 + " HTTP/1.1\r\n" + host + "\r\n")
+
+
 def main():
-    if CORPUS.exists():
-        shutil.rmtree(CORPUS)
+    # Seeds are rewritten in place; regression_* inputs (from findings) are left alone.
     client_messages()
     server_messages()
     frames()
@@ -150,6 +174,7 @@ def main():
     static_paths()
     scenes()
     volume_headers()
+    http_requests()
 
 
 if __name__ == "__main__":
