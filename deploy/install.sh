@@ -20,6 +20,8 @@ packages=(
   zlib1g-dev
   # Tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
+  # Fuzz targets (fuzz/README.md): clang with libFuzzer, ASan and UBSan
+  clang-14 libfuzzer-14-dev
   # Web client tests: Debian's Chromium driven by playwright-core
   chromium
   # Container tests: podman with runc and netavark's bridge network (iptables),
@@ -30,8 +32,6 @@ packages=(
   podman runc netavark iptables podman-compose debootstrap curl catatonit
   # Vectorised CPU ray casting: Highway's SIMD headers
   libhwy-dev
-  # Fuzzing the parsers: clang with libFuzzer and its sanitizers
-  clang-14 libfuzzer-14-dev
 )
 # Node.js and npm only where the machine has none: a machine may already carry a newer Node.js
 # (NodeSource's, which bundles npm), and Debian's npm package conflicts with it.

@@ -51,7 +51,10 @@ std::string quotableText(std::string_view text, size_t maxBytes) {
     out.reserve(text.size() < 256 ? text.size() : 256);
     for (size_t i = 0; i < text.size();) {
         const size_t n = sequenceLength(text, i);
-        const std::string_view piece = n ? text.substr(i, n) : kReplacement;
+        // A NUL goes too: messages travel through std::exception::what(), which ends at one
+        // (a key "\u0000id" emptied the whole error message).
+        const bool keep = n != 0 && text[i] != '\0';
+        const std::string_view piece = keep ? text.substr(i, n) : kReplacement;
         if (out.size() + piece.size() > maxBytes) {
             out += kEllipsis;
             return out;

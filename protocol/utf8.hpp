@@ -15,7 +15,7 @@ namespace volcast::protocol {
 bool isValidUtf8(std::string_view text);
 
 // `text` as valid UTF-8: each byte of an ill-formed sequence (a stray continuation byte, a
-// sequence cut short, an overlong form, a surrogate, 0xF5..0xFF) is replaced by U+FFFD. When the
+// sequence cut short, an overlong form, a surrogate, 0xF5..0xFF) and each NUL are replaced by U+FFFD. When the
 // result would be longer than maxBytes it ends at the last whole code point that fits
 // before "…", so the whole is at most maxBytes + 3 bytes.
 std::string quotableText(std::string_view text, size_t maxBytes = std::string_view::npos);

@@ -360,6 +360,9 @@ json parseJson(std::string_view text) {
         // Drop the library's "[json.exception.parse_error.101] " tag; keep line and column.
         if (const auto close = message.find("] "); message.starts_with("[json.") && close != std::string::npos)
             message.erase(0, close + 2);
+        // The parser's excerpt ("last read: ...") may end inside a UTF-8 sequence; a message
+        // must stay valid UTF-8 (errors are quoted inside JSON): U+FFFD for the bad bytes.
+        message = json::parse(json(message).dump(-1, ' ', false, json::error_handler_t::replace)).get<std::string>();
         const std::string near = tracker->current();
         // An overflowing number is a bad value of a known key; anything else is bad syntax,
         // for which the key is only a hint next to the line and column.

@@ -23,6 +23,9 @@ template <class... Ts>
 struct Overloaded : Ts... {
     using Ts::operator()...;
 };
+// clang before 17 deduces no aggregate template arguments (the fuzz build uses clang 14).
+template <class... Ts>
+Overloaded(Ts...) -> Overloaded<Ts...>;
 
 // closed, operation_aborted and end_of_stream are normal endings, not failures.
 void fail(beast::error_code ec, const char *what) {

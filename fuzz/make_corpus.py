@@ -1,0 +1,181 @@
+#!/usr/bin/env python3
+"""Writes the seed corpora under fuzz/corpus/<target>/ (committed; rerun after changing).
+
+Seeds are the protocol README's examples, the scenes/ files, hand-written volume headers
+and a few inputs aimed at known edges (non-ASCII and cut UTF-8, "..", links). No real
+scan data. Each seed's file name says what it is. libFuzzer adds what it finds to a
+scratch folder, never here.
+"""
+import gzip
+import json
+import pathlib
+import re
+import struct
+
+HERE = pathlib.Path(__file__).resolve().parent
+ROOT = HERE.parent
+CORPUS = HERE / "corpus"
+
+
+def write(target, name, data):
+    folder = CORPUS / target
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / name).write_bytes(data if isinstance(data, bytes) else data.encode())
+
+
+def readme_lines(prefix):
+    text = (ROOT / "protocol" / "README.md").read_text()
+    return [m.group(1) for m in re.finditer(r"^" + prefix + r": (\{.*\})$", text, re.M)]
+
+
+def client_messages():
+    for i, line in enumerate(readme_lines("C")):
+        write("fuzz_client_message", f"readme_{i:02}.json", line)
+    # Non-ASCII: whole and cut UTF-8 sequences (a cut one once crashed the server).
+    write("fuzz_client_message", "utf8_name.json", '{"type": "open_volume", "id": 1, "name": "sch\u00e4del/\u8133.nrrd"}')
+    write("fuzz_client_message", "utf8_cut_in_string.json", b'{"type": "hello", "id": 1, "protocol": 1, "client": "\xc3"}')
+    write("fuzz_client_message", "utf8_cut_at_end.txt", b'{"type": "hello", "client": "\xe8\x84')
+    write("fuzz_client_message", "latin1_type.json", b'{"type": "h\xe9llo"}')
+    write("fuzz_client_message", "string_id.json", '{"type": "get_state", "id": "r\u00e9q-1"}')
+    write("fuzz_client_message", "quality_automatic.json",
+          '{"type": "quality_policy", "id": 20, "mode": "automatic", "target_frame_ms": 60, "quality": null}')
+    write("fuzz_client_message", "still_null.json", '{"type": "still", "id": 21, "image": null}')
+    write("fuzz_client_message", "hello_token.json", '{"type": "hello", "id": 0, "protocol": 1, "token": "s3cr\u00eat", "client": "x"}')
+
+
+def server_messages():
+    for i, line in enumerate(readme_lines("S")):
+        write("fuzz_server_message", f"readme_{i:02}.json", line)
+    write("fuzz_server_message", "error_utf8.json",
+          '{"type": "error", "id": "\u00e9", "code": "not_found", "message": "volume \\"\u8133\\" not found", "request_type": "open_volume"}')
+    write("fuzz_server_message", "error_unknown_code.json",
+          '{"type": "error", "id": null, "code": "from_the_future", "message": "x", "request_type": null}')
+
+
+def frame(header, image):
+    text = json.dumps(header, separators=(",", ":"), ensure_ascii=False).encode()
+    return b"VCF1" + struct.pack("<I", len(text)) + text + image
+
+
+def frames():
+    image = bytes(range(16))
+    base = {"seq": 1, "request": 7, "level": 0, "quality": {"step": 0.5, "interpolation": "linear"},
+            "width": 4, "height": 2, "codec": "jpeg", "render_ms": 12.5, "encode_ms": 1.25,
+            "error": None, "final": False, "camera": None, "image_bytes": len(image)}
+    write("fuzz_frame", "jpeg_level0.bin", frame(base, image))
+    final = dict(base, seq=9, request="r\u00e9q", level=2, codec="png", final=True,
+                 error={"value": 0.0042, "method": "rmse_vs_next_level"},
+                 camera={"eye": [600, 500, 700], "target": [127.5, 127.5, 127.5], "up": [0, 1, 0],
+                         "projection": "perspective", "fov_y_deg": 30})
+    write("fuzz_frame", "png_final_error_camera.bin", frame(final, image))
+    write("fuzz_frame", "no_image.bin", frame(dict(base, image_bytes=0), b""))
+    write("fuzz_frame", "truncated.bin", frame(base, image)[:-3])
+    write("fuzz_frame", "wrong_magic.bin", b"VCF2" + frame(base, image)[4:])
+
+
+def volume_names():
+    names = ["bonsai", "ct/head.nrrd", "../secrets/key.nrrd", "/etc/passwd", "C:/scans/x.nrrd", "~/x",
+             "a//b", "a/./b", "a/", "sch\u00e4del/\u8133.nii.gz", "a\\b", "x" * 256]
+    for i, n in enumerate(names):
+        write("fuzz_volume_name", f"name_{i:02}.txt", n)
+    write("fuzz_volume_name", "nul.txt", b"a\x00b")
+    write("fuzz_volume_name", "cut_utf8.txt", b"a/\xc3")
+
+
+def static_paths():
+    # The fuzz target's web root: index.html, app/main.js, app/sub/index.html, empty/,
+    # "a b%.css", escape.txt -> ../secret.txt, up -> .., inside.js -> app/main.js.
+    targets = ["/", "/index.html", "/app/main.js?x=1", "/app/sub/", "/app/sub#frag", "/empty/",
+               "/a%20b%25.css", "/%2e%2e/secret.txt", "/app/../../secret.txt", "/escape.txt",
+               "/up/secret.txt", "/up/web/index.html", "/inside.js", "/%zz", "/a%00b", "/app\\main.js",
+               "//index.html", "/./app/./main.js", "relative.html", "/%C3%A9t%C3%A9.html"]
+    for i, t in enumerate(targets):
+        write("fuzz_static_path", f"target_{i:02}.txt", t)
+
+
+def scenes():
+    for f in sorted((ROOT / "scenes").glob("*.json")):
+        write("fuzz_scene", f.name, f.read_bytes())
+    write("fuzz_scene", "builtin_minimal.json", '{"volume": "builtin:sphere", "transfer_function": {"preset": "ct_bone"}}')
+    write("fuzz_scene", "utf8_volume.json", '{"volume": "sch\u00e4del.nrrd", "transfer_function": {"points": [[0,0,0,0,0],[1,1,1,1,1]]}}')
+    write("fuzz_scene", "cut_utf8.json", b'{"volume": "\xc3')
+
+
+def volume_headers():
+    # The first byte picks the format (fuzz_volume_header.cpp): 0 nrrd, 1 nhdr, 2 nii,
+    # 3 mhd, 4 mha. The target's folder holds data.raw (4096 bytes) and data.raw.gz.
+    voxels = bytes(range(8))
+    nrrd = ("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nspacings: 1 1 2.5\n"
+            "encoding: raw\n\n").encode() + voxels
+    write("fuzz_volume_header", "nrrd_raw.bin", b"\x00" + nrrd)
+    nrrd_space = ("NRRD0005\ntype: short\ndimension: 3\nspace: left-posterior-superior\nsizes: 2 2 1\n"
+                  "space directions: (1,0,0) (0,1,0) (0,0,3)\nspace origin: (10,-5,2.5)\nendian: big\n"
+                  "encoding: raw\n\n").encode() + struct.pack(">4h", -3, 0, 7, 32767)
+    write("fuzz_volume_header", "nrrd_space_big_endian.bin", b"\x00" + nrrd_space)
+    nrrd_gz = ("NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 1\nencoding: gzip\n\n").encode() + \
+        gzip.compress(struct.pack("<2f", 1.5, float("nan")), mtime=0)
+    write("fuzz_volume_header", "nrrd_gzip_float_nan.bin", b"\x00" + nrrd_gz)
+    nhdr = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 16 16 16\nencoding: raw\ndata file: data.raw\n"
+    write("fuzz_volume_header", "nhdr_raw.bin", b"\x01" + nhdr.encode())
+    nhdr_gz = "NRRD0004\ntype: uint16\ndimension: 3\nsizes: 8 16 16\nendian: little\nencoding: gzip\ndata file: data.raw.gz\n"
+    write("fuzz_volume_header", "nhdr_gzip.bin", b"\x01" + nhdr_gz.encode())
+    # NIfTI-1 single file: 348-byte header, 4 extension bytes, voxels at vox_offset 352.
+    hdr = bytearray(348)
+    struct.pack_into("<i", hdr, 0, 348)
+    struct.pack_into("<8h", hdr, 40, 3, 2, 2, 2, 1, 1, 1, 1)        # dim
+    struct.pack_into("<hh", hdr, 70, 2, 8)                          # datatype uint8, bitpix
+    struct.pack_into("<8f", hdr, 76, 1, 1.5, 1.5, 2, 1, 1, 1, 1)    # pixdim (qfac 1)
+    struct.pack_into("<f", hdr, 108, 352.0)                         # vox_offset
+    struct.pack_into("<ff", hdr, 112, 1.0, 0.0)                     # scl_slope, scl_inter
+    struct.pack_into("<hh", hdr, 252, 1, 0)                         # qform_code, sform_code
+    hdr[344:348] = b"n+1\x00"
+    write("fuzz_volume_header", "nifti_uint8.bin", b"\x02" + bytes(hdr) + b"\x00" * 4 + voxels)
+    mhd = ("ObjectType = Image\nNDims = 3\nDimSize = 16 16 16\nElementSpacing = 1 1 1\n"
+           "ElementType = MET_UCHAR\nElementDataFile = data.raw\n")
+    write("fuzz_volume_header", "mhd_raw.bin", b"\x03" + mhd.encode())
+    mha = ("ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nBinaryDataByteOrderMSB = False\n"
+           "TransformMatrix = 1 0 0 0 1 0 0 0 1\nOffset = 0 0 0\nElementSpacing = 0.5 0.5 0.5\n"
+           "ElementType = MET_UCHAR\nElementDataFile = LOCAL\n").encode() + voxels
+    write("fuzz_volume_header", "mha_local.bin", b"\x04" + mha)
+
+
+def http_requests():
+    # The first byte is the read size minus one (fuzz_http_session.cpp); 0xff: 256-byte reads.
+    def req(name, text, read=b"\xff"):
+        write("fuzz_http_session", name, read + text.encode())
+    host = "Host: 127.0.0.1:8080\r\n"
+    req("get_index.bin", "GET / HTTP/1.1\r\n" + host + "\r\n")
+    req("get_js_keepalive_then_head.bin", "GET /app/main.js?v=1 HTTP/1.1\r\n" + host + "\r\n"
+        "HEAD /index.html HTTP/1.1\r\n" + host + "Connection: close\r\n\r\n")
+    req("health_ready_metrics_bytewise.bin", "GET /healthz HTTP/1.1\r\n" + host + "\r\n"
+        "GET /readyz HTTP/1.1\r\n" + host + "\r\nGET /metrics HTTP/1.1\r\n" + host + "\r\n", b"\x00")
+    req("escape_link.bin", "GET /escape.txt HTTP/1.1\r\n" + host + "\r\n")
+    req("dotdot_encoded.bin", "GET /%2e%2e/secret.txt HTTP/1.0\r\n\r\n")
+    req("post_with_body.bin", "POST /ws HTTP/1.1\r\n" + host + "Content-Length: 5\r\n\r\nhello")
+    req("chunked.bin", "GET / HTTP/1.1\r\n" + host + "Transfer-Encoding: chunked\r\n\r\n3\r\nabc\r\n0\r\n\r\n")
+    req("upgrade_ws.bin", "GET /ws HTTP/1.1\r\n" + host + "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+        "Origin: http://127.0.0.1:8080\r\n\r\n")
+    req("upgrade_bad_origin.bin", "GET /ws HTTP/1.1\r\n" + host + "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\nOrigin: http://evil.example\r\n\r\n")
+    req("upgrade_wrong_path.bin", "GET /other HTTP/1.1\r\n" + host + "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+    req("bad_host.bin", "GET / HTTP/1.1\r\nHost: evil.example\r\n\r\n")
+    req("garbage.bin", "\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03")
+    req("long_target.bin", "GET /" + "a" * 9000 + " HTTP/1.1\r\n" + host + "\r\n")
+
+
+def main():
+    # Seeds are rewritten in place; regression_* inputs (from findings) are left alone.
+    client_messages()
+    server_messages()
+    frames()
+    volume_names()
+    static_paths()
+    scenes()
+    volume_headers()
+    http_requests()
+
+
+if __name__ == "__main__":
+    main()
