@@ -1,5 +1,5 @@
 #pragma once
-// Forced into renderer/volume_io.cpp in the fuzz build only (fuzz/CMakeLists.txt). Debian's
+// Forced into renderer/io/volume_io.cpp in the fuzz build only (fuzz/CMakeLists.txt). Debian's
 // ITK 5.2 headers were generated for g++ alone: itk_compiler_detection.h stops with
 // "Unsupported compiler" for clang. Including it once here, with clang presenting itself as
 // the g++ 12 those headers were made for, lets its include guard keep the later includes
