@@ -16,6 +16,7 @@
 namespace volcast {
 
 static_assert(sizeof(RayCastParams) == 352, "RayCastParams must match the kernel's layout");
+static_assert(VC_MAX_CLIP_PLANES == FrameRenderer::kMaxClipPlanes);
 
 namespace {
 
@@ -93,6 +94,8 @@ std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) c
     if (q.shading) o += " -DSHADING";
     return o.empty() ? o : o.substr(1);
 }
+
+std::string OpenClRenderer::description() const { return "opencl: " + cl_.deviceName(); }
 
 PreprocessCounts OpenClRenderer::preprocessCounts() const {
     std::lock_guard lock(countsMutex_);
@@ -202,19 +205,20 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
 
 Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                              const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
-    camera.validate();
-    tf.validate();
-    validateImageSize(width, height); // before anything is allocated
-    if (clipPlanes.size() > VC_MAX_CLIP_PLANES)
-        throw std::invalid_argument("clip_planes: at most " + std::to_string(VC_MAX_CLIP_PLANES) + " are supported");
-    for (size_t c = 0; c < clipPlanes.size(); ++c)
-        if (!(length(clipPlanes[c].normal) > 0))
-            throw std::invalid_argument("clip_planes[" + std::to_string(c) + "].normal: zero length");
-    if (quality.mipLevel < 0 || quality.mipLevel > pyramid_.maxLevel())
-        throw std::invalid_argument("quality.mip_level: " + std::to_string(quality.mipLevel) + " is outside 0…" +
-                                    std::to_string(pyramid_.maxLevel()) + " for volume " + volume_->name);
-    if (!(quality.imageScale > 0 && quality.imageScale <= 1))
-        throw std::invalid_argument("quality.image_scale: must be in (0, 1]");
+    return castRays(tf, camera, width, height, quality, clipPlanes, nullptr, stats);
+}
+
+Image OpenClRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                                   const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
+                                   const RayWindow &window, RenderStats *stats) {
+    return castRays(tf, camera, width, height, quality, clipPlanes, &window, stats);
+}
+
+Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
+                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
+                           RenderStats *stats) {
+    validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
+    if (window) validateRayWindow(*window, width, height, quality);
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -227,21 +231,7 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     if (quality.emptySpaceSkipping) classify(data, tf, st);
 
     const double smallest = minComponent(volume_->spacing);
-    double step = quality.step * smallest;
-    // A step so short that a ray across the whole volume would take more than
-    // kMaxSamplesPerRay segments is raised to the shortest that does not (the 16 spare cover
-    // a jittered first segment and rounding). Rays are then never cut off by the kernel's
-    // bound, which would drop the back of the volume from the image, and a frame costs at most
-    // rays × kMaxSamplesPerRay samples; the step used is reported and logged.
-    const double shortestStep = length(volume_->extent()) / (kMaxSamplesPerRay - 16);
-    if (step < shortestStep) {
-        spdlog::warn("{}: quality.step {:g} voxels would take more than {} samples per ray across the volume; "
-                     "using {:g} voxels",
-                     volume_->name, quality.step, kMaxSamplesPerRay, shortestStep / smallest);
-        step = shortestStep;
-        st.stepRaised = true;
-    }
-    st.stepUsed = step / smallest;
+    const double step = frameStep(*volume_, quality, st);
     const double opacityUnit = tf.opacityUnit ? *tf.opacityUnit : smallest;
     if (quality.preintegrated) {
         if (!preintegration_ || !(preintegration_->tf == tf) || preintegration_->step != step ||
@@ -295,8 +285,8 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     }
 
     // Fewer rays for image_scale < 1, on the full image's plane, then upsampled.
-    const int raysWide = std::max(1, int(std::lround(width * quality.imageScale)));
-    const int raysHigh = std::max(1, int(std::lround(height * quality.imageScale)));
+    const int raysWide = raysForScale(width, quality.imageScale);
+    const int raysHigh = raysForScale(height, quality.imageScale);
     st.raysWide = raysWide;
     st.raysHigh = raysHigh;
     // Camera frame exactly as RayGenerator builds it, so both renderers cast the same rays.
@@ -347,11 +337,16 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     }
 
     const auto t = Clock::now();
-    Image cast(raysWide, raysHigh);
+    // A window casts only its own rays (the launch offset places them on the full grid) and
+    // reads back only its rows; the output buffer spans the grid so the kernel's indexing holds.
+    const RayWindow all{0, 0, raysWide, raysHigh};
+    const RayWindow &win = window ? *window : all;
+    Image cast(win.width, win.height);
     try {
         auto &queue = cl_.queue();
         cl::Buffer params(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof p, &p);
-        cl::Buffer out(cl_.context(), CL_MEM_WRITE_ONLY, cast.rgba.size() * sizeof(float));
+        const size_t rowBytes = size_t(raysWide) * 4 * sizeof(float);
+        cl::Buffer out(cl_.context(), CL_MEM_WRITE_ONLY, size_t(raysHigh) * rowBytes);
         cl_uint zeros[VC_STAT_COUNT] = {};
         cl::Buffer counters(cl_.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, sizeof zeros, zeros);
         // Arguments in the order of the kernel's signature for this feature set.
@@ -369,9 +364,18 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
         kernel.setArg(arg++, params);
         kernel.setArg(arg++, out);
         kernel.setArg(arg++, counters);
-        queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(roundUp(raysWide), roundUp(raysHigh)),
+        queue.enqueueNDRangeKernel(kernel, cl::NDRange(size_t(win.x), size_t(win.y)),
+                                   cl::NDRange(roundUp(win.width), roundUp(win.height)),
                                    cl::NDRange(kGroupEdge, kGroupEdge));
-        queue.enqueueReadBuffer(out, CL_FALSE, 0, cast.rgba.size() * sizeof(float), cast.rgba.data());
+        if (win.width == raysWide) {
+            queue.enqueueReadBuffer(out, CL_FALSE, size_t(win.y) * rowBytes, size_t(win.height) * rowBytes,
+                                    cast.rgba.data());
+        } else {
+            const size_t pixel = 4 * sizeof(float);
+            queue.enqueueReadBufferRect(out, CL_FALSE, {size_t(win.x) * pixel, size_t(win.y), 0}, {0, 0, 0},
+                                        {size_t(win.width) * pixel, size_t(win.height), 1}, rowBytes, 0,
+                                        size_t(win.width) * pixel, 0, cast.rgba.data());
+        }
         cl_uint counts[VC_STAT_COUNT];
         queue.enqueueReadBuffer(counters, CL_TRUE, 0, sizeof counts, counts);
         st.raysHit = counts[VC_STAT_RAYS_HIT];
@@ -384,7 +388,8 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     } catch (const cl::Error &e) {
         throw OpenClError("rendering on " + cl_.deviceName() + " failed: " + describe(e));
     }
-    Image image = raysWide == width && raysHigh == height ? std::move(cast) : resizeBilinear(cast, width, height);
+    Image image = window || (raysWide == width && raysHigh == height) ? std::move(cast)
+                                                                      : resizeBilinear(cast, width, height);
     st.renderSeconds = secondsSince(t);
     if (stats) *stats = st;
     return image;

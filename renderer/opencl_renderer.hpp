@@ -6,6 +6,7 @@
 // function changes), the pre-integration table (rebuilt when the transfer function or the
 // step changes). Everything is cached for the renderer's life.
 
+#include "renderer/frame_renderer.hpp"
 #include "renderer/image.hpp"
 #include "renderer/minmax_bricks.hpp"
 #include "renderer/mip_pyramid.hpp"
@@ -21,42 +22,6 @@
 
 namespace volcast {
 
-// Seconds of preprocessing a frame caused (0: it was cached) and what the kernel did.
-struct RenderStats {
-    std::string buildOptions;       // the feature set the program was built with
-    double kernelBuildSeconds = 0;  // 0 when the program was already built
-    double tfTableSeconds = 0;
-    int tfTableEntries = 0;
-    double tfTableError = 0;
-    double mipSeconds = 0;          // building the mip level(s) this frame needed
-    double coefficientSeconds = 0;  // B-spline prefilter (on the device) and upload
-    double brickGridSeconds = 0;    // min-max grid of the sampled data
-    double brickClassifySeconds = 0;
-    double emptyBrickFraction = 0;  // under the current transfer function
-    double preintegrationSeconds = 0;
-    int preintegrationNodes = 0;
-    double preintegrationError = 0; // the table's own measured error
-    double renderSeconds = 0;       // kernel, read-back and upsampling
-    int raysWide = 0, raysHigh = 0; // rays cast (image_scale < 1 casts fewer, then upsamples)
-    uint64_t raysHit = 0;           // rays that entered the volume
-    double meanSamplesPerRay = 0;   // over rays that hit the volume
-    double skippedSegmentsPerRay = 0; // empty-space skipping, over rays that hit
-    double earlyTerminatedFraction = 0;
-    uint64_t raysTruncated = 0;     // rays that hit the per-ray sample bound
-    double stepUsed = 0;            // voxels: quality.step, or the shortest step that keeps a ray
-    bool stepRaised = false;        // across the volume within kMaxSamplesPerRay (then true)
-};
-
-// How often each kind of preprocessing has run: the evidence that it is lazy.
-struct PreprocessCounts {
-    int tfTables = 0;
-    int mipLevels = 0;            // levels below 0 built
-    int coefficientVolumes = 0;   // B-spline prefilter runs
-    int brickGrids = 0;
-    int brickClassifications = 0;
-    int preintegrationTables = 0;
-};
-
 // Where the tricubic B-spline reads its 64 coefficients from: a buffer, tap by tap, or a
 // 3-D image, as 8 trilinear fetches (Sigg and Hadwiger). Auto: images on GPUs, whose
 // texture units filter for free (with ~8-bit weights), buffers elsewhere (PLATFORM.md).
@@ -67,7 +32,7 @@ struct OpenClRendererOptions {
     int brickSize = 8; // level voxels per min-max brick edge
 };
 
-class OpenClRenderer {
+class OpenClRenderer : public FrameRenderer {
   public:
     // Shares the volume: mip levels, bricks and coefficients are computed from it on demand.
     OpenClRenderer(OpenClContext &cl, std::shared_ptr<const Volume> volume, OpenClRendererOptions options = {});
@@ -76,15 +41,17 @@ class OpenClRenderer {
 
     // Thread-safe; frames are rendered one at a time.
     Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr);
+                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
+    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
+                       RenderStats *stats = nullptr) override;
+    bool rendersWindowsCheaply() const override { return true; }
+    std::string description() const override;
 
     // The -D options a scene's program is built with: only the features it uses.
     std::string buildOptions(const Quality &quality, bool hasClipPlanes) const;
-    PreprocessCounts preprocessCounts() const;
-    const Volume &volume() const { return *volume_; }
-    // Samples a ray may take at most: shorter steps are raised to keep every ray within it
-    // (RenderStats::stepRaised); rays past it, should any be, stop and are counted.
-    static constexpr int kMaxSamplesPerRay = 1 << 20;
+    PreprocessCounts preprocessCounts() const override;
+    const Volume &volume() const override { return *volume_; }
 
   private:
     // The data a frame samples: a mip level's voxels, or its B-spline coefficients.
@@ -102,6 +69,9 @@ class OpenClRenderer {
     struct PreintegrationCache;
 
     bool cubicFromImage() const;
+    // render() and renderWindow(): the whole grid (upsampled to the frame) or one window.
+    Image castRays(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
+               const std::vector<ClipPlane> &clipPlanes, const RayWindow *window, RenderStats *stats);
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
     std::vector<float> readBackCoefficients(const DataSet &data);

@@ -73,10 +73,15 @@ void WebsocketSession::onAccept(beast::error_code ec) {
                 if (auto self = weak.lock()) self->onFrame(std::move(*f));
             });
         },
-        [weak, executor](const std::string &message) {
-            net::post(executor, [weak, message] {
+        [weak, executor](const std::string &message, const nlohmann::json &request) {
+            net::post(executor, [weak, message, request] {
                 if (auto self = weak.lock())
-                    self->sendError({ErrorCode::RenderFailed, "rendering failed: " + message, self->lastRequest_, ""});
+                    self->sendError({ErrorCode::RenderFailed, "rendering failed: " + message, request, ""});
+            });
+        },
+        [weak, executor](const protocol::ProgressMessage &progress) {
+            net::post(executor, [weak, progress] {
+                if (auto self = weak.lock()) self->sendMessage(progress);
             });
         });
     doRead();
@@ -243,7 +248,9 @@ void WebsocketSession::submitView(const nlohmann::json &requestId, const nlohman
     lastRequest_ = requestId;
     const Scene scene = scene_.scene();
     auto job = std::make_shared<ViewJob>();
-    job->volume = volume_;
+    job->renderer = rendererOf(volume_);
+    job->volumeId = volume_->id;
+    job->volumeName = volume_->name;
     job->transferFunction = resolvedTransferFunction(scene, volume_->volume->range);
     job->camera = scene.camera;
     job->cameraJson = nlohmann::json::parse(sceneToJson(scene)).at("camera");
