@@ -30,10 +30,6 @@ OpenClContext::OpenClContext(const DeviceOptions &options) {
     // PoCL reads its cache folder when the platform is first opened.
     const std::string cacheDir = fromEnv(options.kernelCacheDir, "VOLCAST_KERNEL_CACHE", "");
     if (!cacheDir.empty()) setenv("POCL_CACHE_DIR", cacheDir.c_str(), 1);
-    // PoCL's continuation-based work-groups run our long, divergent per-ray loops 12-14 %
-    // faster than its default loop vectoriser, which has little to vectorise in them
-    // (README, Performance). Only where the user has not chosen; other drivers ignore it.
-    setenv("POCL_WORK_GROUP_METHOD", "cbs", 0);
     const std::string wanted = lower(fromEnv(options.device, "VOLCAST_DEVICE", "auto"));
 
     std::vector<cl::Device> all;

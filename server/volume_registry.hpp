@@ -39,7 +39,7 @@ struct VolumeEntry {
     uint64_t id = newVolumeId();
     std::string name;                          // as clients name it
     std::shared_ptr<const Volume> volume;
-    std::unique_ptr<OpenClRenderer> renderer;  // thread-safe; serialises its frames
+    std::unique_ptr<FrameRenderer> renderer;  // thread-safe; serialises its frames
     uint64_t bytes = 0;                        // host memory counted against the budget
     protocol::VolumeInfo info() const;
 };

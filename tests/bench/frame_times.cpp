@@ -3,6 +3,7 @@
 // (kernel, read-back to the host, and any upsampling: what a server pays before encoding).
 
 #include "renderer/image.hpp"
+#include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/opencl_renderer.hpp"
 #include "renderer/volume_io.hpp"
 #include "tests/bench/phantom.hpp"
@@ -70,7 +71,7 @@ struct CellResult {
 
 // First frame (program build, bricks, tables) at frame 0, then the camera orbits one step
 // per timed frame, as in the peers' time_frames().
-CellResult timeOrbit(OpenClRenderer &renderer, const TransferFunction &tf, const Quality &quality, int width,
+CellResult timeOrbit(FrameRenderer &renderer, const TransferFunction &tf, const Quality &quality, int width,
                      int height, const RepeatOptions &repeat) {
     CellResult r;
     const auto t0 = std::chrono::steady_clock::now();
@@ -87,6 +88,13 @@ CellResult timeOrbit(OpenClRenderer &renderer, const TransferFunction &tf, const
 }
 
 } // namespace
+
+std::unique_ptr<FrameRenderer> makeStudyRenderer(OpenClContext &cl, const std::string &backEnd,
+                                                 std::shared_ptr<const Volume> volume) {
+    if (backEnd == "cpu") return std::make_unique<CpuRenderer>(std::move(volume));
+    if (backEnd == "opencl") return std::make_unique<OpenClRenderer>(cl, std::move(volume));
+    throw std::invalid_argument("back end '" + backEnd + "': expected opencl or cpu");
+}
 
 std::vector<std::pair<int, int>> parseSizes(const std::string &text) {
     std::vector<std::pair<int, int>> sizes;
@@ -161,11 +169,13 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
     j["transfer_function"] = "peers' ramp: opacity 0 below 40 % of the nominal range, 0.25 per voxel at 100 %, grey";
     std::vector<std::vector<std::string>> rows;
     std::map<std::string, std::map<std::string, CellResult>> cells;
+    j["renderer"] = options.backEnd;
     for (const Entry &e : volumes) {
-        OpenClRenderer renderer(cl, e.volume);
+        const std::unique_ptr<FrameRenderer> renderer = makeStudyRenderer(cl, options.backEnd, e.volume);
+        j["device"] = renderer->description();
         const TransferFunction tf = peerTransferFunction(e.range, e.volume->smallestSpacing());
         for (const auto &s : sizes) {
-            const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, options.repeat);
+            const CellResult r = timeOrbit(*renderer, tf, quality, s.first, s.second, options.repeat);
             cells[e.key][sizeName(s)] = r;
             const auto &paper = kPaperTable1.at(e.paper);
             const double paperMs = paper.count(sizeName(s)) ? paper.at(sizeName(s)) : 0;
@@ -243,7 +253,8 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
 
 void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
     auto volume = std::make_shared<Volume>(loadVolume(options.volume));
-    OpenClRenderer renderer(cl, volume);
+    const std::unique_ptr<FrameRenderer> frameRenderer = makeStudyRenderer(cl, options.backEnd, volume);
+    FrameRenderer &renderer = *frameRenderer;
     const ValueRange nominal = nominalRange(*volume);
     const TransferFunction tf = peerTransferFunction(nominal, volume->smallestSpacing());
     const Quality quality = table1Quality(options.sampleDistance);
@@ -252,8 +263,8 @@ void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
         const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, repeat);
         nlohmann::json line = {
             {"peer", "volcast"},
-            {"renderer", "volcast OpenCL ray caster"},
-            {"device", cl.deviceName()},
+            {"renderer", options.backEnd == "cpu" ? "volcast native CPU ray caster" : "volcast OpenCL ray caster"},
+            {"device", renderer.description()},
             {"resolution", {s.first, s.second}},
             {"render_ms", {{"median", r.timing.median}, {"min", r.timing.min}, {"max", r.timing.max}, {"n", r.timing.n}}},
             {"first_frame", {{"render_ms", r.firstFrameMs}}},

@@ -2,11 +2,13 @@
 // The studies of volcast-bench, one function each (see tests/bench/README.md). Each writes
 // its JSON, CSV, Markdown table and SVG plot into options.out and prints the table.
 
+#include "renderer/frame_renderer.hpp"
 #include "renderer/opencl_context.hpp"
 #include "renderer/scene.hpp"
 #include "tests/bench/bench.hpp"
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -19,6 +21,7 @@ struct StudyOptions {
     bool quick = false;                // tiny sizes: checks the command works, times nothing
     std::vector<std::string> volumes = {"small", "tooth", "large"}; // Table 1's volumes
     std::string sizes = "512x512,800x600,1024x768,1280x1024,1920x1080";
+    std::string backEnd = "opencl";    // Table 1's ray caster: opencl (the context's device) or cpu (native)
 };
 
 void table1(OpenClContext &cl, const StudyOptions &options);
@@ -34,7 +37,13 @@ struct PeerModeOptions {
     double sampleDistance = 1;
     double maxSeconds = 30;
     std::filesystem::path png; // if set: each size's last frame, as PATH_WxH.png
+    std::string backEnd = "opencl"; // opencl or cpu
 };
+
+// The ray caster a study times: "opencl" on `cl`, or "cpu" (the native path). Throws
+// std::invalid_argument for anything else.
+std::unique_ptr<FrameRenderer> makeStudyRenderer(OpenClContext &cl, const std::string &backEnd,
+                                                 std::shared_ptr<const Volume> volume);
 void peerMode(OpenClContext &cl, const PeerModeOptions &options);
 
 // "512x512,800x600" → {{512, 512}, {800, 600}}; throws std::invalid_argument naming the part.

@@ -46,6 +46,9 @@ int main(int argc, char **argv) {
             ->delimiter(',')
             ->capture_default_str();
         sub->add_option("--sizes", options.sizes, "Table 1's output sizes, WxH,...")->capture_default_str();
+        sub->add_option("--backend", options.backEnd, "Table 1's ray caster: opencl (on --device) or cpu (native)")
+            ->check(CLI::IsMember({"opencl", "cpu"}))
+            ->capture_default_str();
     }
     for (auto *sub : {f5, all})
         sub->add_option("--viewport", viewportFigure5, "Figure 5's square viewport")->capture_default_str();
@@ -66,6 +69,9 @@ int main(int argc, char **argv) {
     peers->add_option("--png", peer.png, "Write each size's last frame to PNG_WxH.png");
     peers->add_option("--device", device.device, "OpenCL device: auto, gpu, cpu or part of its name");
     peers->add_option("--kernel-cache", device.kernelCacheDir, "PoCL's compiled-kernel cache folder");
+    peers->add_option("--backend", peer.backEnd, "Ray caster: opencl (on --device) or cpu (native)")
+        ->check(CLI::IsMember({"opencl", "cpu"}))
+        ->capture_default_str();
 
     CLI11_PARSE(app, argc, argv);
     // stdout carries the tables (and the peers' JSON lines); progress and warnings go to stderr.

@@ -1,6 +1,7 @@
 #include "tests/stability/stability_cases.hpp"
 
 #include "renderer/camera.hpp"
+#include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/opencl_renderer.hpp"
 #include "renderer/preintegration.hpp"
 #include "renderer/reference_renderer.hpp"
@@ -312,18 +313,19 @@ std::string formatOpacity(double a) { return a > 0.99 && a < 1 ? "1 − " + form
 
 // ---- Opacity correction ------------------------------------------------------------------
 
-std::vector<Row> opacityCorrection(OpenClContext &cl) {
+std::vector<Row> opacityCorrection(const Backend &be) {
     // A 2×2×8 box seen along z by a 2×2 orthographic camera: every ray runs from z = −1/2 to
     // 15/2 at x, y ∈ {0, 1}, with every coordinate exact in float, so what is left is the
     // opacity correction's own error. The opacity unit sets d/u.
     const Volume box = constantBox({2, 2, 8});
     const Camera cam = orthographic({0.5, 0.5, -10}, {0, 0, 1}, {0, 1, 0}, 2);
-    OpenClRenderer renderer(cl, box);
+    const auto rendererPtr = be.make(box);
+    FrameRenderer &renderer = *rendererPtr;
     // The issue's bound: 1e-6 relative to the double value, 1e-12 absolute near 0, i.e.
     // |Δ| / max(|want|, 1e-6) ≤ 1e-6.
     const std::string name = "opacity correction (Eq. 3), d/u 1e-6…1e4, a ∈ {0, 1e-9, 1e-7, 0.5, 1 − 1e-7, 1}";
     const std::string against = "closed form 1 − (1 − a)^(d/u), relative (absolute 1e-12 near 0)";
-    Check ocl(name, "OpenCL", against, 1e-6), ref(name, "reference", against, 1e-6);
+    Check ocl(name, be.name, against, 1e-6), ref(name, "reference", against, 1e-6);
     for (double a : {0.0, 1e-9, 1e-7, 0.5, 1 - 1e-7, 1.0}) {
         std::vector<double> ratios;
         for (int e = -24; e <= 16; ++e) ratios.push_back(std::pow(10.0, e / 4.0)); // 4 per decade
@@ -352,7 +354,7 @@ std::vector<Row> opacityCorrection(OpenClContext &cl) {
 
 // ---- Faint media -------------------------------------------------------------------------
 
-std::vector<Row> faintMedia(OpenClContext &cl) {
+std::vector<Row> faintMedia(const Backend &be) {
     // a = 1e-7 per voxel along 8192 voxels at step 0.01: 819,200 segments (under the 2^20
     // bound) of optical depth 1e-9 each, A = 1 − (1 − 1e-7)^8192 ≈ 8.2e-4. Seen along the
     // long axis (one ray, exact chord), and by a narrow perspective camera of 3×1 pixels whose
@@ -362,13 +364,14 @@ std::vector<Row> faintMedia(OpenClContext &cl) {
     m.a = 1e-7;
     const Camera along = orthographic({0.5, 0.5, -10}, {0, 0, 1}, {0, 1, 0}, 2);
     const Camera narrow = perspective({0.5, 0.5, -20}, {0.5, 0.5, 8000}, {0, 1, 0}, 0.05);
-    OpenClRenderer renderer(cl, box);
+    const auto rendererPtr = be.make(box);
+    FrameRenderer &renderer = *rendererPtr;
     // The issue's bound: 1 % relative. A plain float sum of 819,200 depths of 1e-9 rounds each
     // addition by up to half an ulp of a sum near 8e-4, 2.9e-11 = 3 % of the term, mostly the
     // same way: 0.63 % in all was measured before the kernel compensated its sums.
     const std::string name = "faint media: a = 1e-7, step 0.01, chord 8192 voxels";
     const std::string against = "closed form 1 − (1 − a)^(L/u), relative";
-    Check ocl(name, "OpenCL", against, 0.01), pre(name, "OpenCL pre-integrated", against, 0.01),
+    Check ocl(name, be.name, against, 0.01), pre(name, be.name + " pre-integrated", against, 0.01),
         ref(name, "reference", against, 0.01);
     for (const Camera *cam : {&along, &narrow}) {
         const int w = cam == &along ? 1 : 3, h = 1;
@@ -392,12 +395,13 @@ std::vector<Row> faintMedia(OpenClContext &cl) {
 
 // ---- Opaque media ------------------------------------------------------------------------
 
-std::vector<Row> opaqueMedia(OpenClContext &cl) {
+std::vector<Row> opaqueMedia(const Backend &be) {
     // A 16³ box from an oblique perspective camera, and along z by an orthographic one.
     const Volume box = constantBox({16, 16, 16});
     const Camera obliqueView = oblique(box, {20, 13, 27}, 40);
     const Camera along = orthographic({7.5, 7.5, -10}, {0, 0, 1}, {0, 1, 0}, 16);
-    OpenClRenderer renderer(cl, box);
+    const auto rendererPtr = be.make(box);
+    FrameRenderer &renderer = *rendererPtr;
     std::vector<Row> rows;
     for (double a : {1.0, 1 - 1e-6}) {
         Medium m;
@@ -409,7 +413,7 @@ std::vector<Row> opaqueMedia(OpenClContext &cl) {
         // to ~2e-7 relative, T to 16 roundings between its exact refreshes).
         const double bound = a == 1 ? 0 : 2e-6;
         const std::string against = "closed form, |ΔA|, |Δrgb| (rgb = c·A)";
-        Check ocl(name, "OpenCL (plain, jitter, pre-integrated, skipping + early termination)", against, bound),
+        Check ocl(name, be.name + " (plain, jitter, pre-integrated, skipping + early termination)", against, bound),
             ref(name, "reference", against, bound);
         for (double step : {0.01, 0.1, 1.0, 10.0})
             for (const auto &[label, q] : variants(step))
@@ -489,7 +493,7 @@ double rgbaDifference(const Rgba &got, const Rgba &want) {
                      std::fabs(got.a - want.a)});
 }
 
-std::vector<Row> preintegration(OpenClContext &cl) {
+std::vector<Row> preintegration(const Backend &be) {
     std::vector<Row> rows;
     const double ln2 = std::log(2.0);
 
@@ -563,12 +567,13 @@ std::vector<Row> preintegration(OpenClContext &cl) {
     // The table's tolerance (1e-3) for each of the two segments that hold interpolation error:
     // the one across the step and the partial one at the exit. Everywhere else the table
     // interpolates a constant.
-    Check ocl(kernelCase, "OpenCL", "closed form, |ΔA|, |Δrgb|", 2e-3);
+    Check ocl(kernelCase, be.name, "closed form, |ΔA|, |Δrgb|", 2e-3);
     Check ref(kernelCase, "reference", "closed form, |ΔA|, |Δrgb|", 1e-6);
     {
         const Volume box = constantBox({2, 2, 8});
         const Camera cam = orthographic({0.5, 0.5, -10}, {0, 0, 1}, {0, 1, 0}, 2);
-        OpenClRenderer renderer(cl, box);
+        const auto rendererPtr = be.make(box);
+        FrameRenderer &renderer = *rendererPtr;
         for (double a : {0.5, 1 - 1e-7, 1.0})
             for (double tauD : {1.0, 1e2, 1e4}) {
                 Medium m;
@@ -587,7 +592,8 @@ std::vector<Row> preintegration(OpenClContext &cl) {
         const double v0 = ramp.volume.at(i, 0, 0), v1 = ramp.volume.at(i + 1, 0, 0);
         if (v0 <= kStepValue && v1 > kStepValue) xStep = i + (kStepValue - v0) / (v1 - v0);
     }
-    OpenClRenderer rampRenderer(cl, ramp.volume);
+    const auto rampRendererPtr = be.make(ramp.volume);
+    FrameRenderer &rampRenderer = *rampRendererPtr;
     const double a0 = 1e-3, a1 = 0.5;
     // Step 0.37 at τ₁·d = 0.26 (u = 1), step 3.3 at τ₁·d = 1e4; each table serves both directions.
     for (const auto &[step, unit] : {std::pair{0.37, 1.0}, std::pair{3.3, 3.3 * ln2 / 1e4}}) {
@@ -634,7 +640,7 @@ TransferFunction spreadTf(double lo, double hi, double unit) {
     return tf;
 }
 
-// OpenCL against the reference on a non-constant volume, where no closed form exists. The
+// A back end against the reference on a non-constant volume, where no closed form exists. The
 // bound covers what the fast path approximates: the midpoint rule at step 0.05 (second order,
 // d²/24 · |∂²(c·τ·T)/∂t²| per unit length: ~1e-4 on these fields) and the 1-D table (≤ 1e-4
 // in colour and in opacity per opacity unit, tf_table.hpp), with room for 3×.
@@ -650,7 +656,7 @@ constexpr double kPreintegratedAgainstReferenceBound = 1e-2;
 // Renders `v` trilinear and cubic at kAgainstReferenceStep (into `plainCheck`) and
 // pre-integrated at kPreintegratedAgainstReferenceStep (into `preCheck`), each against the
 // reference of the same reconstruction (whose outputs go to `refCheck`).
-void compareWithReference(Check &plainCheck, Check &preCheck, Check &refCheck, OpenClRenderer &renderer,
+void compareWithReference(Check &plainCheck, Check &preCheck, Check &refCheck, FrameRenderer &renderer,
                           const Volume &v, const TransferFunction &tf, const Camera &cam, const std::string &name,
                           bool preintegrated = true) {
     constexpr int kSize = 8;
@@ -751,7 +757,7 @@ std::vector<DegenerateVolume> makeDegenerateVolumes(const fs::path &scratch) {
     return out;
 }
 
-std::vector<Row> degenerateVolumes(OpenClContext &cl) {
+std::vector<Row> degenerateVolumes(const Backend &be) {
     std::vector<Row> rows;
     // 1×1×1: one value everywhere in the cell-extent box [−1/2, 1/2]³: a closed form.
     {
@@ -768,8 +774,9 @@ std::vector<Row> degenerateVolumes(OpenClContext &cl) {
         const std::string name = "1×1×1 volume (linear, cubic, pre-integrated, skipping)";
         // As for the opaque media: 2e-6 for the compositing (the colour here is 0.75,
         // 0.75, 0.25 evaluated in double and held in float: 3e-8 more).
-        Check ocl(name, "OpenCL", "closed form, |ΔA|, |Δrgb|", 2e-6), ref(name, "reference", "closed form, |ΔA|, |Δrgb|", 2e-6);
-        OpenClRenderer renderer(cl, one);
+        Check ocl(name, be.name, "closed form, |ΔA|, |Δrgb|", 2e-6), ref(name, "reference", "closed form, |ΔA|, |Δrgb|", 2e-6);
+        const auto rendererPtr = be.make(one);
+        FrameRenderer &renderer = *rendererPtr;
         std::vector<std::pair<std::string, Quality>> qualities = variants(0.1);
         Quality cubic = plain(0.1);
         cubic.interpolation = Interpolation::Cubic;
@@ -792,12 +799,13 @@ std::vector<Row> degenerateVolumes(OpenClContext &cl) {
     if (!setup.row().failures.empty()) rows.push_back(setup.row());
     const std::string name = "volumes 1×12×12, 24×1×1, 2×2×2, spacing 1:1000, 16-bit 0…65535, float ±1e30";
     const std::string against = "reference, same reconstruction, max |Δ| over RGBA";
-    Check ocl(name, "OpenCL trilinear and cubic, step 0.05", against, kAgainstReferenceBound),
-        pre(name, "OpenCL pre-integrated, step 0.5 (1×12×12, 24×1×1, 16-bit)", against, kPreintegratedAgainstReferenceBound),
+    Check ocl(name, be.name + " trilinear and cubic, step 0.05", against, kAgainstReferenceBound),
+        pre(name, be.name + " pre-integrated, step 0.5 (1×12×12, 24×1×1, 16-bit)", against, kPreintegratedAgainstReferenceBound),
         ref(name, "reference", "outputs only", 0);
     for (const DegenerateVolume &d : volumes)
         ocl.attempt(d.name, [&] {
-            OpenClRenderer renderer(cl, d.volume);
+            const auto rendererPtr = be.make(d.volume);
+            FrameRenderer &renderer = *rendererPtr;
             compareWithReference(ocl, pre, ref, renderer, d.volume, d.tf, d.camera, d.name, d.preintegrated);
         });
     rows.push_back(ocl.row());
@@ -807,7 +815,7 @@ std::vector<Row> degenerateVolumes(OpenClContext &cl) {
     // ±1e30 against the same volume and transfer function scaled by 2^-100 (values ±0.79):
     // every difference and ratio the renderers form scales exactly, so the images must agree
     // to rounding, whatever the approximations. Bound: a few float roundings, 1e-6.
-    Check scaled("float ±1e30 volume (trilinear, cubic, pre-integrated)", "OpenCL and reference",
+    Check scaled("float ±1e30 volume (trilinear, cubic, pre-integrated)", be.name + " and reference",
                  "the same volume scaled by 2^-100, max |Δ| over RGBA", 1e-6);
     for (const DegenerateVolume &d : volumes) {
         if (d.name != "float ±1e30") continue;
@@ -817,7 +825,8 @@ std::vector<Row> degenerateVolumes(OpenClContext &cl) {
             computeStatistics(small);
             TransferFunction tf = d.tf;
             for (ControlPoint &p : tf.points) p.value = std::ldexp(p.value, -100);
-            OpenClRenderer big(cl, d.volume), little(cl, small);
+            const auto bigPtr = be.make(d.volume), littlePtr = be.make(small);
+            FrameRenderer &big = *bigPtr, &little = *littlePtr;
             Quality cubic = plain(0.5);
             cubic.interpolation = Interpolation::Cubic;
             for (const Quality &q : {plain(0.5), cubic, with(plain(0.5), false, true)}) {
@@ -841,13 +850,14 @@ std::vector<Row> degenerateVolumes(OpenClContext &cl) {
 
 // ---- Cameras and rays --------------------------------------------------------------------
 
-std::vector<Row> camerasAndRays(OpenClContext &cl) {
+std::vector<Row> camerasAndRays(const Backend &be) {
     // An 8³ box [−1/2, 15/2]³ of a = 0.2 per voxel; 9×9 images, so the middle row and column
     // have image-plane coordinate exactly 0 (rays in the planes through the view direction).
     const Volume box = constantBox({8, 8, 8});
     Medium m;
     m.a = 0.2;
-    OpenClRenderer renderer(cl, box);
+    const auto rendererPtr = be.make(box);
+    FrameRenderer &renderer = *rendererPtr;
     const std::string against = "closed form, |ΔA|, |Δrgb|";
     // The compositing's 2e-6, as for the opaque media; chords are taken ± their float slack.
     const double bound = 2e-6;
@@ -864,7 +874,8 @@ std::vector<Row> camerasAndRays(OpenClContext &cl) {
     };
     const Vec3d inside{3.3, 3.6, 3.1};
     const Volume box7 = constantBox({7, 7, 8}); // for the orthographic grid below
-    OpenClRenderer renderer7(cl, box7);
+    const auto renderer7Ptr = be.make(box7);
+    FrameRenderer &renderer7 = *renderer7Ptr;
     const std::vector<View> placements = {
         {"camera inside", perspective(inside, inside + Vec3d{1, 0.4, 0.2}, {0, 1, 0}, 100), {}, &box},
         {"camera on a face, looking in", perspective({3.3, 3.6, -0.5}, {3.3, 3.6, 7}, {0, 1, 0}, 120), {}, &box},
@@ -897,10 +908,10 @@ std::vector<Row> camerasAndRays(OpenClContext &cl) {
          {std::pair{std::string("camera inside the volume, on a face, on an edge"), &placements},
           std::pair{std::string("rays parallel to faces, along edges, through corners; orthographic along an axis"), &rays},
           std::pair{std::string("clip plane through the camera; clip plane that removes everything"), &clipped}}) {
-        Check ocl(name, "OpenCL (plain, pre-integrated, skipping + early termination)", against, bound),
+        Check ocl(name, be.name + " (plain, pre-integrated, skipping + early termination)", against, bound),
             ref(name, "reference", against, bound);
         for (const View &v : *views) {
-            OpenClRenderer &r = v.volume == &box ? renderer : renderer7;
+            FrameRenderer &r = v.volume == &box ? renderer : renderer7;
             for (const auto &[label, q] : qualities)
                 ocl.attempt(v.name + ", " + label, [&] {
                     compareWithMedium(ocl, r.render(m.tf(), v.camera, v.size, v.size, q, v.planes), *v.volume, v.camera,
@@ -918,16 +929,16 @@ std::vector<Row> camerasAndRays(OpenClContext &cl) {
     // Cases that cannot be right: a clear error from every entry point.
     Camera parallel = perspective({0, 0, 20}, {0, 0, 0}, {0, 0, 1}, 30);
     Camera nowhere = perspective({1, 2, 3}, {1, 2, 3}, {0, 1, 0}, 30);
-    Check errors("up parallel to the view direction; eye = target", "OpenCL, reference, scene file",
+    Check errors("up parallel to the view direction; eye = target", be.name + ", reference, scene file",
                  "a clear error naming the key", 0);
-    expectClearError(errors, "OpenCL, up ∥ view", "camera.up", [&] { renderer.render(m.tf(), parallel, 4, 4, plain(1), {}); });
+    expectClearError(errors, be.name + ", up ∥ view", "camera.up", [&] { renderer.render(m.tf(), parallel, 4, 4, plain(1), {}); });
     expectClearError(errors, "reference, up ∥ view", "camera.up", [&] { referenceImage(box, m.tf(), parallel, 4, 4); });
     expectClearError(errors, "scene file, up ∥ view", "camera.up", [&] {
         parseScene(R"({"volume": "builtin:demo", "transfer_function": {"points": [[0, 0, 0, 0, 0], [255, 1, 1, 1, 1]]},
                       "camera": {"eye": [0, 0, 20], "target": [0, 0, 0], "up": [0, 0, 3], "projection": "perspective",
                                  "fov_y_deg": 30}, "image": {"width": 8, "height": 8}})");
     });
-    expectClearError(errors, "OpenCL, eye = target", "camera.target", [&] { renderer.render(m.tf(), nowhere, 4, 4, plain(1), {}); });
+    expectClearError(errors, be.name + ", eye = target", "camera.target", [&] { renderer.render(m.tf(), nowhere, 4, 4, plain(1), {}); });
     expectClearError(errors, "reference, eye = target", "camera.target", [&] { referenceImage(box, m.tf(), nowhere, 4, 4); });
     rows.push_back(errors.row());
     return rows;
@@ -935,7 +946,7 @@ std::vector<Row> camerasAndRays(OpenClContext &cl) {
 
 // ---- Steps -------------------------------------------------------------------------------
 
-std::vector<Row> steps(OpenClContext &cl) {
+std::vector<Row> steps(const Backend &be) {
     std::vector<Row> rows;
     {
         // Steps of 50 to 1e30 voxels through a 12×9×15 box of spacing (1, 1.5, 0.8): one
@@ -944,9 +955,10 @@ std::vector<Row> steps(OpenClContext &cl) {
         Medium m;
         m.a = 0.07;
         const Camera cam = oblique(box, {20, 13, 27}, 30);
-        OpenClRenderer renderer(cl, box);
+        const auto rendererPtr = be.make(box);
+        FrameRenderer &renderer = *rendererPtr;
         Check ocl("step larger than the whole volume: 50, 1e3, 1e6, 1e30 voxels",
-                  "OpenCL (plain, jitter, pre-integrated, skipping + early termination)", "closed form, |ΔA|, |Δrgb|",
+                  be.name + " (plain, jitter, pre-integrated, skipping + early termination)", "closed form, |ΔA|, |Δrgb|",
                   2e-6); // the compositing's, as for the opaque media
         for (double step : {50.0, 1e3, 1e6, 1e30})
             for (const auto &[label, q] : variants(step))
@@ -964,15 +976,16 @@ std::vector<Row> steps(OpenClContext &cl) {
         Medium m;
         m.a = 0.01;
         const Camera cam = orthographic({-10, 1.5, 1.5}, {1, 0, 0}, {0, 1, 0}, 2);
-        OpenClRenderer renderer(cl, box);
+        const auto rendererPtr = be.make(box);
+        FrameRenderer &renderer = *rendererPtr;
         // Over a million compensated additions the sums stay exact to a few roundings; what
         // is left is each segment's alpha (~2e-7 relative) and T between its refreshes: 2e-6.
         Check ocl("step of 1e-4 voxels, 120-voxel chords (bounded at 2^20 samples per ray)",
-                  "OpenCL (plain, jitter, pre-integrated)", "closed form, |ΔA|, |Δrgb|", 2e-6);
+                  be.name + " (plain, jitter, pre-integrated)", "closed form, |ΔA|, |Δrgb|", 2e-6);
         // The frame's budget: 2 rays × 2^20 samples. One PoCL thread takes the rays of a work
         // group in turn at ~1e7 samples per second here, so 0.2 s; 2 s leaves room for a busy
         // machine (the bound is what stops a frame from running away).
-        Check time("step of 1e-4 voxels: render time of a 2×1 frame", "OpenCL", "seconds against the frame's budget", 2);
+        Check time("step of 1e-4 voxels: render time of a 2×1 frame", be.name, "seconds against the frame's budget", 2);
         std::vector<std::pair<std::string, Quality>> qualities = variants(1e-4);
         qualities.pop_back(); // early termination would stop these rays early
         for (const auto &[label, q] : qualities)
@@ -985,7 +998,7 @@ std::vector<Row> steps(OpenClContext &cl) {
                 compareWithMedium(ocl, img, box, cam, {}, m, Measure::Absolute, 0, true);
                 ocl.require(st.stepRaised, label + ": the step was not raised");
                 ocl.require(st.raysTruncated == 0, label + ": " + std::to_string(st.raysTruncated) + " rays truncated");
-                ocl.require(st.meanSamplesPerRay <= OpenClRenderer::kMaxSamplesPerRay,
+                ocl.require(st.meanSamplesPerRay <= FrameRenderer::kMaxSamplesPerRay,
                             label + ": " + std::to_string(st.meanSamplesPerRay) + " samples per ray");
                 if (label == "plain")
                     ocl.outcome("step raised to " + format(st.stepUsed) + " voxels, " +
@@ -999,15 +1012,16 @@ std::vector<Row> steps(OpenClContext &cl) {
 
 // ---- Images ------------------------------------------------------------------------------
 
-std::vector<Row> images(OpenClContext &cl) {
+std::vector<Row> images(const Backend &be) {
     const Volume box = constantBox({8, 8, 8});
     Medium m;
     m.a = 0.2;
     const Camera cam = oblique(box, {12, 8, 15}, 40);
-    OpenClRenderer renderer(cl, box);
+    const auto rendererPtr = be.make(box);
+    FrameRenderer &renderer = *rendererPtr;
     std::vector<Row> rows;
     const std::string against = "closed form, |ΔA|, |Δrgb|";
-    Check ocl("images of 1×1, 1×64 and 64×1 pixels", "OpenCL (plain, jitter, pre-integrated, skipping + early termination)",
+    Check ocl("images of 1×1, 1×64 and 64×1 pixels", be.name + " (plain, jitter, pre-integrated, skipping + early termination)",
               against, 2e-6),
         ref("images of 1×1, 1×64 and 64×1 pixels", "reference", against, 2e-6);
     for (const auto &[w, h] : {std::pair{1, 1}, std::pair{1, 64}, std::pair{64, 1}}) {
@@ -1022,11 +1036,11 @@ std::vector<Row> images(OpenClContext &cl) {
     // Past the memory budget (kMaxImageSide per side, kMaxImagePixels in all, scene.hpp): a
     // clear error before anything is allocated, from every entry point.
     Check big("images past the budget: 16385×1, 1×16385, 16384×16384, 0×1, −1×5, INT_MAX²",
-              "OpenCL, reference, scene file", "a clear error naming the image", 0);
+              be.name + ", reference, scene file", "a clear error naming the image", 0);
     for (const auto &[w, h] : {std::pair{16385, 1}, std::pair{1, 16385}, std::pair{16384, 16384}, std::pair{0, 1},
                                std::pair{-1, 5}, std::pair{INT_MAX, INT_MAX}}) {
         const std::string size = std::to_string(w) + "×" + std::to_string(h);
-        expectClearError(big, "OpenCL " + size, "image", [&] { renderer.render(m.tf(), cam, w, h, plain(1), {}); });
+        expectClearError(big, be.name + " " + size, "image", [&] { renderer.render(m.tf(), cam, w, h, plain(1), {}); });
         expectClearError(big, "reference " + size, "image", [&] { referenceImage(box, m.tf(), cam, w, h); });
     }
     expectClearError(big, "scene file 16384×16384", "image", [&] {
@@ -1049,7 +1063,7 @@ std::vector<Row> images(OpenClContext &cl) {
 
 // ---- Data --------------------------------------------------------------------------------
 
-std::vector<Row> nonFiniteData(OpenClContext &cl) {
+std::vector<Row> nonFiniteData(const Backend &be) {
     // A 6³ blob written as float32 NRRD with a NaN, a +Inf and a −Inf voxel, loaded back: the
     // loader's policy (volume_io.hpp) puts NaN and −Inf at the smallest finite value, +Inf at
     // the largest, and counts them.
@@ -1058,9 +1072,9 @@ std::vector<Row> nonFiniteData(OpenClContext &cl) {
     Check policy("NaN and Inf voxels: the loader's policy", "loader", "voxels not as the policy says", 0);
     const std::string name = "NaN and Inf voxels: rendering the loaded volume";
     const std::string against = "reference, same reconstruction, max |Δ| over RGBA";
-    Check ocl(name, "OpenCL trilinear and cubic, step 0.05 (and skipping at mip level 1: outputs only)", against,
+    Check ocl(name, be.name + " trilinear and cubic, step 0.05 (and skipping at mip level 1: outputs only)", against,
               kAgainstReferenceBound),
-        pre(name, "OpenCL pre-integrated, step 0.5", against, kPreintegratedAgainstReferenceBound),
+        pre(name, be.name + " pre-integrated, step 0.5", against, kPreintegratedAgainstReferenceBound),
         ref(name, "reference", "outputs only", 0);
     policy.attempt("save and load", [&] {
         Volume v = makeGaussianBlob({6, 6, 6}, {1, 1, 1}, 2, 200).volume;
@@ -1084,7 +1098,8 @@ std::vector<Row> nonFiniteData(OpenClContext &cl) {
 
         const TransferFunction tf = spreadTf(loaded.range.min, loaded.range.max, 1);
         const Camera cam = oblique(loaded, {9, 6, 11}, 40);
-        OpenClRenderer renderer(cl, loaded);
+        const auto rendererPtr = be.make(loaded);
+        FrameRenderer &renderer = *rendererPtr;
         compareWithReference(ocl, pre, ref, renderer, loaded, tf, cam, "blob");
         // Skipping, early termination and a coarser level: outputs only (no reference for these).
         Quality fast = with(plain(0.5), false, false, true);
@@ -1099,6 +1114,13 @@ std::vector<Row> nonFiniteData(OpenClContext &cl) {
 }
 
 } // namespace
+
+Backend openClBackend(OpenClContext &cl) {
+    return {"OpenCL", [&cl](const Volume &v) -> std::unique_ptr<FrameRenderer> { return std::make_unique<OpenClRenderer>(cl, v); }};
+}
+Backend cpuBackend() {
+    return {"CPU", [](const Volume &v) -> std::unique_ptr<FrameRenderer> { return std::make_unique<CpuRenderer>(v); }};
+}
 
 const std::vector<Case> &cases() {
     static const std::vector<Case> all = {

@@ -1,17 +1,19 @@
 #pragma once
 // The numerical-stability cases of issue 4: stiff scenes (optical depth per step far above 1)
-// and extreme ones (the other ends of every range). Each case renders through the OpenCL ray
-// caster and the double-precision reference where both apply, compares with a closed form
+// and extreme ones (the other ends of every range). Each case renders through a back end (the
+// OpenCL ray caster or the native CPU one) and the double-precision reference where both apply, compares with a closed form
 // where one exists and with the reference otherwise, and counts NaN and Inf in every output.
 //
 // The unit tests (tests/unit/test_stability.cpp) and volcast-stability, the command that
 // prints the README's "Numerical stability" table, run this same code, so the table shows
 // what the tests check.
 
+#include "renderer/frame_renderer.hpp"
 #include "renderer/opencl_context.hpp"
 
 #include <cstddef>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -34,10 +36,18 @@ struct Row {
     bool passed() const { return nonFinite == 0 && worst <= bound && failures.empty(); }
 };
 
-// One bullet of the issue: its rows, run on the given OpenCL context.
+// The back end a case renders with: its name starts every row's path ("OpenCL", "CPU").
+struct Backend {
+    std::string name;
+    std::function<std::unique_ptr<FrameRenderer>(const Volume &)> make;
+};
+Backend openClBackend(OpenClContext &cl); // cl must outlive the renderers made
+Backend cpuBackend();                     // the native SIMD ray caster (renderer/cpu/)
+
+// One bullet of the issue: its rows, run on the given back end.
 struct Case {
     std::string id; // a test name: OpacityCorrection, FaintMedia, …
-    std::function<std::vector<Row>(OpenClContext &)> run;
+    std::function<std::vector<Row>(const Backend &)> run;
 };
 
 // Every case of issue 4, in the issue's order.

@@ -1,7 +1,7 @@
 // volcast-stability: run issue 4's numerical-stability cases and print the README's
 // "Numerical stability" table (Markdown). Exit status 1 if any case fails its bound.
 //
-//   volcast-stability [--device cpu] [--case OpaqueMedia]
+//   volcast-stability [--backend opencl|cpu] [--device cpu] [--case OpaqueMedia]
 
 #include "tests/stability/stability_cases.hpp"
 
@@ -9,10 +9,13 @@
 #include <spdlog/spdlog.h>
 
 #include <iostream>
+#include <memory>
 
 int main(int argc, char **argv) {
     CLI::App app{"Run volcast's numerical-stability cases (issue 4) and print their table."};
-    std::string device, only;
+    std::string device, only, backend = "opencl";
+    app.add_option("--backend", backend, "Back end: opencl (the OpenCL ray caster) or cpu (the native SIMD one)")
+        ->check(CLI::IsMember({"opencl", "cpu"}));
     app.add_option("--device", device, "OpenCL device: auto, gpu, cpu or part of its name (default: $VOLCAST_DEVICE or auto)");
     app.add_option("--case", only, "Run only the case with this id (e.g. OpaqueMedia)");
     CLI11_PARSE(app, argc, argv);
@@ -20,16 +23,19 @@ int main(int argc, char **argv) {
     // replaced), and spdlog writes to stdout, where the table goes.
     spdlog::set_level(spdlog::level::err);
     try {
-        volcast::OpenClContext cl({device, ""});
+        std::unique_ptr<volcast::OpenClContext> cl;
+        if (backend == "opencl") cl = std::make_unique<volcast::OpenClContext>(volcast::DeviceOptions{device, ""});
+        const volcast::stability::Backend be =
+            cl ? volcast::stability::openClBackend(*cl) : volcast::stability::cpuBackend();
         std::vector<volcast::stability::Row> rows;
         bool found = false;
         for (const auto &c : volcast::stability::cases()) {
             if (!only.empty() && c.id != only) continue;
             found = true;
-            for (auto &row : c.run(cl)) rows.push_back(std::move(row));
+            for (auto &row : c.run(be)) rows.push_back(std::move(row));
         }
         if (!found) throw std::invalid_argument("--case: no case is called " + only);
-        std::cout << "Device: " << cl.deviceName() << "\n\n" << volcast::stability::markdownTable(rows);
+        std::cout << "Device: " << (cl ? cl->deviceName() : "native CPU path") << "\n\n" << volcast::stability::markdownTable(rows);
         bool passed = true;
         for (const auto &row : rows) {
             passed = passed && row.passed();

@@ -1,0 +1,600 @@
+// The CPU ray march: packets of rays from a small screen block, one ray per SIMD lane, each
+// lane with its own segment state and a mask of lanes still marching. The arithmetic follows
+// kernels/raycast.cl step by step (same ray setup in float, same segment boundaries, jitter
+// hash, opacity polynomial, Kahan sums and transmittance refresh every 16 samples), so the
+// two back ends draw the same image up to float rounding.
+//
+// Highway compiles this file once per instruction set (foreach_target.h re-includes it) and
+// marchTile() calls the best one the machine supports.
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "renderer/cpu/cpu_march.cpp"
+#include <hwy/foreach_target.h> // IWYU pragma: keep
+
+#include <hwy/contrib/math/math-inl.h>
+#include <hwy/highway.h>
+
+#include "renderer/cpu/cpu_march.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+HWY_BEFORE_NAMESPACE();
+namespace volcast::cpu::HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+using DF = hn::ScalableTag<float>;
+using DI = hn::RebindToSigned<DF>;
+using VF = hn::Vec<DF>;
+using VI = hn::Vec<DI>;
+using MF = hn::Mask<DF>;
+
+constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+// PCG hash: the kernel's random01, so jittered images match.
+inline float random01(uint32_t x, uint32_t y, uint32_t seed, uint32_t pass) {
+    uint32_t s = x * 1973u + y * 9277u + seed * 26699u + pass * 104729u;
+    s = s * 747796405u + 2891336453u;
+    uint32_t w = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
+    w = (w >> 22u) ^ w;
+    return float(w >> 8) * (1.0f / 16777216.0f);
+}
+
+// One ray's parameters, in the kernel's float arithmetic: entry and exit t at the level-0 box
+// and the clip planes, the level coordinates q(t) = q0 + t·dq, the world direction.
+struct Ray {
+    float t0 = 0, t1 = 0, q0[3] = {0, 0, 0}, dq[3] = {0, 0, 0}, dir[3] = {0, 0, 0};
+};
+
+inline float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+bool setUpRay(const FrameParams &P, int x, int y, Ray &r) {
+    const float u = 2.0f * (float(x) + 0.5f) / float(P.width) - 1.0f;
+    const float v = 1.0f - 2.0f * (float(y) + 0.5f) / float(P.height);
+    float origin[3], dir[3];
+    for (int a = 0; a < 3; ++a) {
+        const float offset = u * P.right[a] + v * P.up[a];
+        origin[a] = P.eye[a] + (P.orthographic ? offset : 0.0f);
+        dir[a] = P.orthographic ? P.forward[a] : P.forward[a] + offset;
+    }
+    if (!P.orthographic) {
+        const float len = std::sqrt(dot3(dir, dir));
+        for (float &c : dir) c /= len;
+    }
+    float p0[3], dq[3];
+    for (int a = 0; a < 3; ++a) {
+        p0[a] = dot3(P.indexFromWorld[a], origin) + P.indexFromWorld[a][3];
+        dq[a] = dot3(P.indexFromWorld[a], dir);
+    }
+    float t0 = 0.0f, t1 = kInf;
+    for (int a = 0; a < 3; ++a) {
+        const float lo = -0.5f, hi = float(P.dims[a]) - 0.5f;
+        if (dq[a] == 0.0f) {
+            if (p0[a] < lo || p0[a] > hi) t1 = -kInf;
+            continue;
+        }
+        const float ta = (lo - p0[a]) / dq[a], tb = (hi - p0[a]) / dq[a];
+        t0 = std::fmax(t0, std::fmin(ta, tb));
+        t1 = std::fmin(t1, std::fmax(ta, tb));
+    }
+    if (P.features.clipPlanes)
+        for (int c = 0; c < P.clipPlaneCount; ++c) {
+            const float *plane = P.clipPlanes[c];
+            const float g0 = dot3(plane, origin) + plane[3], gd = dot3(plane, dir);
+            if (gd == 0.0f) {
+                if (g0 < 0.0f) t1 = -kInf;
+            } else if (gd > 0.0f) {
+                t0 = std::fmax(t0, -g0 / gd);
+            } else {
+                t1 = std::fmin(t1, -g0 / gd);
+            }
+        }
+    if (!(t1 > t0)) return false;
+    r.t0 = t0;
+    r.t1 = t1;
+    for (int a = 0; a < 3; ++a) {
+        r.q0[a] = (p0[a] + 0.5f) * P.levelScale - 0.5f;
+        r.dq[a] = dq[a] * P.levelScale;
+        r.dir[a] = dir[a];
+    }
+    return true;
+}
+
+inline VF lerp(VF a, VF b, VF t) { return hn::MulAdd(hn::Sub(b, a), t, a); }
+
+// Trilinear at level coordinates q, clamped to the outermost samples; the padding after the
+// last sample makes the upper taps of a clamped position safe without a second clamp.
+VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df);
+    x = hn::Min(hn::Max(x, zero), hn::Set(df, float(P.levelDims[0] - 1)));
+    y = hn::Min(hn::Max(y, zero), hn::Set(df, float(P.levelDims[1] - 1)));
+    z = hn::Min(hn::Max(z, zero), hn::Set(df, float(P.levelDims[2] - 1)));
+    const VI ix = hn::ConvertTo(di, x), iy = hn::ConvertTo(di, y), iz = hn::ConvertTo(di, z);
+    const VF fx = hn::Sub(x, hn::ConvertTo(df, ix)), fy = hn::Sub(y, hn::ConvertTo(df, iy)),
+             fz = hn::Sub(z, hn::ConvertTo(df, iz));
+    const VI sy = hn::Set(di, P.rowStride), sz = hn::Set(di, P.sliceStride), one = hn::Set(di, 1);
+    const VI i000 = hn::Add(hn::Add(ix, hn::Mul(iy, sy)), hn::Mul(iz, sz));
+    const VI i010 = hn::Add(i000, sy), i001 = hn::Add(i000, sz), i011 = hn::Add(i001, sy);
+    const float *v = P.voxels;
+    const VF c000 = hn::GatherIndex(df, v, i000), c100 = hn::GatherIndex(df, v, hn::Add(i000, one));
+    const VF c010 = hn::GatherIndex(df, v, i010), c110 = hn::GatherIndex(df, v, hn::Add(i010, one));
+    const VF c001 = hn::GatherIndex(df, v, i001), c101 = hn::GatherIndex(df, v, hn::Add(i001, one));
+    const VF c011 = hn::GatherIndex(df, v, i011), c111 = hn::GatherIndex(df, v, hn::Add(i011, one));
+    const VF c00 = lerp(c000, c100, fx), c10 = lerp(c010, c110, fx);
+    const VF c01 = lerp(c001, c101, fx), c11 = lerp(c011, c111, fx);
+    return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
+}
+
+// Cubic B-spline weights of the four taps around fractional position f.
+inline void cubicWeights(VF f, VF w[4]) {
+    const DF df;
+    const VF g = hn::Sub(hn::Set(df, 1.0f), f), sixth = hn::Set(df, 1.0f / 6.0f), four = hn::Set(df, 4.0f);
+    const VF f2 = hn::Mul(f, f), g2 = hn::Mul(g, g);
+    w[0] = hn::Mul(hn::Mul(g2, g), sixth);
+    w[1] = hn::Mul(hn::MulAdd(hn::Mul(f2, f), hn::Set(df, 3.0f), hn::NegMulAdd(f2, hn::Set(df, 6.0f), four)), sixth);
+    w[2] = hn::Mul(hn::MulAdd(hn::Mul(g2, g), hn::Set(df, 3.0f), hn::NegMulAdd(g2, hn::Set(df, 6.0f), four)), sixth);
+    w[3] = hn::Mul(hn::Mul(f2, f), sixth);
+}
+
+// Tricubic B-spline at level coordinates q, clamped to the outermost samples: 64 gathered
+// coefficients. Padded index of tap (i − 1 + x, …) is (i + x, …), as in raycast.cl.
+VF sampleCubic(const FrameParams &P, VF x, VF y, VF z) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df);
+    VF p[3] = {x, y, z};
+    VI i[3];
+    VF w[3][4];
+    for (int a = 0; a < 3; ++a) {
+        p[a] = hn::Min(hn::Max(p[a], zero), hn::Set(df, float(P.levelDims[a] - 1)));
+        i[a] = hn::Min(hn::ConvertTo(di, p[a]), hn::Set(di, P.levelDims[a] - 1));
+        cubicWeights(hn::Sub(p[a], hn::ConvertTo(df, i[a])), w[a]);
+    }
+    const VI base = hn::Add(hn::Add(i[0], hn::Mul(i[1], hn::Set(di, P.rowStride))), hn::Mul(i[2], hn::Set(di, P.sliceStride)));
+    VF sum = zero;
+    for (int tz = 0; tz < 4; ++tz) {
+        VF sz = zero;
+        for (int ty = 0; ty < 4; ++ty) {
+            const VI row = hn::Add(base, hn::Set(di, tz * P.sliceStride + ty * P.rowStride));
+            VF r = hn::Mul(w[0][0], hn::GatherIndex(df, P.voxels, row));
+            for (int tx = 1; tx < 4; ++tx)
+                r = hn::MulAdd(w[0][tx], hn::GatherIndex(df, P.voxels, hn::Add(row, hn::Set(di, tx))), r);
+            sz = hn::MulAdd(w[1][ty], r, sz);
+        }
+        sum = hn::MulAdd(w[2][tz], sz, sum);
+    }
+    return sum;
+}
+
+inline VF sampleVolume(const FrameParams &P, VF x, VF y, VF z) {
+    return P.features.cubic ? sampleCubic(P, x, y, z) : sampleTrilinear(P, x, y, z);
+}
+
+// Colour and sigma, linear between table entries.
+void classify(const FrameParams &P, VF value, VF rgbs[4]) {
+    const DF df;
+    const DI di;
+    const VF x = hn::Min(hn::Max(hn::Mul(hn::Sub(value, hn::Set(df, P.tfMin)), hn::Set(df, P.tfScale)), hn::Zero(df)),
+                         hn::Set(df, float(P.tfEntries - 1)));
+    const VI i = hn::Min(hn::ConvertTo(di, x), hn::Set(di, P.tfEntries - 2));
+    const VF f = hn::Sub(x, hn::ConvertTo(df, i));
+    const VI i4 = hn::ShiftLeft<2>(i);
+    for (int c = 0; c < 4; ++c)
+        rgbs[c] = lerp(hn::GatherIndex(df, P.tf + c, i4), hn::GatherIndex(df, P.tf + 4 + c, i4), f);
+}
+
+// Fractional node coordinate of value v: the locator gives the node intervals a uniform
+// bucket overlaps, a binary search per lane the one holding v (raycast.cl's nodeCoordinate).
+VF nodeCoordinate(const FrameParams &P, VF v) {
+    const DF df;
+    const DI di;
+    v = hn::Min(hn::Max(v, hn::Set(df, P.preNodes[0])), hn::Set(df, P.preNodes[P.preNodeCount - 1]));
+    VI b = hn::ConvertTo(di, hn::Mul(hn::Sub(v, hn::Set(df, P.preLocatorMin)), hn::Set(df, P.preLocatorScale)));
+    b = hn::Min(hn::Max(b, hn::Zero(di)), hn::Set(di, P.preLocatorSize - 1));
+    VI i = hn::GatherIndex(di, P.preLocator, b), last = hn::GatherIndex(di, P.preLocator, hn::Add(b, hn::Set(di, 1)));
+    for (auto open = hn::Lt(i, last); !hn::AllFalse(di, open); open = hn::Lt(i, last)) {
+        const VI m = hn::ShiftRight<1>(hn::Add(hn::Add(i, last), hn::Set(di, 1)));
+        const auto above = hn::RebindMask(di, hn::Ge(v, hn::GatherIndex(df, P.preNodes, m)));
+        i = hn::IfThenElse(hn::And(open, above), m, i);
+        last = hn::IfThenElse(hn::AndNot(above, open), hn::Sub(m, hn::Set(di, 1)), last);
+    }
+    const VF lo = hn::GatherIndex(df, P.preNodes, i), hi = hn::GatherIndex(df, P.preNodes, hn::Add(i, hn::Set(di, 1)));
+    const VF f = hn::Min(hn::Max(hn::Div(hn::Sub(v, lo), hn::Sub(hi, lo)), hn::Zero(df)), hn::Set(df, 1.0f));
+    return hn::Add(hn::ConvertTo(df, i), f);
+}
+
+// Segment from value sf to sb of a full step: premultiplied colour and opacity, bilinear in
+// the table (raycast.cl's preintegratedSegment).
+void preintegratedSegment(const FrameParams &P, VF sf, VF sb, VF out[4]) {
+    const DF df;
+    const DI di;
+    const int n = P.preNodeCount;
+    const VF x = nodeCoordinate(P, sf), y = nodeCoordinate(P, sb);
+    const VI i = hn::Min(hn::ConvertTo(di, x), hn::Set(di, n - 2)), j = hn::Min(hn::ConvertTo(di, y), hn::Set(di, n - 2));
+    const VF fx = hn::Sub(x, hn::ConvertTo(df, i)), fy = hn::Sub(y, hn::ConvertTo(df, j));
+    const VI c00 = hn::ShiftLeft<2>(hn::Add(hn::Mul(j, hn::Set(di, n)), i)), c01 = hn::Add(c00, hn::Set(di, 4 * n));
+    for (int c = 0; c < 4; ++c) {
+        const float *t = P.preRgba + c;
+        const VF a = lerp(hn::GatherIndex(df, t, c00), hn::GatherIndex(df, t + 4, c00), fx);
+        const VF b = lerp(hn::GatherIndex(df, t, c01), hn::GatherIndex(df, t + 4, c01), fx);
+        out[c] = lerp(a, b, fy);
+    }
+}
+
+// The incremental brick walk (DDA) over the 8³ brick grid, per lane: the brick holding the
+// point the ray has reached, whether the transfer function leaves it visible, and the t at
+// which the ray crosses each of its walls. Moving on costs a comparison per segment and a
+// division per brick crossed, instead of recomputing the brick and its exit per segment.
+// A point reached within float rounding of a wall may be put in either brick: harmless, as
+// each brick's value range covers half a voxel beyond its box (minmax_bricks.hpp, border).
+struct BrickWalk {
+    VI b[3];
+    VF wall[3]; // t where the ray leaves the brick across its wall on each axis (inf if parallel)
+    MF visible;
+
+    BrickWalk() : visible(hn::FirstN(DF(), 0)) {
+        for (int a = 0; a < 3; ++a) {
+            b[a] = hn::Zero(DI());
+            wall[a] = hn::Set(DF(), kInf);
+        }
+    }
+
+    VF wallAt(const FrameParams &P, const VF q0[3], const VF dq[3], int a) const {
+        const DF df;
+        const float B = float(P.brickSize);
+        const VF lo = hn::Sub(hn::Mul(hn::ConvertTo(df, b[a]), hn::Set(df, B)), hn::Set(df, 0.5f));
+        const VF w = hn::IfThenElse(hn::Gt(dq[a], hn::Zero(df)), hn::Add(lo, hn::Set(df, B)), lo);
+        return hn::IfThenElse(hn::Ne(dq[a], hn::Zero(df)), hn::Div(hn::Sub(w, q0[a]), dq[a]), hn::Set(df, kInf));
+    }
+    void lookUp(const FrameParams &P, MF lanes) {
+        const DI di;
+        VI c[3];
+        for (int a = 0; a < 3; ++a) c[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
+        const VI brick =
+            hn::Add(hn::Mul(hn::Add(hn::Mul(c[2], hn::Set(di, P.bricks[1])), c[1]), hn::Set(di, P.bricks[0])), c[0]);
+        const VI flag = hn::GatherIndex(di, P.brickVisible, brick); // clamped: valid in every lane
+        const MF now = hn::RebindMask(DF(), hn::Ne(flag, hn::Zero(di)));
+        visible = hn::Or(hn::And(lanes, now), hn::AndNot(lanes, visible));
+    }
+    // The brick of q(t) for the ray entering at t.
+    void start(const FrameParams &P, const VF q0[3], const VF dq[3], VF t, MF lanes) {
+        const DF df;
+        const DI di;
+        const VF inverseB = hn::Set(df, 1.0f / float(P.brickSize));
+        for (int a = 0; a < 3; ++a) {
+            const VF q = hn::MulAdd(t, dq[a], q0[a]);
+            b[a] = hn::ConvertTo(di, hn::Floor(hn::Mul(hn::Add(q, hn::Set(df, 0.5f)), inverseB)));
+            b[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
+            wall[a] = wallAt(P, q0, dq, a);
+        }
+        visible = hn::FirstN(df, 0);
+        lookUp(P, lanes);
+    }
+    VF exit() const { return hn::Min(wall[0], hn::Min(wall[1], wall[2])); }
+    // Moves the lanes of `lanes` on to the brick holding q(t), t not before where they are.
+    void advance(const FrameParams &P, const VF q0[3], const VF dq[3], VF t, MF lanes) {
+        const DF df;
+        const DI di;
+        MF moved = hn::FirstN(df, 0);
+        for (;;) {
+            const VF first = exit();
+            const MF move = hn::And(lanes, hn::Ge(t, first));
+            if (hn::AllFalse(df, move)) break;
+            moved = hn::Or(moved, move);
+            MF done = hn::FirstN(df, 0);
+            for (int a = 0; a < 3; ++a) {
+                const MF here = hn::AndNot(done, hn::And(move, hn::Eq(wall[a], first)));
+                done = hn::Or(done, here);
+                const VI stepA = hn::IfThenElse(hn::RebindMask(di, hn::Gt(dq[a], hn::Zero(df))), hn::Set(di, 1), hn::Set(di, -1));
+                b[a] = hn::IfThenElse(hn::RebindMask(di, here), hn::Add(b[a], stepA), b[a]);
+                wall[a] = hn::IfThenElse(here, wallAt(P, q0, dq, a), wall[a]);
+            }
+        }
+        if (!hn::AllFalse(df, moved)) lookUp(P, moved);
+    }
+};
+
+// 1 − exp(−x): the kernel's Taylor polynomial below 1/2, exp above.
+VF opacityFromDepth(VF x) {
+    const DF df;
+    const VF one = hn::Set(df, 1.0f);
+    VF r = hn::Sub(one, hn::Mul(x, hn::Set(df, 1.0f / 8.0f)));
+    for (float n : {7.0f, 6.0f, 5.0f, 4.0f, 3.0f, 2.0f}) r = hn::Sub(one, hn::Mul(hn::Mul(x, hn::Set(df, 1.0f / n)), r));
+    VF result = hn::Mul(x, r);
+    const MF large = hn::Ge(x, hn::Set(df, 0.5f));
+    if (!hn::AllFalse(df, large)) result = hn::IfThenElse(large, hn::Sub(one, hn::Exp(df, hn::Neg(x))), result);
+    return result;
+}
+
+// Kahan sum += x in the lanes of `m`; an infinite sum keeps a zero carry (if `guardInf`).
+inline void addCompensated(MF m, VF &sum, VF &carry, VF x, bool guardInf) {
+    const VF y = hn::Sub(x, carry);
+    const VF t = hn::Add(sum, y);
+    VF c = hn::Sub(hn::Sub(t, sum), y);
+    if (guardInf) c = hn::IfThenZeroElse(hn::IsInf(t), c);
+    carry = hn::IfThenElse(m, c, carry);
+    sum = hn::IfThenElse(m, t, sum);
+}
+
+// Headlight Phong on the central-difference gradient (shading.hpp): diffuse factor, specular.
+void phong(const FrameParams &P, const VF q[3], const VF dir[3], VF &diffuse, VF &specular) {
+    const DF df;
+    const VF one = hn::Set(df, 1.0f);
+    VF g[3];
+    for (int a = 0; a < 3; ++a) {
+        VF plus[3] = {q[0], q[1], q[2]}, minus[3] = {q[0], q[1], q[2]};
+        plus[a] = hn::Add(q[a], one);
+        minus[a] = hn::Sub(q[a], one);
+        g[a] = hn::Sub(sampleVolume(P, plus[0], plus[1], plus[2]), sampleVolume(P, minus[0], minus[1], minus[2]));
+    }
+    VF w[3]; // world gradient = (index-from-world linear part)ᵀ · index gradient
+    for (int c = 0; c < 3; ++c)
+        w[c] = hn::MulAdd(g[2], hn::Set(df, P.indexFromWorld[2][c]),
+                          hn::MulAdd(g[1], hn::Set(df, P.indexFromWorld[1][c]),
+                                     hn::Mul(g[0], hn::Set(df, P.indexFromWorld[0][c]))));
+    const VF len = hn::Sqrt(hn::MulAdd(w[2], w[2], hn::MulAdd(w[1], w[1], hn::Mul(w[0], w[0]))));
+    const VF gd = hn::MulAdd(w[2], dir[2], hn::MulAdd(w[1], dir[1], hn::Mul(w[0], dir[0])));
+    const VF ndl = hn::Min(hn::Div(hn::Abs(gd), len), one);
+    const VF n2 = hn::Mul(ndl, ndl), n4 = hn::Mul(n2, n2), n16 = hn::Mul(hn::Mul(n4, n4), hn::Mul(n4, n4));
+    static_assert(int(20.0f) == 20, "ndl^20 below is the shininess");
+    const MF lit = hn::Gt(len, hn::Zero(df)); // a zero gradient leaves the colour unlit
+    diffuse = hn::IfThenElse(lit, hn::MulAdd(ndl, hn::Set(df, 0.7f), hn::Set(df, 0.3f)), one);
+    specular = hn::IfThenElseZero(lit, hn::Mul(hn::Set(df, 0.2f), hn::Mul(n16, n4)));
+}
+
+void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba, Counters &counters) {
+    const DF df;
+    const DI di;
+    const int lanes = int(hn::Lanes(df));
+    const int packetWide = std::min(lanes, 4), packetHigh = lanes / packetWide;
+    const Features &F = P.features;
+    uint64_t samplesTotal = 0, hitTotal = 0, terminatedTotal = 0, truncatedTotal = 0, skippedTotal = 0;
+
+    HWY_ALIGN float t0a[kMaxLanes], t1a[kMaxLanes], q0a[3][kMaxLanes], dqa[3][kMaxLanes], dira[3][kMaxLanes],
+        ja[kMaxLanes], outa[4][kMaxLanes];
+    HWY_ALIGN int32_t hita[kMaxLanes], samplesa[kMaxLanes];
+    int px[kMaxLanes], py[kMaxLanes];
+
+    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step);
+    for (int by = y0; by < y1; by += packetHigh)
+        for (int bx = x0; bx < x1; bx += packetWide) {
+            int hits = 0;
+            for (int l = 0; l < lanes; ++l) {
+                const int x = bx + l % packetWide, y = by + l / packetWide;
+                px[l] = x;
+                py[l] = y;
+                Ray r;
+                const bool inside = x < x1 && y < y1;
+                const bool hit = inside && setUpRay(P, x, y, r);
+                if (inside && !hit)
+                    std::fill_n(rgba + (size_t(y) * size_t(P.width) + size_t(x)) * 4, 4, 0.0f);
+                if (!hit) r = Ray{}; // finite values in the lanes that do not march
+                hita[l] = hit;
+                hits += hit;
+                t0a[l] = r.t0;
+                t1a[l] = r.t1;
+                for (int a = 0; a < 3; ++a) {
+                    q0a[a][l] = r.q0[a];
+                    dqa[a][l] = r.dq[a];
+                    dira[a][l] = r.dir[a];
+                }
+                ja[l] = hit && F.jitter ? random01(uint32_t(x), uint32_t(y), P.seed, P.pass) : 0.0f;
+            }
+            if (hits == 0) continue;
+            hitTotal += uint64_t(hits);
+
+            const VF t0 = hn::Load(df, t0a), t1 = hn::Load(df, t1a), j = hn::Load(df, ja);
+            const VF q0[3] = {hn::Load(df, q0a[0]), hn::Load(df, q0a[1]), hn::Load(df, q0a[2])};
+            const VF dq[3] = {hn::Load(df, dqa[0]), hn::Load(df, dqa[1]), hn::Load(df, dqa[2])};
+            VF dir[3] = {zero, zero, zero};
+            if (F.shading)
+                for (int a = 0; a < 3; ++a) dir[a] = hn::Load(df, dira[a]);
+            MF alive = hn::RebindMask(df, hn::Ne(hn::Load(di, hita), hn::Zero(di)));
+
+            VF k = hn::IfThenElse(hn::Gt(j, zero), zero, one); // the first boundary past t0
+            VF segStart = t0;
+            BrickWalk walk;
+            if (F.emptySpaceSkipping) walk.start(P, q0, dq, t0, alive);
+            MF sfStale = hn::Not(alive); // pre-integration: sf must be sampled at segStart first
+            VF depth = zero, depthCarry = zero, T = one;
+            VF color[3] = {zero, zero, zero}, colorCarry[3] = {zero, zero, zero};
+            VI samples = hn::Zero(di);
+            VF sf = zero; // pre-integration: the value at the segment's front
+            if (F.preintegrated)
+                sf = sampleVolume(P, hn::MulAdd(t0, dq[0], q0[0]), hn::MulAdd(t0, dq[1], q0[1]),
+                                  hn::MulAdd(t0, dq[2], q0[2]));
+            while (!hn::AllFalse(df, alive)) {
+                const VF boundary = hn::MulAdd(hn::Add(k, j), d, t0);
+                const VF segEnd = hn::Min(boundary, t1);
+                const VF len = hn::Sub(segEnd, segStart);
+                const VF tMid = hn::MulAdd(hn::Set(df, 0.5f), len, segStart);
+                MF take = hn::And(alive, hn::Gt(len, zero));
+                // A partial segment: the first one under jitter, or the last at the exit.
+                const MF partial = hn::Or(hn::Gt(boundary, t1), hn::Eq(k, zero));
+                if (!F.boundarySegment) take = hn::AndNot(partial, take);
+                // Empty-space skipping by sample position: a segment is not taken when the
+                // point that decides it lies in a brick the transfer function makes empty. A
+                // sampled segment is decided by its sample (its centre): there it would
+                // classify to opacity 0 and add nothing. A pre-integrated one reads the values
+                // at both ends and everything between, so it is skipped only when the whole
+                // segment lies in the empty brick (both ends before the brick's exit).
+                MF skipped = hn::FirstN(df, 0);
+                VF jumpTo = zero; // last segment, from k, that lies in the empty brick too
+                if (F.emptySpaceSkipping) {
+                    walk.advance(P, q0, dq, F.preintegrated ? segStart : tMid, take);
+                    const VF exit = walk.exit();
+                    skipped = hn::AndNot(walk.visible, take);
+                    if (F.preintegrated) skipped = hn::And(skipped, hn::Le(segEnd, exit));
+                    if (!hn::AllFalse(df, skipped)) {
+                        take = hn::AndNot(skipped, take);
+                        sfStale = hn::Or(sfStale, skipped);
+                        // Later full segments k' whose deciding point (centre t0 + (k' + j − ½)·d,
+                        // or end t0 + (k' + j)·d) is before the exit, one fewer for rounding, and
+                        // ending before t1: skipped at once instead of one per iteration.
+                        const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, t0), d), j),
+                                                                    hn::Set(df, F.preintegrated ? 0.0f : 0.5f))),
+                                                  one);
+                        const VF byEnd = hn::Sub(hn::Floor(hn::Sub(hn::Div(hn::Sub(t1, t0), d), j)), one);
+                        jumpTo = hn::IfThenElse(skipped, hn::Min(byExit, byEnd), zero);
+                    }
+                }
+                if (!hn::AllFalse(df, take)) {
+                    const MF truncated =
+                        hn::AndNot(hn::RebindMask(df, hn::Lt(samples, hn::Set(di, P.maxSamples))), take);
+                    if (!hn::AllFalse(df, truncated)) {
+                        truncatedTotal += hn::CountTrue(df, truncated);
+                        alive = hn::AndNot(truncated, alive);
+                        take = hn::AndNot(truncated, take);
+                    }
+                    samples = hn::Add(samples, hn::IfThenElseZero(hn::RebindMask(di, take), hn::Set(di, 1)));
+                    if (F.preintegrated) {
+                        const MF fresh = hn::And(take, sfStale);
+                        if (!hn::AllFalse(df, fresh)) {
+                            sf = hn::IfThenElse(fresh, sampleVolume(P, hn::MulAdd(segStart, dq[0], q0[0]),
+                                                                    hn::MulAdd(segStart, dq[1], q0[1]),
+                                                                    hn::MulAdd(segStart, dq[2], q0[2])),
+                                                sf);
+                            sfStale = hn::AndNot(fresh, sfStale);
+                        }
+                    }
+                    const VF q[3] = {hn::MulAdd(tMid, dq[0], q0[0]), hn::MulAdd(tMid, dq[1], q0[1]),
+                                     hn::MulAdd(tMid, dq[2], q0[2])};
+                    // Contribution T·weight·segColor: weight is alpha for a sampled segment
+                    // (the kernel's T·alpha·rgb, in its order), 1 for a premultiplied one.
+                    VF segDepth, alpha, segColor[3], weight = one;
+                    if (F.preintegrated) {
+                        // The segment from the table for a full step; a partial one scales the
+                        // depth by len/step (Eq. 3) and the colour with its opacity, unless the
+                        // full step's alpha is too close to 1 to hold its depth: then it is
+                        // classified at its centre (raycast.cl, VC_ALPHA_HOLDS_DEPTH).
+                        const VF sb = sampleVolume(P, hn::MulAdd(segEnd, dq[0], q0[0]), hn::MulAdd(segEnd, dq[1], q0[1]),
+                                                   hn::MulAdd(segEnd, dq[2], q0[2]));
+                        VF seg[4];
+                        preintegratedSegment(P, sf, sb, seg);
+                        sf = hn::IfThenElse(take, sb, sf);
+                        const MF opaque = hn::Ge(seg[3], one); // −log1p(−1) = +inf: T becomes 0
+                        segDepth = hn::IfThenElse(opaque, hn::Set(df, kInf),
+                                                  hn::Neg(hn::Log1p(df, hn::Neg(hn::IfThenZeroElse(opaque, seg[3])))));
+                        alpha = seg[3];
+                        for (int a = 0; a < 3; ++a) segColor[a] = seg[a];
+                        const MF partialHere = hn::And(take, partial);
+                        if (!hn::AllFalse(df, partialHere)) {
+                            const VF fraction = hn::Div(len, d);
+                            const MF holds = hn::And(partialHere, hn::Le(seg[3], hn::Set(df, 1.0f - 1.0f / 4096.0f)));
+                            const VF scaledDepth = hn::Mul(segDepth, fraction);
+                            const VF scaledAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(holds), scaledDepth));
+                            const VF colourScale =
+                                hn::IfThenElse(hn::Gt(seg[3], zero), hn::Div(scaledAlpha, seg[3]), fraction);
+                            VF c[4];
+                            classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
+                            const VF centreDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
+                            const MF centre = hn::AndNot(holds, partialHere);
+                            const VF centreAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(centre), centreDepth));
+                            segDepth = hn::IfThenElse(holds, scaledDepth, hn::IfThenElse(centre, centreDepth, segDepth));
+                            alpha = hn::IfThenElse(holds, scaledAlpha, hn::IfThenElse(centre, centreAlpha, alpha));
+                            for (int a = 0; a < 3; ++a)
+                                segColor[a] = hn::IfThenElse(holds, hn::Mul(segColor[a], colourScale),
+                                                             hn::IfThenElse(centre, hn::Mul(centreAlpha, c[a]), segColor[a]));
+                        }
+                        if (F.shading) {
+                            // Light the premultiplied colour; the highlight is weighted by the opacity.
+                            VF diffuse, specular;
+                            phong(P, q, dir, diffuse, specular);
+                            for (int a = 0; a < 3; ++a)
+                                segColor[a] = hn::Min(hn::MulAdd(segColor[a], diffuse, hn::Mul(specular, alpha)), alpha);
+                        }
+                    } else {
+                        // Sample the segment at its centre and classify.
+                        VF c[4];
+                        classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
+                        // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
+                        segDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
+                        alpha = opacityFromDepth(segDepth);
+                        if (F.shading) {
+                            const MF lit = hn::And(take, hn::Gt(alpha, zero));
+                            if (!hn::AllFalse(df, lit)) {
+                                VF diffuse, specular;
+                                phong(P, q, dir, diffuse, specular);
+                                for (int a = 0; a < 3; ++a)
+                                    c[a] = hn::IfThenElse(lit, hn::Min(hn::MulAdd(c[a], diffuse, specular), one), c[a]);
+                            }
+                        }
+                        for (int a = 0; a < 3; ++a) segColor[a] = c[a];
+                        weight = alpha;
+                    }
+                    const VF tw = hn::Mul(T, weight);
+                    for (int a = 0; a < 3; ++a) addCompensated(take, color[a], colorCarry[a], hn::Mul(tw, segColor[a]), false);
+                    addCompensated(take, depth, depthCarry, segDepth, true);
+                    // T = exp(−depth), kept by products and made exact every 16 samples.
+                    VF nextT = hn::Mul(T, hn::Sub(one, alpha));
+                    const MF exact =
+                        hn::And(take, hn::RebindMask(df, hn::Eq(hn::And(samples, hn::Set(di, 15)), hn::Zero(di))));
+                    if (!hn::AllFalse(df, exact))
+                        nextT = hn::IfThenElse(exact, hn::Exp(df, hn::Neg(hn::Sub(depth, depthCarry))), nextT);
+                    T = hn::IfThenElse(take, nextT, T);
+                    if (F.earlyTermination) {
+                        const MF stop = hn::And(take, hn::Ge(depth, hn::Set(df, P.terminationDepth)));
+                        if (!hn::AllFalse(df, stop)) {
+                            terminatedTotal += hn::CountTrue(df, stop);
+                            alive = hn::AndNot(stop, alive);
+                        }
+                    }
+                }
+                alive = hn::AndNot(hn::Ge(boundary, t1), alive);
+                segStart = hn::IfThenElse(alive, segEnd, segStart);
+                k = hn::IfThenElse(alive, hn::Add(k, one), k);
+                if (F.emptySpaceSkipping && !hn::AllFalse(df, skipped)) {
+                    // Segments k … jumpTo are skipped; the next to look at is jumpTo + 1.
+                    const MF jump = hn::And(alive, hn::Ge(jumpTo, k));
+                    HWY_ALIGN float count[kMaxLanes];
+                    hn::Store(hn::IfThenElse(jump, hn::Add(hn::Sub(jumpTo, k), hn::Set(df, 2.0f)),
+                                             hn::IfThenElseZero(skipped, one)),
+                              df, count);
+                    for (int l = 0; l < lanes; ++l) skippedTotal += uint64_t(count[l]);
+                    segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(jumpTo, j), d, t0), segStart);
+                    k = hn::IfThenElse(jump, hn::Add(jumpTo, one), k);
+                }
+            }
+
+            for (int a = 0; a < 3; ++a) hn::Store(hn::Sub(color[a], colorCarry[a]), df, outa[a]);
+            hn::Store(opacityFromDepth(hn::Sub(depth, depthCarry)), df, outa[3]);
+            hn::Store(samples, di, samplesa);
+            for (int l = 0; l < lanes; ++l) {
+                if (!hita[l]) continue;
+                samplesTotal += uint64_t(samplesa[l]);
+                float *pixel = rgba + (size_t(py[l]) * size_t(P.width) + size_t(px[l])) * 4;
+                for (int c = 0; c < 4; ++c) pixel[c] = outa[c][l];
+            }
+        }
+    counters.samples += samplesTotal;
+    counters.raysHit += hitTotal;
+    counters.terminatedEarly += terminatedTotal;
+    counters.truncated += truncatedTotal;
+    counters.segmentsSkipped += skippedTotal;
+}
+
+int LanesHere() { return int(hn::Lanes(DF())); }
+const char *TargetHere() { return hwy::TargetName(HWY_TARGET); }
+
+} // namespace volcast::cpu::HWY_NAMESPACE
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace volcast::cpu {
+
+HWY_EXPORT(MarchTile);
+HWY_EXPORT(LanesHere);
+HWY_EXPORT(TargetHere);
+
+void marchTile(const FrameParams &p, int x0, int y0, int x1, int y1, float *rgba, Counters &counters) {
+    HWY_DYNAMIC_DISPATCH(MarchTile)(p, x0, y0, x1, y1, rgba, counters);
+}
+std::string marchTarget() { return HWY_DYNAMIC_DISPATCH(TargetHere)(); }
+int raysPerPacket() { return HWY_DYNAMIC_DISPATCH(LanesHere)(); }
+
+} // namespace volcast::cpu
+#endif

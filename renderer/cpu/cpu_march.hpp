@@ -1,0 +1,80 @@
+#pragma once
+// The interface between the CPU renderer's preparation (cpu_renderer.cpp, plain C++) and
+// its SIMD ray march (cpu_march.cpp, compiled once per instruction set by Highway and
+// dispatched at run time to the best the machine has). One frame's data, in float: the same
+// numbers the OpenCL kernel reads from RayCastParams, so both back ends cast the same rays.
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+
+namespace volcast::cpu {
+
+struct Features {
+    bool jitter = false;
+    bool boundarySegment = true;
+    bool earlyTermination = false;
+    bool clipPlanes = false;
+    bool emptySpaceSkipping = false;
+    bool shading = false;
+    bool cubic = false; // prefiltered tricubic B-spline from padded coefficients
+    bool preintegrated = false;
+};
+
+struct FrameParams {
+    Features features;
+    float eye[3];
+    float forward[3];               // unit view direction
+    float right[3], up[3];          // image axes scaled by the view's half-width and half-height
+    float indexFromWorld[3][4];     // rows: linear part, translation (level-0 index space)
+    float clipPlanes[6][4];         // (n, w): keeps dot(n, x) + w >= 0, world
+    int clipPlaneCount = 0;
+    int dims[3];                    // level-0 samples per axis: the box rays are clipped to
+    int width = 0, height = 0;      // rays cast (after image_scale)
+    bool orthographic = false;
+    float levelScale = 1;           // 2^-mip_level
+    float step = 1;                 // world units
+    float opacityUnit = 1;          // world units
+    float terminationDepth = 0;     // optical depth of the early-termination opacity
+    uint32_t seed = 0, pass = 0;
+    int maxSamples = 0;
+
+    // The sampled level, padded so that the taps of any clamped position need no further
+    // clamps: trilinear, voxels with one edge copy after the last on each axis; cubic, its
+    // B-spline coefficients with one mirrored before and two after (as the kernel's buffer).
+    // Index with int32.
+    const float *voxels = nullptr;
+    int levelDims[3];               // samples per axis of the level (unpadded)
+    int rowStride = 0, sliceStride = 0; // of the padded array
+
+    // Transfer-function table (tf_table.hpp): entries × (r, g, b, sigma).
+    const float *tf = nullptr;
+    float tfMin = 0, tfScale = 1;
+    int tfEntries = 0;
+
+    // Pre-integration table (preintegration.hpp): N nodes, N·N·4 rgba by (back·N + front),
+    // and the uniform locator into the nodes.
+    const float *preRgba = nullptr, *preNodes = nullptr;
+    const int32_t *preLocator = nullptr;
+    int preNodeCount = 0, preLocatorSize = 0;
+    float preLocatorMin = 0, preLocatorScale = 0;
+
+    // Empty-space skipping: per brick 1 if visible, as int32 so that lanes gather it.
+    const int32_t *brickVisible = nullptr;
+    int bricks[3] = {0, 0, 0};
+    int brickSize = 8;
+};
+
+// Sums over a frame, added to by every tile.
+struct Counters {
+    std::atomic<uint64_t> samples{0}, raysHit{0}, terminatedEarly{0}, truncated{0}, segmentsSkipped{0};
+};
+
+// Casts the rays of pixels [x0, x1) × [y0, y1) into rgba (width × height × 4, premultiplied).
+void marchTile(const FrameParams &p, int x0, int y0, int x1, int y1, float *rgba, Counters &counters);
+
+// The instruction set the march runs on here ("AVX3", "AVX2", …) and its rays per packet.
+std::string marchTarget();
+int raysPerPacket();
+
+} // namespace volcast::cpu

@@ -1,0 +1,74 @@
+#pragma once
+// The native CPU back end: the OpenCL kernel's ray casting, written for the CPU with Highway
+// (SIMD packets of rays from small screen blocks, one ray per lane, a mask of lanes still
+// marching, gathers for the trilinear taps and the table look-ups), threads over screen
+// tiles, dispatched at run time to the widest instruction set the CPU has.
+//
+// Supported quality switches: step with opacity correction, jitter, boundary segments,
+// clip planes, early termination, empty-space skipping, mip levels, image scale, shading,
+// cubic B-spline, pre-integration: every switch of the scene contract.
+
+#include "renderer/frame_renderer.hpp"
+#include "renderer/minmax_bricks.hpp"
+#include "renderer/mip_pyramid.hpp"
+#include "renderer/preintegration.hpp"
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+
+namespace volcast {
+
+struct CpuRendererOptions {
+    int threads = 0;   // 0: one per core
+    int brickSize = 8; // level voxels per min-max brick edge
+};
+
+class CpuRenderer : public FrameRenderer {
+  public:
+    explicit CpuRenderer(std::shared_ptr<const Volume> volume, CpuRendererOptions options = {});
+    // Convenience for tools and tests: keeps a copy.
+    explicit CpuRenderer(const Volume &volume, CpuRendererOptions options = {});
+
+    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
+                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
+    std::string description() const override;
+    PreprocessCounts preprocessCounts() const override;
+    const Volume &volume() const override { return *volume_; }
+
+    // The switches a frame uses, as the OpenCL back end names them ("JITTER CLIP_PLANES …").
+    static std::string featureNames(const Quality &quality, bool hasClipPlanes);
+
+  private:
+    // The data a frame samples: a mip level's voxels, or its B-spline coefficients.
+    struct DataSet {
+        Vec3i dims;
+        bool cubic = false;
+        std::vector<float> padded; // voxels: one edge copy after; coefficients: mirrored 1 before, 2 after
+        std::optional<MinMaxBricks> bricks;
+        std::optional<TransferFunction> classifiedFor;
+        std::vector<int32_t> brickVisible;
+        double emptyFraction = 0;
+    };
+
+    DataSet &dataSet(int level, bool cubic, RenderStats &st);
+    void classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st);
+
+    std::shared_ptr<const Volume> volume_;
+    CpuRendererOptions options_;
+    int threads_ = 1;
+    MipPyramid pyramid_;
+    std::mutex mutex_;
+    std::map<std::pair<int, bool>, DataSet> dataSets_; // by (mip level, cubic)
+    std::optional<TransferFunction> tfTableFor_;
+    std::vector<float> tfTable_;
+    double tfMin_ = 0, tfScale_ = 0, tfError_ = 0;
+    int tfEntries_ = 0;
+    std::shared_ptr<const PreintegrationTable> preintegration_;
+    TransferFunction preintegrationFor_;
+    PreprocessCounts counts_;
+    mutable std::mutex countsMutex_;
+};
+
+} // namespace volcast

@@ -1,0 +1,80 @@
+#include "renderer/make_frame_renderer.hpp"
+
+#include "renderer/cpu/cpu_renderer.hpp"
+#include "renderer/opencl_renderer.hpp"
+
+#include <stdexcept>
+
+namespace volcast {
+
+namespace {
+
+// The OpenCL renderer holds its context by reference; this one also owns it.
+class ContextOwningOpenClRenderer final : public FrameRenderer {
+  public:
+    ContextOwningOpenClRenderer(std::shared_ptr<OpenClContext> cl, std::shared_ptr<const Volume> volume)
+        : cl_(std::move(cl)), renderer_(*cl_, std::move(volume)) {}
+    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
+                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) override {
+        return renderer_.render(tf, camera, width, height, quality, clipPlanes, stats);
+    }
+    std::string description() const override { return renderer_.description(); }
+    PreprocessCounts preprocessCounts() const override { return renderer_.preprocessCounts(); }
+    const Volume &volume() const override { return renderer_.volume(); }
+
+  private:
+    std::shared_ptr<OpenClContext> cl_;
+    OpenClRenderer renderer_;
+};
+
+} // namespace
+
+DeviceChoice DeviceChoice::parse(std::string_view text) {
+    DeviceChoice c;
+    if (text == "auto" || text.empty()) c.kind = Kind::Auto;
+    else if (text == "cpu") c.kind = Kind::Cpu;
+    else if (text == "opencl") c.kind = Kind::OpenCl;
+    else if (text.starts_with("opencl:") && text.size() > 7) {
+        c.kind = Kind::OpenCl;
+        c.openClDevice = std::string(text.substr(7));
+    } else {
+        throw std::invalid_argument("device '" + std::string(text) +
+                                    "': expected cpu, opencl, opencl:<part of an OpenCL device's name>, or auto");
+    }
+    return c;
+}
+
+std::string DeviceChoice::text() const {
+    switch (kind) {
+    case Kind::Cpu: return "cpu";
+    case Kind::OpenCl: return openClDevice.empty() ? "opencl" : "opencl:" + openClDevice;
+    case Kind::Auto: break;
+    }
+    return "auto";
+}
+
+std::shared_ptr<OpenClContext> openContextFor(const DeviceChoice &choice, const std::string &kernelCacheDir) {
+    switch (choice.kind) {
+    case DeviceChoice::Kind::Cpu: return nullptr;
+    case DeviceChoice::Kind::OpenCl: return std::make_shared<OpenClContext>(DeviceOptions{choice.openClDevice, kernelCacheDir});
+    case DeviceChoice::Kind::Auto: break;
+    }
+    try {
+        return std::make_shared<OpenClContext>(DeviceOptions{"gpu", kernelCacheDir});
+    } catch (const OpenClError &) {
+        return nullptr; // no OpenCL, or no GPU among its devices: the native path is faster than PoCL
+    }
+}
+
+std::unique_ptr<FrameRenderer> makeFrameRenderer(std::shared_ptr<OpenClContext> cl,
+                                                 std::shared_ptr<const Volume> volume) {
+    if (!cl) return std::make_unique<CpuRenderer>(std::move(volume));
+    return std::make_unique<ContextOwningOpenClRenderer>(std::move(cl), std::move(volume));
+}
+
+std::unique_ptr<FrameRenderer> makeFrameRenderer(const DeviceChoice &choice, std::shared_ptr<const Volume> volume,
+                                                 const std::string &kernelCacheDir) {
+    return makeFrameRenderer(openContextFor(choice, kernelCacheDir), std::move(volume));
+}
+
+} // namespace volcast

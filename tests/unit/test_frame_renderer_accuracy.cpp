@@ -1,0 +1,546 @@
+// The accuracy, stability and remedy checks every back end must pass, run against each one
+// (value-parameterised: .../OpenCl is the OpenCL ray caster on whatever device OpenCL offers,
+// PoCL's CPU device in CI; .../Cpu is the native SIMD path), with closed forms and the
+// double-precision reference integrator as the judge. Checks that only concern one back end
+// (OpenCL build options and its two cubic fetch paths) stay in test_opencl_renderer.cpp and
+// test_opencl_remedies.cpp.
+
+#include "renderer/cpu/cpu_renderer.hpp"
+#include "renderer/error_metrics.hpp"
+#include "renderer/opencl_renderer.hpp"
+#include "renderer/reference_renderer.hpp"
+#include "renderer/synthetic.hpp"
+#include "test_scenes.hpp"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+
+namespace volcast {
+namespace {
+
+enum class Backend { OpenCl, Cpu };
+
+std::string backendName(const testing::TestParamInfo<Backend> &info) {
+    return info.param == Backend::Cpu ? "Cpu" : "OpenCl";
+}
+
+std::unique_ptr<FrameRenderer> makeRenderer(Backend b, const Volume &v) {
+    if (b == Backend::Cpu) return std::make_unique<CpuRenderer>(v);
+    return std::make_unique<OpenClRenderer>(test::sharedOpenClContext(), v);
+}
+
+class FrameRendererAccuracy : public testing::TestWithParam<Backend> {
+  protected:
+    std::unique_ptr<FrameRenderer> renderer(const Volume &v) const { return makeRenderer(GetParam(), v); }
+};
+
+INSTANTIATE_TEST_SUITE_P(Backends, FrameRendererAccuracy, testing::Values(Backend::OpenCl, Backend::Cpu),
+                         backendName);
+
+TransferFunction constantTf(double a) { return test::constantTf(0.9, 0.5, 0.2, a, 1.0); }
+Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 30); }
+Quality plain(double step) { return test::plainQuality(step); }
+
+TransferFunction blobTf() {
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {40, 0, 0, 0, 0}, {90, 1, 0.4, 0.1, 0.15}, {150, 0.3, 0.7, 1, 0.4},
+                 {220, 1, 1, 1, 0.7}};
+    return tf;
+}
+
+const SyntheticVolume &blob() {
+    static const SyntheticVolume v = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 4, 220);
+    return v;
+}
+
+Image reference(const Volume &v, const TransferFunction &tf, Reconstruction rec, const Camera &cam, int w, int h,
+                bool shading = false, double tolerance = 1e-6, const std::vector<ClipPlane> &clip = {}) {
+    ReferenceRenderer ref(v, tf, rec);
+    ref.setShading(shading);
+    ReferenceOptions o;
+    o.tolerance = tolerance;
+    return ref.render(cam, w, h, clip, o);
+}
+
+// Largest per-pixel |A − closed form| over the image, and the count of pixels that hit.
+double constantBoxAlphaError(const Image &img, const Volume &v, const Camera &cam, double a,
+                             const std::vector<ClipPlane> &clip = {}, int *hits = nullptr) {
+    const RayGenerator rays(cam, img.width, img.height);
+    const ReferenceRenderer ref(v, constantTf(a), Reconstruction::Linear);
+    double worst = 0;
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x) {
+            double t0, t1;
+            const double L = ref.clipRay(rays.pixelRay(x, y), clip, t0, t1) ? t1 - t0 : 0;
+            if (hits && L > 0) ++*hits;
+            worst = std::max(worst, std::fabs(img.pixel(x, y)[3] - -std::expm1(L * std::log1p(-a))));
+        }
+    return worst;
+}
+
+// Every pixel finite, premultiplied (colour ≤ alpha up to float rounding), alpha in [0, 1].
+void expectValidImage(const Image &img, const std::string &what) {
+    int bad = 0;
+    for (size_t i = 0; i < img.rgba.size(); i += 4) {
+        const float a = img.rgba[i + 3];
+        bool ok = std::isfinite(a) && a >= 0 && a <= 1;
+        for (int k = 0; k < 3; ++k)
+            ok = ok && std::isfinite(img.rgba[i + k]) && img.rgba[i + k] >= 0 && img.rgba[i + k] <= a + 1e-5f;
+        bad += !ok;
+    }
+    EXPECT_EQ(bad, 0) << what;
+}
+
+TEST_P(FrameRendererAccuracy, DescribesItsBackEnd) {
+    const auto r = renderer(blob().volume);
+    EXPECT_EQ(r->description().rfind(GetParam() == Backend::Cpu ? "cpu: " : "opencl: ", 0), 0u) << r->description();
+}
+
+TEST_P(FrameRendererAccuracy, ConstantBoxIsExactWithPartialSegmentsAtAnyStep) {
+    const SyntheticVolume box = makeConstantBox({12, 9, 15}, {1.0, 1.5, 0.8}, 100);
+    const auto r = renderer(box.volume);
+    const Camera cam = obliqueCamera(box.volume);
+    for (double step : {0.3, 1.0, 2.7, 40.0}) { // 40: one segment longer than the volume
+        const Image img = r->render(constantTf(0.07), cam, 32, 24, plain(step), {});
+        int hits = 0;
+        // Float32 ray parameters ~100 world units from the eye carry ~1e-5 absolute error,
+        // which moves A by at most τ·1e-5 ≈ 1e-6; summing ≤ 60 segment depths adds ~1e-6.
+        EXPECT_LT(constantBoxAlphaError(img, box.volume, cam, 0.07, {}, &hits), 1e-5) << "step " << step;
+        EXPECT_GT(hits, 60); // the box really is in view
+    }
+}
+
+TEST_P(FrameRendererAccuracy, ConstantBoxIsMeasurablyWrongWithoutPartialSegments) {
+    const SyntheticVolume box = makeConstantBox({12, 9, 15}, {1.0, 1.5, 0.8}, 100);
+    const auto r = renderer(box.volume);
+    const Camera cam = obliqueCamera(box.volume);
+    Quality q = plain(2.7);
+    q.boundarySegment = false;
+    const Image img = r->render(constantTf(0.07), cam, 32, 24, q, {});
+    // Dropping up to one 2.7-voxel segment per ray loses up to 1 − 0.93^2.7 ≈ 0.18 of
+    // opacity: the jerky edges of the paper's Figure 4.
+    EXPECT_GT(constantBoxAlphaError(img, box.volume, cam, 0.07), 0.05);
+}
+
+TEST_P(FrameRendererAccuracy, ClipPlaneWithPartialSegmentsIsExactOnAConstantBox) {
+    const SyntheticVolume box = makeConstantBox({16, 16, 16}, {1, 1, 1}, 10);
+    const auto r = renderer(box.volume);
+    const Camera cam = obliqueCamera(box.volume);
+    const std::vector<ClipPlane> clip{{{7.5, 7.5, 7.5}, normalize(Vec3d{0.3, -1, 0.5})}};
+    const Image img = r->render(constantTf(0.1), cam, 32, 32, plain(1.7), clip);
+    EXPECT_LT(constantBoxAlphaError(img, box.volume, cam, 0.1, clip), 1e-5); // as for the box without planes
+}
+
+TEST_P(FrameRendererAccuracy, ConvergesToTheReferenceAsTheStepShrinks) {
+    const SyntheticVolume b = makeGaussianBlob({32, 32, 32}, {1, 1, 1}, 7, 220);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {60, 1, 0.4, 0.1, 0.05}, {140, 0.3, 0.7, 1, 0.3}, {220, 1, 1, 1, 0.6}};
+    const Camera cam = obliqueCamera(b.volume);
+    const Image exact = reference(b.volume, tf, Reconstruction::Linear, cam, 40, 40);
+    const auto r = renderer(b.volume);
+    double previous = 1;
+    for (double step : {2.0, 0.5, 0.125}) {
+        const double rmse = compareImages(r->render(tf, cam, 40, 40, plain(step), {}), exact).rmse;
+        // Midpoint sampling is second order: a 4× smaller step cuts the error ≥ 4× until
+        // float rounding (~1e-6) is reached.
+        EXPECT_LT(rmse, std::max(previous / 4, 2e-6)) << "step " << step;
+        previous = rmse;
+    }
+    EXPECT_LT(previous, 1e-3);
+}
+
+TEST_P(FrameRendererAccuracy, JitterIsReproducibleFromTheSeed) {
+    const SyntheticVolume b = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 6, 200);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {100, 1, 0.5, 0.2, 0.2}, {200, 1, 1, 1, 0.8}};
+    const auto r = renderer(b.volume);
+    Quality q = plain(1.5);
+    q.jitter = true;
+    q.seed = 42;
+    const Camera cam = obliqueCamera(b.volume);
+    const Image a = r->render(tf, cam, 24, 24, q, {}), again = r->render(tf, cam, 24, 24, q, {});
+    q.seed = 43;
+    const Image c = r->render(tf, cam, 24, 24, q, {});
+    EXPECT_EQ(compareImages(a, again).maxAbs, 0);
+    EXPECT_GT(compareImages(a, c).maxAbs, 1e-4);
+}
+
+TEST_P(FrameRendererAccuracy, EarlyTerminationChangesPixelsByLessThanTheRemainingTransmittance) {
+    const SyntheticVolume b = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 8, 220);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {50, 1, 0.6, 0.3, 0.6}, {220, 1, 1, 1, 0.95}};
+    const auto r = renderer(b.volume);
+    const Camera cam = obliqueCamera(b.volume);
+    Quality q = plain(0.5);
+    const Image full = r->render(tf, cam, 24, 24, q, {});
+    q.earlyTermination = 0.99;
+    RenderStats st;
+    const Image early = r->render(tf, cam, 24, 24, q, {}, &st);
+    // A ray stops once T ≤ 0.01; what lies behind adds at most T·1 to any channel.
+    EXPECT_LE(compareImages(early, full).maxAbs, 0.01 + 1e-6);
+    EXPECT_GT(st.earlyTerminatedFraction, 0.1); // the switch really did something
+}
+
+TEST_P(FrameRendererAccuracy, EmptySpaceSkippingChangesTheWorkNotTheImage) {
+    const SyntheticVolume sphere = makeSphere({48, 40, 44}, {1, 1, 1.2}, 9, 2, 200);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {60, 0, 0, 0, 0}, {120, 1, 0.6, 0.3, 0.3}, {200, 1, 1, 1, 0.5}};
+    const auto r = renderer(sphere.volume);
+    const Camera cam = test::obliqueCamera(sphere.volume, 40);
+    for (auto interpolation : {Interpolation::Linear, Interpolation::Cubic})
+        for (bool preintegrated : {false, true}) {
+            Quality q = plain(0.5);
+            q.interpolation = interpolation;
+            q.preintegrated = preintegrated;
+            RenderStats without, with;
+            const Image full = r->render(tf, cam, 32, 32, q, {}, &without);
+            q.emptySpaceSkipping = true;
+            const Image skipped = r->render(tf, cam, 32, 32, q, {}, &with);
+            const std::string what = std::string(interpolation == Interpolation::Cubic ? "cubic" : "linear") +
+                                     (preintegrated ? " pre-integrated" : "");
+            // Only segments wholly inside bricks where the transfer function is 0 are skipped;
+            // they add exactly 0 (pre-integration's table cells there are all zero too, since
+            // the control point at 60 is a node). What remains is float rounding of t.
+            EXPECT_LT(compareImages(full, skipped).maxAbs, 1e-5) << what;
+            EXPECT_GT(with.skippedSegmentsPerRay, 10) << what;
+            EXPECT_LT(with.meanSamplesPerRay, 0.7 * without.meanSamplesPerRay) << what;
+            EXPECT_GT(with.emptyBrickFraction, 0.3) << what;
+        }
+}
+
+TEST_P(FrameRendererAccuracy, ShadingMatchesTheReferenceLighting) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const Image exactLit = reference(blob().volume, blobTf(), Reconstruction::Linear, cam, 24, 24, true, 1e-5);
+    const Image exactUnlit = reference(blob().volume, blobTf(), Reconstruction::Linear, cam, 24, 24);
+    const auto r = renderer(blob().volume);
+    Quality q = plain(0.125);
+    q.shading = true;
+    const Image lit = r->render(blobTf(), cam, 24, 24, q, {});
+    expectValidImage(lit, "shaded");
+    // The same lighting on the same field: the step's midpoint error (< 1e-3 at 0.125, as
+    // unlit) and the reference's 1e-5 tolerance, with a margin for the |n·l| kinks.
+    EXPECT_LT(compareImages(lit, exactLit).rmse, 2e-3);
+    EXPECT_GT(compareImages(exactLit, exactUnlit).rmse, 10 * compareImages(lit, exactLit).rmse);
+}
+
+TEST_P(FrameRendererAccuracy, CubicBSplineMatchesTheReferenceSpline) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const Image exactCubic = reference(blob().volume, blobTf(), Reconstruction::Cubic, cam, 32, 32);
+    const auto r = renderer(blob().volume);
+    Quality q = plain(0.125);
+    const double linearError = compareImages(r->render(blobTf(), cam, 32, 32, q, {}), exactCubic).rmse;
+    q.interpolation = Interpolation::Cubic;
+    RenderStats st;
+    const double cubicError = compareImages(r->render(blobTf(), cam, 32, 32, q, {}, &st), exactCubic).rmse;
+    // Step 0.125 leaves a midpoint-rule error below 1e-3 (the trilinear convergence test);
+    // the same spline on both sides leaves nothing else but float rounding.
+    EXPECT_LT(cubicError, 1e-3);
+    // And the back end really reconstructs the spline: trilinear is far from it on a σ = 4 blob.
+    EXPECT_GT(linearError, 5 * cubicError);
+    EXPECT_GT(st.coefficientSeconds, 0);
+}
+
+// A linear ramp crossed by a transfer-function spike one data unit wide: the thin slab the
+// paper's onion rings come from. Trilinear reconstruction of a linear field is exact, so the
+// value along each segment is linear and pre-integration has only its table's error.
+TEST_P(FrameRendererAccuracy, PreintegrationCatchesASpikeThatSamplingMisses) {
+    const SyntheticVolume ramp = makeLinearRamp({32, 24, 24}, {1, 1, 1}, 0, 248); // 8 units per voxel
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {99.5, 0, 0, 0, 0}, {100, 1, 0.8, 0.3, 0.9}, {100.5, 0, 0, 0, 0}};
+    const Camera cam = test::obliqueCamera(ramp.volume, 30);
+    const Image exact = reference(ramp.volume, tf, Reconstruction::Linear, cam, 32, 32, false, 1e-7);
+    const auto r = renderer(ramp.volume);
+    Quality q = plain(2);
+    const double sampledError = compareImages(r->render(tf, cam, 32, 32, q, {}), exact).rmse;
+    q.preintegrated = true;
+    RenderStats st;
+    const double preError = compareImages(r->render(tf, cam, 32, 32, q, {}, &st), exact).rmse;
+    // Each ray crosses the slab once: one or two table lookups at ≤ 1e-3 each, plus float.
+    EXPECT_LT(preError, 2e-3);
+    EXPECT_LE(st.preintegrationError, 1e-3);
+    EXPECT_GT(sampledError, 10 * preError); // step 2 (16 data units) mostly misses the spike
+}
+
+TEST_P(FrameRendererAccuracy, PreintegrationConvergesOnASmoothVolume) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const Image exact = reference(blob().volume, blobTf(), Reconstruction::Linear, cam, 32, 32);
+    const auto r = renderer(blob().volume);
+    Quality q = plain(2);
+    q.preintegrated = true;
+    const double coarse = compareImages(r->render(blobTf(), cam, 32, 32, q, {}), exact).rmse;
+    q.step = 0.5;
+    RenderStats st;
+    const double fine = compareImages(r->render(blobTf(), cam, 32, 32, q, {}, &st), exact).rmse;
+    // The value is not linear along a segment here: that error is second order in the step
+    // (measured 3.5e-3 at step 2, 1.5e-4 at 0.5). Below that the table's own error (≤ 1e-3
+    // per segment, absolute) adds up over more, fainter segments and sets the floor.
+    EXPECT_LT(fine, coarse / 8);
+    EXPECT_LT(fine, 1e-3);
+    EXPECT_LE(st.preintegrationError, 1e-3);
+}
+
+TEST_P(FrameRendererAccuracy, MipLevelsKeepAConstantBoxExact) {
+    const SyntheticVolume box = makeConstantBox({20, 13, 9}, {1, 1.5, 2}, 70);
+    const TransferFunction tf = test::constantTf(0.9, 0.5, 0.2, 0.08, 1.0);
+    const auto r = renderer(box.volume);
+    const Camera cam = test::obliqueCamera(box.volume, 30);
+    for (int level : {1, 2, 4}) {
+        Quality q = plain(0.8);
+        q.mipLevel = level;
+        const Image img = r->render(tf, cam, 24, 24, q, {});
+        // Rays are clipped to the level-0 box at every level, so a constant box keeps its
+        // exact chord lengths: the tolerance of the level-0 constant-box test.
+        EXPECT_LT(constantBoxAlphaError(img, box.volume, cam, 0.08), 1e-5) << "mip level " << level;
+    }
+    Quality q = plain(1);
+    q.mipLevel = 6; // 20 → 10 → 5 → 3 → 2 → 1: level 5 is the last
+    try {
+        r->render(tf, cam, 8, 8, q, {});
+        FAIL() << "mip level 6 of a 20×13×9 volume was accepted";
+    } catch (const std::invalid_argument &e) {
+        EXPECT_NE(std::string(e.what()).find("mip_level"), std::string::npos) << e.what();
+    }
+}
+
+TEST_P(FrameRendererAccuracy, MipLevelErrorGrowsWithTheLevel) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const Image exact = reference(blob().volume, blobTf(), Reconstruction::Linear, cam, 24, 24);
+    const auto r = renderer(blob().volume);
+    double previous = 0;
+    for (int level : {0, 1, 2}) {
+        Quality q = plain(0.25);
+        q.mipLevel = level;
+        const double e = compareImages(r->render(blobTf(), cam, 24, 24, q, {}), exact).rmse;
+        EXPECT_GT(e, previous) << "level " << level; // coarser data, further from the exact picture
+        previous = e;
+    }
+}
+
+TEST_P(FrameRendererAccuracy, ImageScaleCastsFewerRaysAndUpsamplesThem) {
+    const auto r = renderer(blob().volume);
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    Quality q = plain(0.5);
+    const Image small = r->render(blobTf(), cam, 15, 10, q, {});
+    q.imageScale = 0.5;
+    RenderStats st;
+    const Image scaled = r->render(blobTf(), cam, 30, 20, q, {}, &st);
+    EXPECT_EQ(st.raysWide, 15);
+    EXPECT_EQ(st.raysHigh, 10);
+    ASSERT_EQ(scaled.width, 30);
+    ASSERT_EQ(scaled.height, 20);
+    // The same rays (same image plane, same aspect) then bilinear upsampling: identical.
+    EXPECT_EQ(compareImages(scaled, resizeBilinear(small, 30, 20)).maxAbs, 0);
+}
+
+TEST_P(FrameRendererAccuracy, JitteredPassesAveragedBeatOnionRings) {
+    const SyntheticVolume ramp = makeLinearRamp({32, 24, 24}, {1, 1, 1}, 0, 248);
+    TransferFunction tf;
+    // A shell one voxel (8 data units) thick: a 3-voxel step hits or misses it by ray.
+    tf.points = {{0, 0, 0, 0, 0}, {96, 0, 0, 0, 0}, {100, 1, 0.7, 0.3, 0.5}, {104, 0, 0, 0, 0}};
+    const Camera cam = test::obliqueCamera(ramp.volume, 30);
+    const Image exact = reference(ramp.volume, tf, Reconstruction::Linear, cam, 32, 32);
+    const auto r = renderer(ramp.volume);
+    Quality q = plain(3);
+    const double rings = compareImages(r->render(tf, cam, 32, 32, q, {}), exact).rmse;
+    q.jitter = true;
+    Image mean(32, 32);
+    const int passes = 16;
+    for (int pass = 0; pass < passes; ++pass) {
+        q.seed = uint64_t(pass);
+        const Image img = r->render(tf, cam, 32, 32, q, {});
+        for (size_t i = 0; i < mean.rgba.size(); ++i) mean.rgba[i] += img.rgba[i] / passes;
+    }
+    // Jitter turns the rings' structured error into noise that averaging shrinks by √16
+    // (measured on OpenCL: 0.11 for the rings, 0.042 for the mean of 16 passes).
+    EXPECT_LT(compareImages(mean, exact).rmse, 0.5 * rings);
+}
+
+// Every pair of switches on together at least once: ten binary factors in six runs. Column
+// c is on in the rows of one 3-subset of {0..5} containing row 0 (ten such subsets): any two
+// share row 0 (both on), together leave a row out (both off) and differ somewhere.
+TEST_P(FrameRendererAccuracy, EveryPairOfSwitchesWorksTogether) {
+    std::vector<std::array<int, 3>> subsets;
+    for (int a = 1; a < 6; ++a)
+        for (int b = a + 1; b < 6; ++b) subsets.push_back({0, a, b});
+    ASSERT_EQ(subsets.size(), 10u);
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const std::vector<ClipPlane> clip{{blob().volume.center(), normalize(Vec3d{0.2, 1, -0.3})}};
+    const auto r = renderer(blob().volume);
+    for (int row = 0; row < 6; ++row) {
+        bool on[10];
+        for (int c = 0; c < 10; ++c) {
+            const auto &s = subsets[size_t(c)];
+            on[c] = s[0] == row || s[1] == row || s[2] == row;
+        }
+        Quality q = plain(0.5);
+        q.jitter = on[0];
+        q.preintegrated = on[1];
+        q.interpolation = on[2] ? Interpolation::Cubic : Interpolation::Linear;
+        q.boundarySegment = on[3];
+        q.earlyTermination = on[4] ? 0.98 : 1;
+        q.emptySpaceSkipping = on[5];
+        q.shading = on[6];
+        q.mipLevel = on[8] ? 1 : 0;
+        q.imageScale = on[9] ? 0.5 : 1;
+        const std::vector<ClipPlane> planes = on[7] ? clip : std::vector<ClipPlane>{};
+        const std::string what = "row " + std::to_string(row) + ": " + CpuRenderer::featureNames(q, !planes.empty());
+        const Image img = r->render(blobTf(), cam, 24, 24, q, planes);
+        expectValidImage(img, what);
+        const Image exact = reference(blob().volume, blobTf(), on[2] ? Reconstruction::Cubic : Reconstruction::Linear,
+                                      cam, 24, 24, q.shading, 1e-5, planes);
+        // A loose bound that still catches a broken combination (a wrong image is off by
+        // ~0.1–0.5): mip level 1 and half-resolution rays cost up to a few hundredths here.
+        EXPECT_LT(compareImages(img, exact).rmse, 0.05) << what;
+    }
+}
+
+// --- The two back ends against each other, and the native path's own contract. ---
+
+// The same rays, segments, jitter hash and sums in float on both: images agree to float
+// rounding.
+TEST(CpuRenderer, DrawsTheOpenClImageToFloatRounding) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const std::vector<ClipPlane> clip{{blob().volume.center(), normalize(Vec3d{0.2, 1, -0.3})}};
+    CpuRenderer cpu(blob().volume);
+    OpenClRenderer ocl(test::sharedOpenClContext(), blob().volume);
+    struct Case {
+        const char *what;
+        Quality q;
+        std::vector<ClipPlane> planes;
+    };
+    std::vector<Case> cases;
+    Quality q = plain(0.5);
+    cases.push_back({"plain", q, {}});
+    q.jitter = true;
+    q.seed = 7;
+    q.earlyTermination = 0.98;
+    q.emptySpaceSkipping = true;
+    cases.push_back({"jitter, early termination, skipping, clip plane", q, clip});
+    q.shading = true;
+    q.mipLevel = 1;
+    q.boundarySegment = false;
+    cases.push_back({"shading, mip 1, no boundary segment", q, {}});
+    q.interpolation = Interpolation::Cubic;
+    q.mipLevel = 0;
+    cases.push_back({"cubic, shading, jitter, skipping", q, clip});
+    q.preintegrated = true;
+    q.boundarySegment = true;
+    cases.push_back({"pre-integrated cubic, shading, jitter, skipping, clip plane", q, clip});
+    q.interpolation = Interpolation::Linear;
+    q.shading = false;
+    q.step = 1.3;
+    cases.push_back({"pre-integrated at step 1.3, partial segments", q, clip});
+    for (const Case &c : cases) {
+        RenderStats sc, so;
+        const Image a = cpu.render(blobTf(), cam, 40, 40, c.q, c.planes, &sc);
+        const Image b = ocl.render(blobTf(), cam, 40, 40, c.q, c.planes, &so);
+        // Float rounding only: PoCL may contract a·b + c into fma where the CPU path does not
+        // (or the reverse), and computes normalize() its own way. Measured on PoCL 3.1 against
+        // AVX-512: 1.5e-6, 3.7e-6, 1.5e-6, 1.1e-6, 3.5e-6 and 3.6e-6 for the six cases; 2e-5
+        // leaves 5× for other devices' rounding while a different jitter hash is ≥ 5e-3.
+        EXPECT_LT(compareImages(a, b).maxAbs, 2e-5) << c.what;
+        EXPECT_EQ(sc.raysHit, so.raysHit) << c.what;
+        EXPECT_NEAR(sc.meanSamplesPerRay, so.meanSamplesPerRay, 1e-3 * so.meanSamplesPerRay) << c.what;
+    }
+}
+
+// The native path skips by sample position (a segment whose sample lies in an empty brick is
+// not taken; a pre-integrated one when it lies wholly in one), the OpenCL kernel per segment
+// (only segments wholly inside an empty brick): the native path takes fewer samples, and every
+// segment it leaves out would have added exactly 0, so the image is the one without skipping
+// and the kernel's, to float rounding. Every segment is either taken or counted as skipped.
+TEST(CpuRenderer, SkipsBySamplePositionFewerSamplesSameImage) {
+    const SyntheticVolume sphere = makeSphere({48, 40, 44}, {1, 1, 1.2}, 9, 2, 200);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {60, 0, 0, 0, 0}, {120, 1, 0.6, 0.3, 0.3}, {200, 1, 1, 1, 0.5}};
+    const Camera cam = test::obliqueCamera(sphere.volume, 40);
+    CpuRenderer cpu(sphere.volume);
+    OpenClRenderer ocl(test::sharedOpenClContext(), sphere.volume);
+    for (bool preintegrated : {false, true})
+        for (bool jitter : {false, true}) {
+            Quality q = plain(0.7);
+            q.preintegrated = preintegrated;
+            q.jitter = jitter;
+            RenderStats none, byPosition, perSegment;
+            const Image full = cpu.render(tf, cam, 40, 40, q, {}, &none);
+            q.emptySpaceSkipping = true;
+            const Image a = cpu.render(tf, cam, 40, 40, q, {}, &byPosition);
+            const Image b = ocl.render(tf, cam, 40, 40, q, {}, &perSegment);
+            const std::string what = std::string(preintegrated ? "pre-integrated" : "sampled") + (jitter ? ", jitter" : "");
+            // Float rounding, as in DrawsTheOpenClImageToFloatRounding (2e-5); a segment
+            // wrongly skipped at the sphere's edge (opacity ≥ 0.05 there) would be ≥ 1e-3.
+            EXPECT_LT(compareImages(a, full).maxAbs, 2e-5) << what;
+            EXPECT_LT(compareImages(a, b).maxAbs, 2e-5) << what;
+            const auto count = [](double perRay, const RenderStats &s) { return std::llround(perRay * double(s.raysHit)); };
+            EXPECT_EQ(count(byPosition.meanSamplesPerRay, byPosition) + count(byPosition.skippedSegmentsPerRay, byPosition),
+                      count(none.meanSamplesPerRay, none))
+                << what << ": taken + skipped must be every segment";
+            if (preintegrated) {
+                EXPECT_LE(byPosition.meanSamplesPerRay, perSegment.meanSamplesPerRay) << what;
+            } else {
+                // Each empty brick the ray enters costs the kernel the segment that straddles
+                // into it; with bricks of 8 voxels and a step of 0.7 that is several percent.
+                EXPECT_LT(byPosition.meanSamplesPerRay, 0.97 * perSegment.meanSamplesPerRay) << what;
+            }
+            std::printf("%s: samples per ray %.2f by position, %.2f per segment (OpenCL), %.2f without skipping\n",
+                        what.c_str(), byPosition.meanSamplesPerRay, perSegment.meanSamplesPerRay, none.meanSamplesPerRay);
+        }
+}
+
+TEST(CpuRenderer, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
+    CpuRenderer r(blob().volume);
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    TransferFunction tf = blobTf();
+    r.render(tf, cam, 8, 8, plain(1), {});
+    r.render(tf, cam, 8, 8, plain(0.5), {});
+    EXPECT_EQ(r.preprocessCounts().tfTables, 1);
+    EXPECT_EQ(r.preprocessCounts().brickGrids, 0);
+    Quality q = plain(1);
+    q.emptySpaceSkipping = true;
+    r.render(tf, cam, 8, 8, q, {});
+    tf.points[2].a = 0.3; // a new transfer function re-classifies the same grid
+    r.render(tf, cam, 8, 8, q, {});
+    EXPECT_EQ(r.preprocessCounts().brickGrids, 1);
+    EXPECT_EQ(r.preprocessCounts().brickClassifications, 2);
+    EXPECT_EQ(r.preprocessCounts().mipLevels, 0);
+    q.mipLevel = 2;
+    r.render(tf, cam, 8, 8, q, {});
+    q.mipLevel = 1;
+    r.render(tf, cam, 8, 8, q, {});
+    EXPECT_EQ(r.preprocessCounts().mipLevels, 2); // levels 1 and 2, once
+    EXPECT_EQ(r.preprocessCounts().coefficientVolumes, 0); // no cubic asked for yet
+    q.interpolation = Interpolation::Cubic;
+    r.render(tf, cam, 8, 8, q, {});
+    r.render(tf, cam, 8, 8, q, {});
+    EXPECT_EQ(r.preprocessCounts().coefficientVolumes, 1);
+    EXPECT_EQ(r.preprocessCounts().brickGrids, 4); // levels 0, 2 and 1, and level 1's spline
+    EXPECT_EQ(r.preprocessCounts().preintegrationTables, 0);
+    q.preintegrated = true;
+    r.render(tf, cam, 8, 8, q, {});
+    r.render(tf, cam, 8, 8, q, {});
+    EXPECT_EQ(r.preprocessCounts().preintegrationTables, 1); // same transfer function and step: reused
+    q.step = 0.7;
+    r.render(tf, cam, 8, 8, q, {});
+    EXPECT_EQ(r.preprocessCounts().preintegrationTables, 2); // the table depends on the step
+}
+
+TEST(CpuRenderer, ThreadCountDoesNotChangeTheImage) {
+    CpuRendererOptions one;
+    one.threads = 1;
+    CpuRendererOptions three;
+    three.threads = 3;
+    CpuRenderer a(blob().volume, one), b(blob().volume, three);
+    Quality q = plain(0.7);
+    q.jitter = true;
+    q.emptySpaceSkipping = true;
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    // Each ray is one lane of one packet whatever thread runs its tile: bit-identical.
+    EXPECT_EQ(compareImages(a.render(blobTf(), cam, 37, 29, q, {}), b.render(blobTf(), cam, 37, 29, q, {})).maxAbs, 0);
+}
+
+} // namespace
+} // namespace volcast
