@@ -101,8 +101,10 @@ RenderScheduler::SlotId RenderScheduler::addSession(Deliver deliver, Failed fail
     std::lock_guard lock(mutex_);
     const SlotId id = nextId_++;
     const double least = leastServiceMs();
+    const double leastFrames = leastInteractiveFrames();
     Slot &s = slots_[id];
     s.serviceMs = least;   // no head start over the sessions already there
+    s.interactiveFrames = leastFrames;
     s.deliver = std::move(deliver);
     s.failed = std::move(failed);
     s.progress = std::move(progress);
@@ -131,7 +133,10 @@ void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
         if (it == slots_.end()) return;
         Slot &s = it->second;
         // Time without work is not credit to spend later at the others' expense.
-        if (!s.job || s.finalSent || s.failed_) s.serviceMs = std::max(s.serviceMs, leastServiceMs());
+        if (!s.job || s.finalSent || s.failed_) {
+            s.serviceMs = std::max(s.serviceMs, leastServiceMs());
+            s.interactiveFrames = std::max(s.interactiveFrames, leastInteractiveFrames());
+        }
         s.job = std::move(job);
         s.calibration = std::move(calibration);
         ++s.generation;
@@ -332,14 +337,17 @@ bool RenderScheduler::pickWork(Kind kind, Clock::time_point now, Work &work, Clo
     // (the sessions after the one served last, then from the start). Least service rather
     // than plain turns: a session whose client answered a moment late gets the next unit
     // instead of losing its turn for a round.
+    // Interactive frames are shared by count (dragging sessions get as many frames each,
+    // whatever level each one's measured cost allows), refinement by render time.
     bool found = false;
     double least = 0;
     const auto consider = [&](SlotId id, Slot &s) {
         Work candidate;
         if (!nextWork(kind, id, s, now, candidate, wakeAt)) return;
-        if (found && s.serviceMs >= least) return;
+        const double service = kind == Kind::Interactive ? s.interactiveFrames : s.serviceMs;
+        if (found && service >= least) return;
         found = true;
-        least = s.serviceMs;
+        least = service;
         work = std::move(candidate);
     };
     for (auto it = slots_.upper_bound(lastServed_); it != slots_.end(); ++it) consider(it->first, it->second);
@@ -351,6 +359,13 @@ double RenderScheduler::leastServiceMs() const {
     double least = -1;
     for (const auto &[id, s] : slots_)
         if (s.job && (least < 0 || s.serviceMs < least)) least = s.serviceMs;
+    return std::max(least, 0.0);
+}
+
+double RenderScheduler::leastInteractiveFrames() const {
+    double least = -1;
+    for (const auto &[id, s] : slots_)
+        if (s.job && (least < 0 || s.interactiveFrames < least)) least = s.interactiveFrames;
     return std::max(least, 0.0);
 }
 
@@ -419,6 +434,7 @@ void RenderScheduler::runUnit(Work &work) {
         if (!work.substitute && size_t(work.level) < s.timerLadderSize)
             s.timer.record(size_t(work.level), frame.renderMs(), samples * double(frame.passes()));
         s.inFlight = true;
+        if (work.kind == Kind::Interactive) ++s.interactiveFrames;
     }
     if (!work.substitute) {
         const std::string key = preparationKey(job.volumeId, job.transferFunction, frame.quality());

@@ -6,8 +6,8 @@
 // Units: an interactive frame (its level is chosen to fit the frame-time target), or one
 // band of rows of one pass of a refinement level (as many rows as fit unitMs at the level's
 // measured cost). Between units the worker picks again: any session's interactive frame
-// first, then the next refinement unit; within each, the session that has had the least
-// render time (ties round-robin).
+// first, then the next refinement unit; within each, the session that has had the fewest
+// interactive frames, or the least render time for refinement (ties round-robin).
 // So a session's interactive frame waits for at most one unit, whatever another session's
 // final frame costs, and new input drops a refinement at the next unit boundary.
 //
@@ -122,7 +122,8 @@ class RenderScheduler {
         int substituteSent = -1;      // highest level delivered with its preparation pending
         bool finalSent = false;
         bool failed_ = false;
-        double serviceMs = 0;         // render time received: the least served goes next
+        double serviceMs = 0;         // render time received: the least served refines next
+        double interactiveFrames = 0; // interactive frames received: the fewest goes next
         LevelTimer timer;
         size_t timerLadderSize = 0;
         std::shared_ptr<TiledFrame> refining;   // the frame under way, unit by unit
@@ -148,6 +149,7 @@ class RenderScheduler {
 
     void workerLoop();
     double leastServiceMs() const;   // over sessions with a view; under the lock
+    double leastInteractiveFrames() const;
     bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
     // What slot s should do now of this kind; false with wakeAt set when it waits for its idle time.
     bool nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
