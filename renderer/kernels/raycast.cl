@@ -8,7 +8,8 @@
  *   CUBIC                prefiltered tricubic B-spline, 64 taps from a padded coefficient buffer
  *   CUBIC_IMAGE          the same spline as 8 trilinear fetches from a 3-D image (GPUs)
  *   PREINTEGRATED        segment colour and opacity from the 2-D pre-integration table
- *   EMPTY_SPACE_SKIPPING skip the segments inside bricks the transfer function makes transparent
+ *   EMPTY_SPACE_SKIPPING skip the segments whose sample lies in a brick the transfer function makes
+ *                        transparent (pre-integrated: that lie wholly in one), found by a brick walk
  *   SHADING              gradient Phong lighting with a headlight
  */
 #ifndef VOLCAST_EMBEDDED
@@ -207,22 +208,58 @@ float random01(uint x, uint y, uint seed, uint pass) {
 }
 
 #ifdef EMPTY_SPACE_SKIPPING
-/* The ray parameter where the ray leaves the brick holding level position q(t), q = q0 + t·dqL,
- * and whether that brick is visible under the transfer function. */
-float brickExit(__global const uchar *visible, __global const RayCastParams *P, float3 q0, float3 dqL, float t,
-                bool *isVisible) {
+/* The incremental brick walk (DDA) over the brick grid: the brick holding the point the ray has
+ * reached, whether the transfer function leaves it visible, and the t at which the ray crosses
+ * each of its walls. Moving on costs a comparison per segment and a division per wall crossed.
+ * A point within float rounding of a wall may be put in either brick: harmless, as each
+ * brick's value range covers half a voxel beyond its box (minmax_bricks.hpp). The CPU path's
+ * BrickWalk (renderer/cpu/cpu_march.cpp) does the same arithmetic. */
+typedef struct {
+    int b[3];
+    float wall[3];
+    bool visible;
+} BrickWalk;
+
+/* Brick b covers level coordinates [b·B − 1/2, (b + 1)·B − 1/2] on each axis. */
+float brickWall(__global const RayCastParams *P, int b, float q0, float dq) {
+    if (dq == 0.0f) return INFINITY;
     const float B = (float)P->brickSize;
-    const float3 q = q0 + t * dqL;
-    const int3 nb = (int3)(P->bricks[0], P->bricks[1], P->bricks[2]);
-    const int3 b = clamp(convert_int3(floor((q + 0.5f) / B)), (int3)(0), nb - 1);
-    *isVisible = visible[((size_t)b.z * nb.y + b.y) * nb.x + b.x] != 0;
-    /* Brick b covers level coordinates [b·B − 1/2, (b + 1)·B − 1/2] on each axis. */
-    const float3 lo = convert_float3(b) * B - 0.5f, hi = lo + B;
-    float exit = INFINITY;
-    if (dqL.x != 0.0f) exit = fmin(exit, ((dqL.x > 0.0f ? hi.x : lo.x) - q0.x) / dqL.x);
-    if (dqL.y != 0.0f) exit = fmin(exit, ((dqL.y > 0.0f ? hi.y : lo.y) - q0.y) / dqL.y);
-    if (dqL.z != 0.0f) exit = fmin(exit, ((dqL.z > 0.0f ? hi.z : lo.z) - q0.z) / dqL.z);
-    return exit;
+    const float lo = (float)b * B - 0.5f;
+    return ((dq > 0.0f ? lo + B : lo) - q0) / dq;
+}
+
+void brickLookUp(__global const uchar *visible, __global const RayCastParams *P, BrickWalk *w) {
+    const int bx = clamp(w->b[0], 0, P->bricks[0] - 1), by = clamp(w->b[1], 0, P->bricks[1] - 1),
+              bz = clamp(w->b[2], 0, P->bricks[2] - 1);
+    w->visible = visible[((size_t)bz * P->bricks[1] + by) * P->bricks[0] + bx] != 0;
+}
+
+void brickWalkStart(__global const uchar *visible, __global const RayCastParams *P, const float *q0, const float *dq,
+                    float t, BrickWalk *w) {
+    const float inverseB = 1.0f / (float)P->brickSize;
+    for (int a = 0; a < 3; ++a) {
+        const float q = fma(t, dq[a], q0[a]);
+        w->b[a] = clamp((int)floor((q + 0.5f) * inverseB), 0, P->bricks[a] - 1);
+        w->wall[a] = brickWall(P, w->b[a], q0[a], dq[a]);
+    }
+    brickLookUp(visible, P, w);
+}
+
+float brickWalkExit(const BrickWalk *w) { return fmin(w->wall[0], fmin(w->wall[1], w->wall[2])); }
+
+/* Moves on to the brick holding q(t), t not before where the walk is. */
+void brickWalkTo(__global const uchar *visible, __global const RayCastParams *P, const float *q0, const float *dq,
+                 float t, BrickWalk *w) {
+    bool moved = false;
+    for (;;) {
+        const float first = brickWalkExit(w);
+        if (!(t >= first)) break;
+        moved = true;
+        const int a = w->wall[0] == first ? 0 : (w->wall[1] == first ? 1 : 2);
+        w->b[a] += dq[a] > 0.0f ? 1 : -1;
+        w->wall[a] = brickWall(P, w->b[a], q0[a], dq[a]);
+    }
+    if (moved) brickLookUp(visible, P, w);
 }
 #endif
 
@@ -307,32 +344,14 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
     float sf = sampleVolume(VOLUME, n, q0 + t0 * dqL); /* value at the segment's front */
 #endif
 #ifdef EMPTY_SPACE_SKIPPING
-    float visibleUntil = t0; /* the current brick is visible up to here */
+    const float q0a[3] = {q0.x, q0.y, q0.z}, dqa[3] = {dqL.x, dqL.y, dqL.z};
+    BrickWalk walk;
+    brickWalkStart(brickVisible, P, q0a, dqa, t0, &walk);
+#endif
+#if defined(EMPTY_SPACE_SKIPPING) && defined(PREINTEGRATED)
+    bool sfStale = false; /* sf must be sampled at segStart first */
 #endif
     for (int k = (j > 0.0f ? 0 : 1);; ++k) {
-#ifdef EMPTY_SPACE_SKIPPING
-        if (segStart >= visibleUntil) {
-            /* Entering a new brick: skip every whole segment inside it if it is transparent.
-             * Segments that leave it are rendered as usual, so the image does not change. */
-            bool isVisible;
-            const float exit = brickExit(brickVisible, P, q0, dqL, segStart + 1e-3f * d, &isVisible);
-            if (isVisible || !(exit > segStart)) {
-                visibleUntil = fmax(exit, segStart);
-            } else {
-                /* Last boundary t0 + (k' + j)·d at or before the exit. */
-                const int kLast = (int)floor((fmin(exit, t1) - t0) / d - j);
-                if (kLast >= k) {
-                    skipped += (uint)(kLast - k + 1);
-                    k = kLast + 1;
-                    segStart = t0 + ((float)kLast + j) * d;
-#ifdef PREINTEGRATED
-                    sf = sampleVolume(VOLUME, n, q0 + segStart * dqL);
-#endif
-                }
-                visibleUntil = segStart; /* look again from here */
-            }
-        }
-#endif
         const float boundary = t0 + ((float)k + j) * d;
         const float segEnd = fmin(boundary, t1);
         const float len = segEnd - segStart;
@@ -342,6 +361,41 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
         const bool take = len > 0.0f;
 #else
         const bool take = len > 0.0f && !partial;
+#endif
+#ifdef EMPTY_SPACE_SKIPPING
+        /* Skipping by sample position: a sampled segment is not taken when its centre lies in
+         * a brick the transfer function makes empty (it would add exactly 0); a pre-integrated
+         * one, which reads the values at both ends and between, when it lies wholly in one. */
+        if (take) {
+#ifdef PREINTEGRATED
+            brickWalkTo(brickVisible, P, q0a, dqa, segStart, &walk);
+            const bool skip = !walk.visible && segEnd <= brickWalkExit(&walk);
+            const float decidingPoint = 0.0f; /* the segment's end: t0 + (k' + j)·d */
+#else
+            brickWalkTo(brickVisible, P, q0a, dqa, fma(0.5f, len, segStart), &walk);
+            const bool skip = !walk.visible;
+            const float decidingPoint = 0.5f; /* its centre: t0 + (k' + j − ½)·d */
+#endif
+            if (skip) {
+                ++skipped;
+#ifdef PREINTEGRATED
+                sfStale = true;
+#endif
+                if (boundary >= t1) break;
+                /* Later full segments k' whose deciding point is before the brick's exit (one
+                 * fewer for rounding) and that end before t1: skipped at once. */
+                const float jumpTo = fmin(floor((brickWalkExit(&walk) - t0) / d - j + decidingPoint) - 1.0f,
+                                          floor((t1 - t0) / d - j) - 1.0f);
+                if (jumpTo >= (float)(k + 1)) {
+                    skipped += (uint)(jumpTo - (float)k);
+                    k = (int)jumpTo; /* the loop moves on to jumpTo + 1 */
+                    segStart = fma(jumpTo + j, d, t0);
+                } else {
+                    segStart = segEnd;
+                }
+                continue;
+            }
+        }
 #endif
         if (take) {
             if ((int)samples >= P->maxSamples) {
@@ -355,6 +409,12 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
              * Partial by position, not by len < d: far from the eye, float rounding of the
              * boundaries makes full segments a little shorter or longer than d, and scaling
              * only the shorter ones would bias the sum (by 0.7 % over 800,000 faint segments). */
+#ifdef EMPTY_SPACE_SKIPPING
+            if (sfStale) {
+                sf = sampleVolume(VOLUME, n, q0 + segStart * dqL);
+                sfStale = false;
+            }
+#endif
             const float sb = sampleVolume(VOLUME, n, q0 + segEnd * dqL);
             const float4 seg = preintegratedSegment(preTable, preNodes, preLocator, P, sf, sb);
             sf = sb;
