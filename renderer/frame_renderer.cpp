@@ -45,4 +45,29 @@ double frameStep(const Volume &volume, const Quality &quality, RenderStats &stat
 
 int raysForScale(int pixels, double imageScale) { return std::max(1, int(std::lround(pixels * imageScale))); }
 
+void validateRayWindow(const RayWindow &window, int width, int height, const Quality &quality) {
+    const int w = raysForScale(width, quality.imageScale), h = raysForScale(height, quality.imageScale);
+    if (window.width < 1 || window.height < 1 || window.x < 0 || window.y < 0 || window.x + window.width > w ||
+        window.y + window.height > h)
+        throw std::invalid_argument("window " + std::to_string(window.width) + "x" + std::to_string(window.height) +
+                                    "+" + std::to_string(window.x) + "+" + std::to_string(window.y) +
+                                    " is outside the frame's " + std::to_string(w) + "x" + std::to_string(h) +
+                                    " rays");
+}
+
+Image FrameRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                                  const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
+                                  const RayWindow &window, RenderStats *stats) {
+    validateRayWindow(window, width, height, quality);
+    const int w = raysForScale(width, quality.imageScale), h = raysForScale(height, quality.imageScale);
+    // The grid itself at image_scale 1: the same rays (within rounding of the grid's aspect).
+    Quality whole = quality;
+    whole.imageScale = 1;
+    const Image grid = render(tf, camera, w, h, whole, clipPlanes, stats);
+    Image out(window.width, window.height);
+    for (int y = 0; y < window.height; ++y)
+        std::copy_n(grid.pixel(window.x, window.y + y), size_t(window.width) * 4, out.pixel(0, y));
+    return out;
+}
+
 } // namespace volcast

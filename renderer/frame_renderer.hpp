@@ -51,6 +51,13 @@ struct PreprocessCounts {
     int preintegrationTables = 0;
 };
 
+// A rectangle of a frame's ray grid (raysForScale of the frame's size and image_scale), x
+// to the right and y down from the top-left ray: a frame rendered in pieces, so that a
+// server can interleave other work between them.
+struct RayWindow {
+    int x = 0, y = 0, width = 0, height = 0;
+};
+
 class FrameRenderer {
   public:
     virtual ~FrameRenderer() = default;
@@ -59,6 +66,15 @@ class FrameRenderer {
     virtual Image render(const TransferFunction &tf, const Camera &camera, int width, int height,
                          const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
                          RenderStats *stats = nullptr) = 0;
+    // The rays of `window` exactly as render() casts them for this frame, not upsampled (a
+    // window of a frame with image_scale < 1 is a window of its smaller grid). Throws
+    // std::invalid_argument for a window outside the grid. This default casts the whole grid
+    // and crops it; a back end that can cast the window's rays alone overrides it and
+    // answers true to rendersWindowsCheaply().
+    virtual Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                               const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
+                               const RayWindow &window, RenderStats *stats = nullptr);
+    virtual bool rendersWindowsCheaply() const { return false; }
     // Which back end and device draws, for logs and reports: "cpu: …", "opencl: …".
     virtual std::string description() const = 0;
     virtual PreprocessCounts preprocessCounts() const = 0;
@@ -84,5 +100,8 @@ double frameStep(const Volume &volume, const Quality &quality, RenderStats &stat
 
 // Rays cast across and down for image_scale < 1, on the full image's plane.
 int raysForScale(int pixels, double imageScale);
+
+// Throws std::invalid_argument unless the window is non-empty and inside the frame's ray grid.
+void validateRayWindow(const RayWindow &window, int width, int height, const Quality &quality);
 
 } // namespace volcast

@@ -49,6 +49,8 @@ class LevelTimer {
     void reset(size_t levels) { msPerSample_.assign(levels, 0); }
     void record(size_t level, double ms, double samples);
     double predictMs(size_t level, double samples) const;
+    // Whether this level itself was measured (not borrowed from another, not the guess).
+    bool measured(size_t level) const { return level < msPerSample_.size() && msPerSample_[level] > 0; }
     // The finest of levels [0, count) whose predicted time fits targetMs; 0 if none does.
     size_t choose(size_t count, double targetMs, const std::vector<double> &samplesPerLevel) const;
 

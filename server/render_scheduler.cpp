@@ -1,11 +1,10 @@
 #include "server/render_scheduler.hpp"
 
-#include "renderer/error_metrics.hpp"
-#include "renderer/reference_renderer.hpp"
 #include "server/frame_encoder.hpp"
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -21,14 +20,63 @@ nlohmann::json qualityToJson(const Quality &q) {
     return nlohmann::json::parse(sceneToJson(s)).at("quality");
 }
 
-// The calibration renders this small: the reference integrator is ~1000x slower than a frame.
-constexpr int kCalibrationSide = 32;                         // pixels, the longer side
-constexpr double kCalibrationTolerance = 1e-4;               // far below the levels' errors (~1e-2..1e-3)
-constexpr size_t kMaxCalibratedVoxels = size_t(256) * 256 * 256;   // the cubic reference prefilters in double
-constexpr size_t kMaxCalibrations = 256;                     // cached keys before the cache is cleared
+// Everything a level's error depends on besides the camera: volume, transfer function,
+// clip planes, the ladder and the frame size. The volume by its registry id, which is never
+// reused (an address would be, by the next volume loaded after an eviction).
+std::string calibrationKey(const ViewJob &job) {
+    std::ostringstream key;
+    key << job.volumeId << '|' << job.width << 'x' << job.height << '|';
+    Scene s;
+    s.volume = "-";
+    s.transferFunction = job.transferFunction;
+    s.clipPlanes = job.clipPlanes;
+    key << sceneToJson(s);
+    for (const Level &l : job.ladder) key << '|' << qualityToJson(l.quality).dump() << 'x' << l.passes;
+    return key.str();
+}
+
+std::string preparationTask(const Quality &q) {
+    std::string task;
+    const auto add = [&](const char *what) {
+        if (!task.empty()) task += ',';
+        task += what;
+    };
+    if (q.interpolation == Interpolation::Cubic) add("bspline_coefficients");
+    if (q.preintegrated) add("preintegration_table");
+    if (q.shading) add("shading_kernel");
+    return task;
+}
 } // namespace
 
-RenderScheduler::RenderScheduler(Metrics &metrics, SchedulerOptions options) : metrics_(metrics), options_(options) {
+std::string preparationKey(uint64_t volumeId, const TransferFunction &tf, const Quality &q) {
+    if (q.interpolation != Interpolation::Cubic && !q.preintegrated && !q.shading) return "";
+    std::ostringstream key;
+    key << "prepare " << volumeId << " mip" << q.mipLevel << (q.interpolation == Interpolation::Cubic ? " cubic" : "")
+        << (q.shading ? " shading" : "");
+    if (q.preintegrated) {
+        // The table depends on the transfer function and the step.
+        Scene s;
+        s.volume = "-";
+        s.transferFunction = tf;
+        key << " preintegrated step " << q.step << ' ' << nlohmann::json::parse(sceneToJson(s)).at("transfer_function").dump();
+    }
+    return key.str();
+}
+
+Quality plainQuality(const Quality &q) {
+    Quality p = q;
+    p.interpolation = Interpolation::Linear;
+    p.preintegrated = false;
+    p.shading = false;
+    return p;
+}
+
+std::shared_ptr<FrameRenderer> rendererOf(const std::shared_ptr<VolumeEntry> &entry) {
+    return std::shared_ptr<FrameRenderer>(entry, entry->renderer.get());
+}
+
+RenderScheduler::RenderScheduler(Metrics &metrics, SchedulerOptions options)
+    : metrics_(metrics), options_(options), calibrator_(preprocess_, options.errorCalibration) {
     worker_ = std::thread([this] { workerLoop(); });
 }
 
@@ -40,15 +88,26 @@ void RenderScheduler::stop() {
         stopping_ = true;
     }
     wake_.notify_all();
+    preprocess_.stop();
     if (worker_.joinable()) worker_.join();
 }
 
-RenderScheduler::SlotId RenderScheduler::addSession(Deliver deliver, Failed failed) {
+double RenderScheduler::longestUnitMs() const {
+    std::lock_guard lock(mutex_);
+    return longestUnitMs_;
+}
+
+RenderScheduler::SlotId RenderScheduler::addSession(Deliver deliver, Failed failed, Progress progress) {
     std::lock_guard lock(mutex_);
     const SlotId id = nextId_++;
+    const double least = leastServiceMs();
+    const double leastFrames = leastInteractiveFrames();
     Slot &s = slots_[id];
+    s.serviceMs = least;   // no head start over the sessions already there
+    s.interactiveFrames = leastFrames;
     s.deliver = std::move(deliver);
     s.failed = std::move(failed);
+    s.progress = std::move(progress);
     s.lastInput = Clock::now();
     return id;
 }
@@ -59,15 +118,35 @@ void RenderScheduler::removeSession(SlotId slot) {
 }
 
 void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
+    auto calibration = std::make_shared<CalibrationView>();
+    calibration->key = calibrationKey(*job);
+    calibration->renderer = job->renderer;
+    calibration->transferFunction = job->transferFunction;
+    calibration->camera = job->camera;
+    calibration->clipPlanes = job->clipPlanes;
+    calibration->ladder = job->ladder;
+    calibration->width = job->width;
+    calibration->height = job->height;
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(slot);
         if (it == slots_.end()) return;
         Slot &s = it->second;
+        // Time without work is not credit to spend later at the others' expense.
+        if (!s.job || s.finalSent || s.failed_) {
+            s.serviceMs = std::max(s.serviceMs, leastServiceMs());
+            s.interactiveFrames = std::max(s.interactiveFrames, leastInteractiveFrames());
+        }
         s.job = std::move(job);
+        s.calibration = std::move(calibration);
         ++s.generation;
         s.sentLevel = -1;
+        s.substituteSent = -1;
         s.finalSent = false;
+        s.failed_ = false;
+        s.refining.reset();
+        s.refiningLevel = -1;
+        s.levelImages.clear();
         s.lastInput = Clock::now();
     }
     wake_.notify_all();
@@ -101,51 +180,193 @@ void RenderScheduler::frameDone(SlotId slot) {
     wake_.notify_all();
 }
 
-bool RenderScheduler::nextWork(SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt) {
-    if (s.inFlight || !s.job || s.finalSent) return false;
+Quality RenderScheduler::renderable(SlotId id, Slot &s, const Quality &q, bool &substitute) {
     const ViewJob &job = *s.job;
+    const std::string key = preparationKey(job.volumeId, job.transferFunction, q);
+    substitute = !key.empty() && !preprocess_.ready(key);
+    if (!substitute) return q;
+    // Prepare it in the background with a one-ray render: the renderer builds and caches
+    // what the quality needs (coefficients, table, kernel), then the level renders for real.
+    Quality warm = q;
+    warm.imageScale = 1;
+    const bool queued = preprocess_.request(
+        key, PreprocessWorker::Priority::Preparation,
+        [this, renderer = job.renderer, tf = job.transferFunction, camera = job.camera, clip = job.clipPlanes,
+         warm](const std::atomic<bool> &) {
+            // The renderer is ours alone meanwhile: the render worker skips its sessions
+            // rather than wait on its lock (which would hold every session's frames).
+            const FrameRenderer *r = renderer.get();
+            {
+                std::unique_lock lock(mutex_);
+                wake_.wait(lock, [&] { return rendering_ != r || stopping_; });
+                if (stopping_) return;
+                preparing_.insert(r);
+            }
+            struct Release {
+                RenderScheduler &self;
+                const FrameRenderer *r;
+                ~Release() {
+                    {
+                        std::lock_guard lock(self.mutex_);
+                        self.preparing_.erase(r);
+                    }
+                    self.wake_.notify_all();
+                }
+            } release{*this, r};
+            renderer->render(tf, camera, 1, 1, warm, clip);
+        },
+        [this](const std::string &doneKey, bool) {
+            std::vector<std::pair<Progress, protocol::ProgressMessage>> told;
+            {
+                std::lock_guard lock(mutex_);
+                for (auto &[slotId, slot] : slots_)
+                    if (auto a = slot.announced.find(doneKey); a != slot.announced.end()) {
+                        const std::string task = a->second;
+                        slot.announced.erase(a);
+                        if (!slot.progress || !slot.job) continue;
+                        protocol::ProgressMessage p;
+                        p.id = slot.job->request;
+                        p.volume = slot.job->volumeName;
+                        p.stage = protocol::ProgressStage::Preprocessing;
+                        p.task = task;
+                        p.fraction = 1;
+                        told.emplace_back(slot.progress, p);
+                    }
+            }
+            wake_.notify_all();
+            for (auto &[progress, message] : told) progress(message);
+        });
+    (void)queued;
+    if (!s.announced.count(key) && s.progress) {
+        s.announced[key] = preparationTask(q);
+        protocol::ProgressMessage p;
+        p.id = job.request;
+        p.volume = job.volumeName;
+        p.stage = protocol::ProgressStage::Preprocessing;
+        p.task = preparationTask(q);
+        p.fraction = 0;
+        s.progress(p);   // only posts
+    }
+    (void)id;
+    return plainQuality(q);
+}
+
+bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work,
+                               Clock::time_point &wakeAt) {
+    if (s.inFlight || !s.job || s.finalSent || s.failed_) return false;
+    const ViewJob &job = *s.job;
+    if (preparing_.count(job.renderer.get())) return false;   // its preparation's end wakes us
     const int last = int(job.ladder.size()) - 1;
+    const bool firstOfView = !job.stillOnly && s.sentLevel < 0 && s.substituteSent < 0;
+    if ((kind == Kind::Interactive) != firstOfView) return false;
+    work.kind = kind;
     work.slot = id;
     work.job = s.job;
     work.generation = s.generation;
-    if (job.stillOnly) {
-        work.level = last;
-        work.final = true;
-        return true;
+
+    if (s.timerLadderSize != job.ladder.size()) {
+        s.timer.reset(job.ladder.size());
+        s.timerLadderSize = job.ladder.size();
     }
-    const auto refineAt = s.lastInput + std::chrono::duration_cast<Clock::duration>(Ms(options_.idleMs));
-    const bool still = now >= refineAt;
-    if (s.sentLevel < 0) {
-        if (last == 0 && still) {   // an explicit policy, already still: straight to the final frame
-            work.level = 0;
-            work.final = true;
-            return true;
+    const auto samplesOf = [&](const Quality &q) { return predictedSamples(job.renderer->volume(), q, job.width, job.height); };
+
+    if (!s.refining) {
+        const auto refineAt = s.lastInput + std::chrono::duration_cast<Clock::duration>(Ms(options_.idleMs));
+        const bool still = now >= refineAt;
+        int level = 0;
+        if (job.stillOnly) {
+            level = last;
+        } else if (firstOfView) {
+            if (last == 0 && still) {
+                level = 0;   // an explicit policy, already still: straight to the final frame
+            } else {
+                // The interactive level: the finest non-final one predicted to fit the target.
+                std::vector<double> samples;
+                for (const Level &l : job.ladder) samples.push_back(samplesOf(l.quality));
+                level = last == 0 ? 0 : int(s.timer.choose(size_t(last), job.targetFrameMs, samples));
+            }
+        } else {
+            if (!still) {
+                wakeAt = std::min(wakeAt, refineAt);
+                return false;
+            }
+            std::vector<double> predictedMs;
+            for (size_t i = 0; i < job.ladder.size(); ++i)
+                predictedMs.push_back(s.timer.predictMs(i, samplesOf(job.ladder[i].quality)) * job.ladder[i].passes);
+            level = int(nextRefinementLevel(size_t(std::max({s.sentLevel, s.substituteSent, 0})), predictedMs));
+            if (s.substituteSent >= level) {
+                // Shown already without its preparation: wait for it (its completion wakes us).
+                const std::string key = preparationKey(job.volumeId, job.transferFunction, job.ladder[size_t(level)].quality);
+                if (!key.empty() && !preprocess_.ready(key)) return false;
+            }
         }
-        // The interactive level: the finest non-final one predicted to fit the target.
-        if (s.timerLadderSize != job.ladder.size()) {
-            s.timer.reset(job.ladder.size());
-            s.timerLadderSize = job.ladder.size();
-        }
-        std::vector<double> samples;
-        for (const Level &l : job.ladder)
-            samples.push_back(predictedSamples(*job.volume->volume, l.quality, job.width, job.height));
-        work.level = last == 0 ? 0 : int(s.timer.choose(size_t(last), job.targetFrameMs, samples));
-        work.final = false;
-        return true;
+        const Level &l = job.ladder[size_t(level)];
+        const bool final = level == last && (job.stillOnly || !firstOfView || (last == 0 && still));
+        bool substitute = false;
+        const Quality q = renderable(id, s, l.quality, substitute);
+        s.refining = std::make_shared<TiledFrame>(q, substitute ? 1 : l.passes, job.width, job.height);
+        s.refiningLevel = level;
+        s.refiningFinal = final;
+        s.refiningSubstitute = substitute;
     }
-    if (!still) {
-        wakeAt = std::min(wakeAt, refineAt);
-        return false;
-    }
-    std::vector<double> predictedMs;
-    for (size_t i = 0; i < job.ladder.size(); ++i) {
-        const Level &l = job.ladder[i];
-        predictedMs.push_back(
-            s.timer.predictMs(i, predictedSamples(*job.volume->volume, l.quality, job.width, job.height)) * l.passes);
-    }
-    work.level = int(nextRefinementLevel(size_t(std::max(s.sentLevel, 0)), predictedMs));
-    work.final = work.level == last;
+    const TiledFrame &frame = *s.refining;
+    work.level = s.refiningLevel;
+    work.final = s.refiningFinal && !s.refiningSubstitute;
+    work.substitute = s.refiningSubstitute;
+    work.quality = frame.quality();
+    work.frame = s.refining;
+    // As many rows as fit the unit at the cost measured by this frame's own units, else by
+    // this level's earlier frames; a level never measured starts with one row (a guess of
+    // the cost could be off a hundredfold, and a unit must not overrun). A renderer that
+    // cannot render part of a frame cheaply renders it whole.
+    const double rays = double(frame.gridWidth()) * frame.gridHeight();
+    double msPerRay = frame.msPerRay();
+    if (msPerRay == 0 && s.timer.measured(size_t(work.level)) && !work.substitute)
+        msPerRay = s.timer.predictMs(size_t(work.level), samplesOf(frame.quality())) / std::max(rays, 1.0);
+    if (!job.renderer->rendersWindowsCheaply())
+        work.rows = frame.gridHeight();
+    else if (msPerRay == 0)
+        work.rows = 1;
+    else
+        work.rows = rowsForBudget(options_.unitMs, msPerRay, frame.gridWidth(), frame.gridHeight());
     return true;
+}
+
+bool RenderScheduler::pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt) {
+    // The session with work that has had the least render time; ties in round-robin order
+    // (the sessions after the one served last, then from the start). Least service rather
+    // than plain turns: a session whose client answered a moment late gets the next unit
+    // instead of losing its turn for a round.
+    // Interactive frames are shared by count (dragging sessions get as many frames each,
+    // whatever level each one's measured cost allows), refinement by render time.
+    bool found = false;
+    double least = 0;
+    const auto consider = [&](SlotId id, Slot &s) {
+        Work candidate;
+        if (!nextWork(kind, id, s, now, candidate, wakeAt)) return;
+        const double service = kind == Kind::Interactive ? s.interactiveFrames : s.serviceMs;
+        if (found && service >= least) return;
+        found = true;
+        least = service;
+        work = std::move(candidate);
+    };
+    for (auto it = slots_.upper_bound(lastServed_); it != slots_.end(); ++it) consider(it->first, it->second);
+    for (auto it = slots_.begin(); it != slots_.end() && it->first <= lastServed_; ++it) consider(it->first, it->second);
+    return found;
+}
+
+double RenderScheduler::leastServiceMs() const {
+    double least = -1;
+    for (const auto &[id, s] : slots_)
+        if (s.job && (least < 0 || s.serviceMs < least)) least = s.serviceMs;
+    return std::max(least, 0.0);
+}
+
+double RenderScheduler::leastInteractiveFrames() const {
+    double least = -1;
+    for (const auto &[id, s] : slots_)
+        if (s.job && (least < 0 || s.interactiveFrames < least)) least = s.interactiveFrames;
+    return std::max(least, 0.0);
 }
 
 void RenderScheduler::workerLoop() {
@@ -153,43 +374,28 @@ void RenderScheduler::workerLoop() {
     while (!stopping_) {
         const auto now = Clock::now();
         Work work;
-        bool found = false;
         auto wakeAt = Clock::time_point::max();
-        // Round robin: the sessions after the one served last, then from the start.
-        for (auto it = slots_.upper_bound(lastServed_); !found && it != slots_.end(); ++it)
-            found = nextWork(it->first, it->second, now, work, wakeAt);
-        for (auto it = slots_.begin(); !found && it != slots_.end() && it->first <= lastServed_; ++it)
-            found = nextWork(it->first, it->second, now, work, wakeAt);
+        // Every session's interactive frame before anyone's refinement.
+        const bool found = pickWork(Kind::Interactive, now, work, wakeAt) || pickWork(Kind::Refine, now, work, wakeAt);
         if (found) {
             lastServed_ = work.slot;
-            slots_[work.slot].inFlight = true;
+            rendering_ = work.job->renderer.get();
             lock.unlock();
-            // The worker thread's one boundary: nothing thrown here may end the thread (every
+            // The worker thread's one boundary: nothing thrown may end the thread (every
             // session would wait for frames forever) or the process.
             try {
-                render(work);
+                runUnit(work);
             } catch (const std::exception &e) {
-                spdlog::error("render worker: {}", e.what());
+                spdlog::error("render failed: {}", e.what());
                 try {
-                    renderFailed(work, std::string("internal error: ") + e.what());
+                    fail(work, e.what());
                 } catch (const std::exception &again) {
                     spdlog::error("render worker: telling the session failed too: {}", again.what());
                 }
             }
             lock.lock();
-            continue;
-        }
-        // Nothing to render now: calibrate the newest view's error estimates.
-        if (toCalibrate_) {
-            auto job = std::move(toCalibrate_);
-            toCalibrate_.reset();
-            lock.unlock();
-            try {
-                calibrate(*job, calibrationKey(*job));
-            } catch (const std::exception &e) {
-                spdlog::error("render worker: calibration: {}", e.what());
-            }
-            lock.lock();
+            rendering_ = nullptr;
+            wake_.notify_all();   // a preparation may wait for this renderer
             continue;
         }
         if (wakeAt == Clock::time_point::max())
@@ -199,172 +405,112 @@ void RenderScheduler::workerLoop() {
     }
 }
 
-bool RenderScheduler::stale(const Work &work) {
-    std::lock_guard lock(mutex_);
-    auto it = slots_.find(work.slot);
-    return stopping_ || it == slots_.end() || it->second.generation != work.generation;
-}
-
-void RenderScheduler::render(const Work &work) {
+void RenderScheduler::runUnit(Work &work) {
     const ViewJob &job = *work.job;
-    const Level &level = job.ladder[size_t(work.level)];
-    FrameRenderer &renderer = *job.volume->renderer;
-    const bool firstOfView = [&] {
+    TiledFrame &frame = *work.frame;
+    const double ms = frame.renderUnit(*job.renderer, job.transferFunction, job.camera, job.clipPlanes, work.rows);
+    {
         std::lock_guard lock(mutex_);
-        auto it = slots_.find(work.slot);
-        return it != slots_.end() && it->second.sentLevel < 0 && it->second.generation == work.generation;
-    }();
-    RenderStats stats;
-    const auto t0 = Clock::now();
-    Image image;
-    bool cancelled = false;
-    double kernelMs = 0;
-    try {
-        if (level.passes <= 1) {
-            image = renderer.render(job.transferFunction, job.camera, job.width, job.height, level.quality,
-                                    job.clipPlanes, &stats);
-            kernelMs = stats.renderSeconds * 1e3;
-        } else {
-            // Several jittered passes, averaged: each pass moves the sample positions, so the
-            // onion rings of one pass average out; new input cancels between passes.
-            for (int k = 0; k < level.passes && !cancelled; ++k) {
-                Quality q = level.quality;
-                q.jitter = true;
-                q.seed = level.quality.seed + uint64_t(k);
-                Image pass = renderer.render(job.transferFunction, job.camera, job.width, job.height, q,
-                                             job.clipPlanes, &stats);
-                kernelMs += stats.renderSeconds * 1e3;
-                if (k == 0)
-                    image = std::move(pass);
-                else
-                    for (size_t i = 0; i < image.rgba.size(); ++i) image.rgba[i] += pass.rgba[i];
-                cancelled = k + 1 < level.passes && stale(work);
-            }
-            for (float &v : image.rgba) v /= float(level.passes);
-        }
-    } catch (const std::exception &e) {
-        spdlog::error("render failed: {}", e.what());
-        renderFailed(work, e.what());
-        return;
+        longestUnitMs_ = std::max(longestUnitMs_, ms);
+        if (auto it = slots_.find(work.slot); it != slots_.end()) it->second.serviceMs += ms;
     }
-    const double renderMs = Ms(Clock::now() - t0).count();
+    if (!frame.done()) return;
 
-    RenderedFrame frame;
-    if (!cancelled && !(stale(work) && !firstOfView)) {
-        const auto t1 = Clock::now();
-        try {
-            frame.image = work.final ? encodePng(image) : encodeJpeg(image, level.jpegQuality);
-        } catch (const std::exception &e) {
-            // Like a render failure: tell the client once and stop, rather than re-render the
-            // view forever with nothing to show for it.
-            spdlog::error("encoding failed: {}", e.what());
-            renderFailed(work, std::string("encoding the frame failed: ") + e.what());
-            return;
-        }
-        const double encodeMs = Ms(Clock::now() - t1).count();
-        protocol::FrameHeader &h = frame.header;
-        h.request = job.request;
-        h.level = work.level;
-        h.quality = qualityToJson(level.quality);
-        if (level.passes > 1) h.quality["jitter"] = true;
-        h.width = image.width;
-        h.height = image.height;
-        h.codec = work.final ? protocol::Codec::Png : protocol::Codec::Jpeg;
-        h.renderMs = renderMs;
-        h.encodeMs = encodeMs;
-        h.final = work.final;
-        h.camera = job.cameraJson;
-        if (auto it = calibrations_.find(calibrationKey(job));
-            it != calibrations_.end() && size_t(work.level) < it->second.rmse.size())
-            h.error = protocol::ErrorEstimate{it->second.rmse[size_t(work.level)], "calibrated_vs_reference"};
-    }
-
-    Deliver deliver;
+    const Level &level = job.ladder[size_t(work.level)];
+    const double samples = predictedSamples(job.renderer->volume(), frame.quality(), job.width, job.height);
+    Image image = frame.finish();
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(work.slot);
         if (it == slots_.end()) return;
         Slot &s = it->second;
-        const bool isStale = s.generation != work.generation;
-        // A refined frame made stale by newer input is dropped; the first (interactive) frame
-        // of a view is delivered anyway: it is the newest picture the client can have.
-        if (cancelled || (isStale && !firstOfView) || frame.image.empty()) {
-            s.inFlight = false;
-            if (isStale) metrics_.frameDroppedStale();
-            wake_.notify_all();
+        if (s.refining == work.frame) s.refining.reset();
+        // The first (interactive) frame of a view is delivered even if newer input came: it
+        // is the newest picture the client can have. A refined one is dropped.
+        if (s.generation != work.generation && work.kind != Kind::Interactive) {
+            metrics_.frameDroppedStale();
             return;
         }
-        if (!isStale) {
-            s.sentLevel = std::max(s.sentLevel, work.level);
+        if (!work.substitute && size_t(work.level) < s.timerLadderSize)
+            s.timer.record(size_t(work.level), frame.renderMs(), samples * double(frame.passes()));
+        s.inFlight = true;
+        if (work.kind == Kind::Interactive) ++s.interactiveFrames;
+    }
+    if (!work.substitute) {
+        const std::string key = preparationKey(job.volumeId, job.transferFunction, frame.quality());
+        if (!key.empty()) preprocess_.markReady(key);
+    }
+
+    RenderedFrame out;
+    const auto t1 = Clock::now();
+    try {
+        out.image = work.final ? encodePng(image) : encodeJpeg(image, level.jpegQuality);
+    } catch (const std::exception &e) {
+        spdlog::error("encoding failed: {}", e.what());
+        fail(work, std::string("encoding the frame failed: ") + e.what());
+        return;
+    }
+    protocol::FrameHeader &h = out.header;
+    h.request = job.request;
+    h.level = work.level;
+    h.quality = qualityToJson(frame.quality());
+    if (frame.passes() > 1) h.quality["jitter"] = true;
+    h.width = image.width;
+    h.height = image.height;
+    h.codec = work.final ? protocol::Codec::Png : protocol::Codec::Jpeg;
+    h.renderMs = frame.renderMs();
+    h.encodeMs = Ms(Clock::now() - t1).count();
+    h.final = work.final;
+    h.camera = job.cameraJson;
+
+    Deliver deliver;
+    std::shared_ptr<const CalibrationView> calibration;
+    std::vector<std::pair<int, Rgb8>> levelImages;
+    uint64_t serial = 0;
+    {
+        std::lock_guard lock(mutex_);
+        auto it = slots_.find(work.slot);
+        if (it == slots_.end()) return;
+        Slot &s = it->second;
+        if (!work.substitute && s.calibration) h.error = calibrator_.estimate(s.calibration->key, work.level, work.final);
+        if (s.generation == work.generation) {
+            if (work.substitute)
+                s.substituteSent = std::max(s.substituteSent, work.level);
+            else
+                s.sentLevel = std::max(s.sentLevel, work.level);
             s.finalSent = work.final;
+            if (options_.errorCalibration && !work.substitute) {
+                if (work.final) {
+                    calibration = s.calibration;
+                    levelImages = std::move(s.levelImages);
+                    s.levelImages.clear();
+                    serial = ++viewSerial_;
+                } else {
+                    s.levelImages.emplace_back(work.level, toRgb8(image));
+                }
+            }
         }
-        if (size_t(work.level) < s.timerLadderSize)
-            s.timer.record(size_t(work.level), kernelMs,
-                           predictedSamples(*job.volume->volume, level.quality, job.width, job.height) *
-                               double(level.passes));
-        if (options_.errorCalibration && !frame.header.error && !job.stillOnly) toCalibrate_ = work.job;
         deliver = s.deliver;
     }
-    deliver(std::move(frame));
+    if (calibration) calibrator_.finalRendered(calibration, std::move(levelImages), toRgb8(image), serial);
+    deliver(std::move(out));
 }
 
-void RenderScheduler::renderFailed(const Work &work, const std::string &message) {
+void RenderScheduler::fail(const Work &work, const std::string &message) {
     Failed failed;
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(work.slot);
         if (it == slots_.end()) return;
-        it->second.inFlight = false;
-        it->second.finalSent = true;   // do not retry the same view in a loop
-        failed = it->second.failed;
+        Slot &s = it->second;
+        if (s.refining == work.frame) s.refining.reset();
+        if (s.generation != work.generation) return;   // a newer view replaced it: no use telling
+        s.inFlight = false;
+        s.failed_ = true;   // do not retry the same view in a loop
+        failed = s.failed;
     }
     wake_.notify_all();
-    failed(message, work.job->request);
-}
-
-std::string RenderScheduler::calibrationKey(const ViewJob &job) const {
-    std::ostringstream key;
-    key << static_cast<const void *>(job.volume.get()) << '|';
-    Scene s;
-    s.volume = "-";
-    s.transferFunction = job.transferFunction;
-    s.clipPlanes = job.clipPlanes;
-    key << sceneToJson(s);
-    for (const Level &l : job.ladder) key << '|' << qualityToJson(l.quality).dump();
-    return key.str();
-}
-
-void RenderScheduler::calibrate(const ViewJob &job, const std::string &key) {
-    if (calibrations_.count(key)) return;
-    if (calibrations_.size() >= kMaxCalibrations) calibrations_.clear();
-    Calibration &c = calibrations_[key];   // empty (no estimates) if it cannot be measured
-    const Volume &volume = *job.volume->volume;
-    if (volume.voxelCount() > kMaxCalibratedVoxels) return;
-    try {
-        const auto t0 = Clock::now();
-        const int w = job.width >= job.height ? kCalibrationSide
-                                              : std::max(4, int(std::lround(kCalibrationSide * double(job.width) / job.height)));
-        const int h = job.width >= job.height ? std::max(4, int(std::lround(kCalibrationSide * double(job.height) / job.width)))
-                                              : kCalibrationSide;
-        const Quality &final = job.ladder.back().quality;
-        ReferenceRenderer reference(volume, job.transferFunction,
-                                    final.interpolation == Interpolation::Cubic ? Reconstruction::Cubic
-                                                                                : Reconstruction::Linear);
-        reference.setShading(final.shading);
-        ReferenceOptions options;
-        options.tolerance = kCalibrationTolerance;
-        const Image exact = reference.render(job.camera, w, h, job.clipPlanes, options);
-        std::vector<double> rmse;
-        for (const Level &l : job.ladder) {
-            const Image img = job.volume->renderer->render(job.transferFunction, job.camera, w, h, l.quality, job.clipPlanes);
-            rmse.push_back(compareImages(img, exact).rmse);
-        }
-        c.rmse = std::move(rmse);
-        spdlog::debug("calibrated {} levels of {} in {:.0f} ms", c.rmse.size(), job.volume->name,
-                      Ms(Clock::now() - t0).count());
-    } catch (const std::exception &e) {
-        spdlog::warn("error calibration failed: {}", e.what());
-    }
+    if (failed) failed(message, work.job->request);
 }
 
 } // namespace volcast::server

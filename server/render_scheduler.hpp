@@ -1,25 +1,38 @@
 #pragma once
-// Decides what each session's next frame is and renders it: one worker thread, round-robin
-// over the sessions, so the one (PoCL CPU) device is shared fairly and no session's slow
-// client holds up another's frames.
+// Decides what each session's next frame is and renders it, in bounded units of work, on
+// one render thread: the device is one PoCL CPU device, and one worker with a fair queue is
+// the simplest thing that shares it fairly.
 //
-// Per session ("slot"): the newest view only (latest request wins: a view submitted before
-// the previous one was rendered replaces it), at most one frame in flight (from the start
-// of its render until the session has written it to the socket), and a position on the
-// view's ladder of levels:
-//   - a new view first gets one frame at the interactive level (the policy's choice);
-//   - once no input has come for idleMs (or at interaction_end), it is refined level by
-//     level to the final one, each frame delivered as soon as it is encoded;
-//   - new input cancels refinement between levels and between jittered passes; a refined
-//     frame that finishes after newer input arrived is dropped as stale (an interactive
-//     one is still delivered: it is the newest picture there is).
-// Frames are delivered through the slot's callback on the worker thread; the session's
-// callback only posts them to its strand (no socket is touched here).
+// Units: an interactive frame (its level is chosen to fit the frame-time target), or one
+// band of rows of one pass of a refinement level (as many rows as fit unitMs at the level's
+// measured cost). Between units the worker picks again: any session's interactive frame
+// first, then the next refinement unit; within each, the session that has had the fewest
+// interactive frames, or the least render time for refinement (ties round-robin).
+// So a session's interactive frame waits for at most one unit, whatever another session's
+// final frame costs, and new input drops a refinement at the next unit boundary.
+//
+// Per session ("slot"): the newest view only (latest wins), at most one frame in flight
+// (from its delivery until the session has written it), and a position on the view's
+// ladder: one interactive frame, then after idleMs without input (or at interaction_end)
+// refinement level by level to the final one.
+//
+// Long preparation (B-spline coefficients, pre-integration tables, a new kernel variant)
+// runs on the PreprocessWorker; until it is ready, the level is rendered without it
+// (trilinear, no pre-integration, no shading: the frame's quality says so) and the session
+// gets `progress` messages. Error estimates come from the ErrorCalibrator, off this thread.
+//
+// Frames, failures and progress go out through the slot's callbacks on the worker threads;
+// the session's callbacks only post them to its strand.
 
 #include "protocol/frame.hpp"
+#include "protocol/server_messages.hpp"
+#include "renderer/frame_renderer.hpp"
 #include "renderer/scene.hpp"
+#include "server/error_calibrator.hpp"
 #include "server/metrics.hpp"
+#include "server/preprocess_worker.hpp"
 #include "server/quality_ladder.hpp"
+#include "server/tiled_frame.hpp"
 #include "server/volume_registry.hpp"
 
 #include <chrono>
@@ -29,6 +42,8 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -36,7 +51,9 @@ namespace volcast::server {
 
 // One view to render, complete and immutable once submitted.
 struct ViewJob {
-    std::shared_ptr<VolumeEntry> volume;
+    std::shared_ptr<FrameRenderer> renderer;   // keeps its volume alive (aliases the registry entry)
+    uint64_t volumeId = 0;                     // the registry's id of the volume: never reused
+    std::string volumeName;                    // for progress messages
     TransferFunction transferFunction;   // resolved (presets placed on the value range)
     Camera camera;
     nlohmann::json cameraJson;           // scene-file form, echoed in frame headers
@@ -48,6 +65,9 @@ struct ViewJob {
     nlohmann::json request;              // id of the request this view reflects
 };
 
+// The job for a registry entry's renderer, sharing the entry's lifetime.
+std::shared_ptr<FrameRenderer> rendererOf(const std::shared_ptr<VolumeEntry> &entry);
+
 // A rendered, encoded frame; the session gives it its sequence number.
 struct RenderedFrame {
     protocol::FrameHeader header;
@@ -56,76 +76,114 @@ struct RenderedFrame {
 
 struct SchedulerOptions {
     double idleMs = 150;             // ms without input before refinement starts
-    bool errorCalibration = true;    // calibrate error estimates against the reference
+    bool errorCalibration = true;    // measure error estimates (background)
+    double unitMs = 40;              // the longest a refinement unit is planned to take
 };
 
 class RenderScheduler {
   public:
     using SlotId = uint64_t;
-    using Deliver = std::function<void(RenderedFrame)>;                 // must only post
-    // render_failed for the request whose frame failed; must only post.
+    using Deliver = std::function<void(RenderedFrame)>;   // must only post
+    // render_failed for the request the failed frame was rendered for; must only post.
     using Failed = std::function<void(const std::string &message, const nlohmann::json &request)>;
+    using Progress = std::function<void(const protocol::ProgressMessage &)>;   // must only post
 
     RenderScheduler(Metrics &metrics, SchedulerOptions options);
     ~RenderScheduler();   // stop()
 
-    SlotId addSession(Deliver deliver, Failed failed);
+    SlotId addSession(Deliver deliver, Failed failed, Progress progress = {});
     void removeSession(SlotId slot);
     // A new view for the slot: replaces any not yet rendered and cancels refinement.
     void submit(SlotId slot, std::shared_ptr<const ViewJob> job);
     void setInteracting(SlotId slot, bool interacting);
     // The session has written (or discarded) the frame it was delivered: the slot may render again.
     void frameDone(SlotId slot);
+    // Stops the render worker after its current unit and the preprocess worker after its
+    // current task (both cancel what is queued).
     void stop();
+
+    // For tests and metrics: the longest unit rendered so far, in ms.
+    double longestUnitMs() const;
+    bool preparing() const { return preprocess_.busy(); }
 
   private:
     using Clock = std::chrono::steady_clock;
     struct Slot {
         Deliver deliver;
         Failed failed;
+        Progress progress;
         std::shared_ptr<const ViewJob> job;
+        std::shared_ptr<const CalibrationView> calibration;   // the job's, with its key
         uint64_t generation = 0;      // bumps with every submit
         bool interacting = false;
         Clock::time_point lastInput;
         bool inFlight = false;
         int sentLevel = -1;           // highest level delivered for this generation
+        int substituteSent = -1;      // highest level delivered with its preparation pending
         bool finalSent = false;
+        bool failed_ = false;
+        double serviceMs = 0;         // render time received: the least served refines next
+        double interactiveFrames = 0; // interactive frames received: the fewest goes next
         LevelTimer timer;
         size_t timerLadderSize = 0;
+        std::shared_ptr<TiledFrame> refining;   // the frame under way, unit by unit
+        int refiningLevel = -1;
+        bool refiningFinal = false;
+        bool refiningSubstitute = false;       // rendered without its pending preparation
+        std::vector<std::pair<int, Rgb8>> levelImages;   // this generation's, for calibration
+        std::map<std::string, std::string> announced;   // preparations this slot was told of: key, task
     };
+    enum class Kind { Interactive, Refine };
     struct Work {
+        Kind kind = Kind::Interactive;
         SlotId slot = 0;
         std::shared_ptr<const ViewJob> job;
         uint64_t generation = 0;
         int level = 0;
         bool final = false;
-    };
-    // Calibrated RMSE per level against the reference, by what the error depends on.
-    struct Calibration {
-        std::vector<double> rmse;
+        Quality quality;              // what is rendered: the level's, or its substitute
+        bool substitute = false;
+        std::shared_ptr<TiledFrame> frame;   // Refine: the frame the unit belongs to
+        int rows = 0;                        // Refine: the unit's rows
     };
 
     void workerLoop();
-    // What slot s should render now; false with wakeAt set when it waits for its idle time.
-    bool nextWork(SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
-    void render(const Work &work);
-    // The view of `work` cannot be rendered: tell the session once and stop trying it.
-    void renderFailed(const Work &work, const std::string &message);
-    bool stale(const Work &work);
-    std::string calibrationKey(const ViewJob &job) const;
-    void calibrate(const ViewJob &job, const std::string &key);
+    double leastServiceMs() const;   // over sessions with a view; under the lock
+    double leastInteractiveFrames() const;
+    bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
+    // What slot s should do now of this kind; false with wakeAt set when it waits for its idle time.
+    bool nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
+    // The quality to render for a level now: the level's if prepared, else a substitute
+    // (and the preparation asked for). Under the lock.
+    Quality renderable(SlotId id, Slot &s, const Quality &q, bool &substitute);
+    // Renders one unit; when it completes its frame, encodes and delivers it.
+    void runUnit(Work &work);
+    void fail(const Work &work, const std::string &message);
 
     Metrics &metrics_;
     SchedulerOptions options_;
-    std::mutex mutex_;
+    PreprocessWorker preprocess_;
+    ErrorCalibrator calibrator_;
+    mutable std::mutex mutex_;
     std::condition_variable wake_;
     std::map<SlotId, Slot> slots_;
     SlotId nextId_ = 1;
     SlotId lastServed_ = 0;
+    uint64_t viewSerial_ = 0;
     bool stopping_ = false;
-    std::map<std::string, Calibration> calibrations_;   // worker thread only
-    std::shared_ptr<const ViewJob> toCalibrate_;        // the newest view without a calibration
+    double longestUnitMs_ = 0;
+    // A renderer is used by one thread at a time without the render worker ever waiting:
+    // the worker skips sessions whose renderer is being prepared, and a preparation waits
+    // for the worker's current unit on its renderer.
+    const FrameRenderer *rendering_ = nullptr;
+    std::set<const FrameRenderer *> preparing_;
     std::thread worker_;
 };
+
+// The key of a quality's slow preparation for a volume, or "" when it needs none (a plain
+// trilinear quality without pre-integration or shading is prepared on the frame path).
+std::string preparationKey(uint64_t volumeId, const TransferFunction &tf, const Quality &q);
+// A quality with what needs slow preparation taken out: trilinear, no pre-integration, no shading.
+Quality plainQuality(const Quality &q);
 
 } // namespace volcast::server

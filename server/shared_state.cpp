@@ -18,7 +18,7 @@ SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
                                                          : "other";
     registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, *cl_, metrics_,
                                                  config_.loadTimeoutS);
-    scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration});
+    scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration, config_.defaultTargetFrameMs});
 }
 
 SharedState::~SharedState() { stopWorkers(); }

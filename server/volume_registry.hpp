@@ -37,7 +37,15 @@
 namespace volcast::server {
 
 // One volume in memory and the renderer that draws it; shared by the sessions that opened it.
+// Ids of loaded volumes, from 1, never reused in a process: what caches key on (an
+// address would be reused by the next volume loaded after an eviction).
+inline uint64_t newVolumeId() {
+    static std::atomic<uint64_t> next{1};
+    return next++;
+}
+
 struct VolumeEntry {
+    uint64_t id = newVolumeId();
     std::string name;                          // as clients name it
     std::shared_ptr<const Volume> volume;
     std::unique_ptr<FrameRenderer> renderer;  // thread-safe; serialises its frames

@@ -146,6 +146,11 @@ void WebsocketSession::joinScheduler() {
                         self->sendError({ErrorCode::RenderFailed, "rendering failed: " + message, request, ""});
                     });
             });
+        },
+        [weak, executor](const protocol::ProgressMessage &progress) {
+            net::post(executor, [weak, progress] {
+                if (auto self = weak.lock()) self->guarded("progress", [&] { self->sendMessage(progress); });
+            });
         });
 }
 
@@ -385,7 +390,9 @@ void WebsocketSession::admit(const SessionScene &candidate, int width, int heigh
 void WebsocketSession::submitView(const nlohmann::json &requestId, const nlohmann::json &stillImage) {
     const Scene scene = scene_.scene();
     auto job = std::make_shared<ViewJob>();
-    job->volume = volume_;
+    job->renderer = rendererOf(volume_);
+    job->volumeId = volume_->id;
+    job->volumeName = volume_->name;
     job->transferFunction = resolvedTransferFunction(scene, volume_->volume->range);
     job->camera = scene.camera;
     job->cameraJson = nlohmann::json::parse(sceneToJson(scene)).at("camera");

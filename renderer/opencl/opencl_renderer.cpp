@@ -205,7 +205,20 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
 
 Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                              const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
+    return castRays(tf, camera, width, height, quality, clipPlanes, nullptr, stats);
+}
+
+Image OpenClRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                                   const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
+                                   const RayWindow &window, RenderStats *stats) {
+    return castRays(tf, camera, width, height, quality, clipPlanes, &window, stats);
+}
+
+Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
+                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
+                           RenderStats *stats) {
     validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
+    if (window) validateRayWindow(*window, width, height, quality);
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -324,11 +337,16 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     }
 
     const auto t = Clock::now();
-    Image cast(raysWide, raysHigh);
+    // A window casts only its own rays (the launch offset places them on the full grid) and
+    // reads back only its rows; the output buffer spans the grid so the kernel's indexing holds.
+    const RayWindow all{0, 0, raysWide, raysHigh};
+    const RayWindow &win = window ? *window : all;
+    Image cast(win.width, win.height);
     try {
         auto &queue = cl_.queue();
         cl::Buffer params(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof p, &p);
-        cl::Buffer out(cl_.context(), CL_MEM_WRITE_ONLY, cast.rgba.size() * sizeof(float));
+        const size_t rowBytes = size_t(raysWide) * 4 * sizeof(float);
+        cl::Buffer out(cl_.context(), CL_MEM_WRITE_ONLY, size_t(raysHigh) * rowBytes);
         cl_uint zeros[VC_STAT_COUNT] = {};
         cl::Buffer counters(cl_.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, sizeof zeros, zeros);
         // Arguments in the order of the kernel's signature for this feature set.
@@ -346,9 +364,18 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
         kernel.setArg(arg++, params);
         kernel.setArg(arg++, out);
         kernel.setArg(arg++, counters);
-        queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(roundUp(raysWide), roundUp(raysHigh)),
+        queue.enqueueNDRangeKernel(kernel, cl::NDRange(size_t(win.x), size_t(win.y)),
+                                   cl::NDRange(roundUp(win.width), roundUp(win.height)),
                                    cl::NDRange(kGroupEdge, kGroupEdge));
-        queue.enqueueReadBuffer(out, CL_FALSE, 0, cast.rgba.size() * sizeof(float), cast.rgba.data());
+        if (win.width == raysWide) {
+            queue.enqueueReadBuffer(out, CL_FALSE, size_t(win.y) * rowBytes, size_t(win.height) * rowBytes,
+                                    cast.rgba.data());
+        } else {
+            const size_t pixel = 4 * sizeof(float);
+            queue.enqueueReadBufferRect(out, CL_FALSE, {size_t(win.x) * pixel, size_t(win.y), 0}, {0, 0, 0},
+                                        {size_t(win.width) * pixel, size_t(win.height), 1}, rowBytes, 0,
+                                        size_t(win.width) * pixel, 0, cast.rgba.data());
+        }
         cl_uint counts[VC_STAT_COUNT];
         queue.enqueueReadBuffer(counters, CL_TRUE, 0, sizeof counts, counts);
         st.raysHit = counts[VC_STAT_RAYS_HIT];
@@ -361,7 +388,8 @@ Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, i
     } catch (const cl::Error &e) {
         throw OpenClError("rendering on " + cl_.deviceName() + " failed: " + describe(e));
     }
-    Image image = raysWide == width && raysHigh == height ? std::move(cast) : resizeBilinear(cast, width, height);
+    Image image = window || (raysWide == width && raysHigh == height) ? std::move(cast)
+                                                                      : resizeBilinear(cast, width, height);
     st.renderSeconds = secondsSince(t);
     if (stats) *stats = st;
     return image;

@@ -42,6 +42,10 @@ class OpenClRenderer : public FrameRenderer {
     // Thread-safe; frames are rendered one at a time.
     Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
                  const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
+    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
+                       RenderStats *stats = nullptr) override;
+    bool rendersWindowsCheaply() const override { return true; }
     std::string description() const override;
 
     // The -D options a scene's program is built with: only the features it uses.
@@ -65,6 +69,9 @@ class OpenClRenderer : public FrameRenderer {
     struct PreintegrationCache;
 
     bool cubicFromImage() const;
+    // render() and renderWindow(): the whole grid (upsampled to the frame) or one window.
+    Image castRays(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
+               const std::vector<ClipPlane> &clipPlanes, const RayWindow *window, RenderStats *stats);
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
     std::vector<float> readBackCoefficients(const DataSet &data);

@@ -1,0 +1,137 @@
+#include "server/error_calibrator.hpp"
+
+#include "renderer/camera.hpp"
+#include "renderer/reference_renderer.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+namespace volcast::server {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+// The cubic reference prefilters the whole volume in double (8 bytes a voxel) before its first ray.
+constexpr size_t kMaxCubicReferenceVoxels = size_t(256) * 256 * 256;
+} // namespace
+
+Rgb8 toRgb8(const Image &image) {
+    Rgb8 out{image.width, image.height, std::vector<uint8_t>(size_t(image.width) * size_t(image.height) * 3)};
+    for (size_t p = 0, n = size_t(image.width) * size_t(image.height); p < n; ++p)
+        for (size_t c = 0; c < 3; ++c)
+            out.rgb[p * 3 + c] = uint8_t(std::lround(std::clamp(image.rgba[p * 4 + c], 0.0f, 1.0f) * 255.0f));
+    return out;
+}
+
+double rmseRgb8(const Rgb8 &a, const Rgb8 &b) {
+    if (a.width != b.width || a.height != b.height || a.rgb.size() != b.rgb.size())
+        throw std::invalid_argument("images of different sizes compared");
+    if (a.rgb.empty()) return 0;
+    double sum = 0;
+    for (size_t i = 0; i < a.rgb.size(); ++i) {
+        const double d = (double(a.rgb[i]) - double(b.rgb[i])) / 255.0;
+        sum += d * d;
+    }
+    return std::sqrt(sum / double(a.rgb.size()));
+}
+
+std::optional<protocol::ErrorEstimate> ErrorCalibrator::estimate(const std::string &key, int level, bool final) const {
+    std::lock_guard lock(mutex_);
+    auto it = measured_.find(key);
+    if (it == measured_.end()) return std::nullopt;
+    const Measured &m = it->second;
+    if (final) return m.final;
+    if (level < 0 || size_t(level) >= m.count.size() || m.count[size_t(level)] == 0) return std::nullopt;
+    return protocol::ErrorEstimate{m.sum[size_t(level)] / m.count[size_t(level)], "rmse_rgb8_vs_final"};
+}
+
+void ErrorCalibrator::record(const std::string &key, int level, double rmse, size_t levels) {
+    std::lock_guard lock(mutex_);
+    if (!measured_.count(key) && measured_.size() >= kMaxKeys) measured_.clear();
+    Measured &m = measured_[key];
+    if (m.count.size() < levels) {
+        m.count.resize(levels, 0);
+        m.sum.resize(levels, 0);
+    }
+    m.sum[size_t(level)] += rmse;
+    ++m.count[size_t(level)];
+}
+
+void ErrorCalibrator::finalRendered(std::shared_ptr<const CalibrationView> view,
+                                    std::vector<std::pair<int, Rgb8>> levels, Rgb8 final, uint64_t viewSerial) {
+    if (!enabled_) return;
+    const size_t ladderSize = view->ladder.size();
+    if (!levels.empty()) {
+        auto shared = std::make_shared<std::pair<std::vector<std::pair<int, Rgb8>>, Rgb8>>(std::move(levels),
+                                                                                          std::move(final));
+        worker_.request("levels " + std::to_string(viewSerial), PreprocessWorker::Priority::Calibration,
+                        [this, key = view->key, shared, ladderSize](const std::atomic<bool> &) {
+                            for (const auto &[level, image] : shared->first)
+                                if (size_t(level) + 1 < ladderSize)
+                                    record(key, level, rmseRgb8(image, shared->second), ladderSize);
+                        });
+    }
+    worker_.request("final " + view->key, PreprocessWorker::Priority::Calibration,
+                    [this, view](const std::atomic<bool> &cancelled) { calibrateFinal(*view, cancelled); });
+}
+
+void ErrorCalibrator::calibrateFinal(const CalibrationView &view, const std::atomic<bool> &cancelled) {
+    const auto t0 = Clock::now();
+    const int w = view.width >= view.height ? kSide
+                                            : std::max(4, int(std::lround(kSide * double(view.width) / view.height)));
+    const int h = view.width >= view.height ? std::max(4, int(std::lround(kSide * double(view.height) / view.width)))
+                                            : kSide;
+    const Level &last = view.ladder.back();
+    const Quality &fq = last.quality;
+    const Volume &volume = view.renderer->volume();
+    const Image fast = view.renderer->render(view.transferFunction, view.camera, w, h, fq, view.clipPlanes);
+
+    // The exact integral, ray by ray, within the budget.
+    std::optional<Image> reference;
+    const bool cubic = fq.interpolation == Interpolation::Cubic;
+    if (!cubic || volume.voxelCount() <= kMaxCubicReferenceVoxels) {
+        ReferenceRenderer exact(volume, view.transferFunction, cubic ? Reconstruction::Cubic : Reconstruction::Linear);
+        exact.setShading(fq.shading);
+        const RayGenerator rays(view.camera, w, h);
+        Image image(w, h);
+        bool inTime = true;
+        for (int y = 0; y < h && inTime; ++y) {
+            for (int x = 0; x < w; ++x) {
+                const RayIntegral r = exact.integrate(rays.pixelRay(x, y), view.clipPlanes, kReferenceTolerance);
+                float *px = image.pixel(x, y);
+                px[0] = float(r.color.r);
+                px[1] = float(r.color.g);
+                px[2] = float(r.color.b);
+                px[3] = float(r.color.a);
+            }
+            if (cancelled) return;
+            inTime = std::chrono::duration<double>(Clock::now() - t0).count() < kReferenceBudgetSeconds;
+        }
+        if (inTime) reference = std::move(image);
+    }
+    std::string method;
+    if (reference) {
+        method = "rmse_rgb8_vs_reference_" + std::to_string(kSide) + "px";
+    } else {
+        if (cancelled) return;
+        Quality fine = fq;
+        fine.step = fq.step / 4;
+        fine.jitter = false;
+        fine.earlyTermination = std::max(fq.earlyTermination, 0.999);
+        reference = view.renderer->render(view.transferFunction, view.camera, w, h, fine, view.clipPlanes);
+        method = "rmse_rgb8_vs_quarter_step_" + std::to_string(kSide) + "px";
+    }
+    const double rmse = rmseRgb8(toRgb8(fast), toRgb8(*reference));
+    {
+        std::lock_guard lock(mutex_);
+        if (!measured_.count(view.key) && measured_.size() >= kMaxKeys) measured_.clear();
+        measured_[view.key].final = protocol::ErrorEstimate{rmse, method};
+    }
+    spdlog::debug("calibrated the final level ({}) in {:.0f} ms", method,
+                  std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+}
+
+} // namespace volcast::server

@@ -1,0 +1,82 @@
+#pragma once
+// Error estimates for frames, measured in the metric the client sees: RMSE over 8-bit RGB
+// composited over black (the premultiplied colour, as JPEG frames show it), in [0, 1].
+//
+//  - Levels below the final: when a view's final frame is rendered, the frames of its
+//    lower levels that were delivered for the same camera are compared with it, on the
+//    background worker. Each level's estimate (per volume, transfer function, clip planes,
+//    ladder and frame size) is the running mean of those measurements: method
+//    "rmse_rgb8_vs_final". Until a view of that kind has reached its final frame: none.
+//  - The final level: compared, on the background worker, with the double-precision
+//    reference integrator on a small image (kSide pixels on the long side) at the same
+//    camera, within a time budget of one core; where the reference would take longer, with
+//    the fast renderer at a quarter of the step instead. Methods
+//    "rmse_rgb8_vs_reference_<side>px" and "rmse_rgb8_vs_quarter_step_<side>px".
+//
+// Nothing here runs on the render thread except copying a frame to 8-bit RGB.
+
+#include "protocol/frame.hpp"
+#include "renderer/frame_renderer.hpp"
+#include "server/preprocess_worker.hpp"
+#include "server/quality_ladder.hpp"
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace volcast::server {
+
+// 8-bit RGB over black, row by row.
+struct Rgb8 {
+    int width = 0, height = 0;
+    std::vector<uint8_t> rgb;
+};
+Rgb8 toRgb8(const Image &image);
+// RMSE over the channels in [0, 1] units; throws std::invalid_argument for different sizes.
+double rmseRgb8(const Rgb8 &a, const Rgb8 &b);
+
+// What a calibration needs of a view; the key names everything the error depends on.
+struct CalibrationView {
+    std::string key;
+    std::shared_ptr<FrameRenderer> renderer;   // also keeps the volume alive
+    TransferFunction transferFunction;
+    Camera camera;
+    std::vector<ClipPlane> clipPlanes;
+    std::vector<Level> ladder;
+    int width = 0, height = 0;
+};
+
+class ErrorCalibrator {
+  public:
+    static constexpr int kSide = 32;                    // reference image, pixels on the long side
+    static constexpr double kReferenceBudgetSeconds = 2; // of one core, then the quarter-step fallback
+    static constexpr double kReferenceTolerance = 1e-3;  // per channel: below an 8-bit step (1/255)
+    static constexpr size_t kMaxKeys = 256;              // remembered kinds of view before clearing
+
+    ErrorCalibrator(PreprocessWorker &worker, bool enabled) : worker_(worker), enabled_(enabled) {}
+
+    // The estimate for a frame of `level` of a view with this key; nullopt until measured.
+    std::optional<protocol::ErrorEstimate> estimate(const std::string &key, int level, bool final) const;
+    // A view's final frame, with the lower levels delivered for the same camera (level, image).
+    void finalRendered(std::shared_ptr<const CalibrationView> view, std::vector<std::pair<int, Rgb8>> levels,
+                       Rgb8 final, uint64_t viewSerial);
+
+  private:
+    struct Measured {
+        std::vector<double> sum;
+        std::vector<int> count;
+        std::optional<protocol::ErrorEstimate> final;
+    };
+    void record(const std::string &key, int level, double rmse, size_t levels);
+    void calibrateFinal(const CalibrationView &view, const std::atomic<bool> &cancelled);
+
+    PreprocessWorker &worker_;
+    bool enabled_;
+    mutable std::mutex mutex_;
+    std::map<std::string, Measured> measured_;
+};
+
+} // namespace volcast::server

@@ -1,0 +1,297 @@
+// The scheduler on its own, driven with a renderer that is slow on purpose (slow_renderer):
+// its timings come from the test's own per-ray cost, not from how fast PoCL is here, so
+// these tests check the scheduling itself — latest wins, cancellation at unit boundaries,
+// interactive frames waiting at most one unit behind another session's expensive final
+// frame, preparation in the background, and a fair share between dragging sessions.
+
+#include "renderer/synthetic.hpp"
+#include "server/render_scheduler.hpp"
+#include "slow_renderer.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+namespace {
+
+using namespace volcast;
+using namespace volcast::server;
+using slow::SlowRenderer;
+using Clock = std::chrono::steady_clock;
+using Ms = std::chrono::duration<double, std::milli>;
+
+std::shared_ptr<const Volume> smallVolume() {
+    static const auto volume = std::make_shared<const Volume>(makeGaussianBlob({16, 16, 16}, {1, 1, 1}, 4, 200).volume);
+    return volume;
+}
+
+TransferFunction rampTf() {
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {50, 0.8, 0.5, 0.3, 0.05}, {200, 1, 1, 1, 0.5}};
+    return tf;
+}
+
+Camera orbitCamera(double angle) {
+    Camera c;
+    c.target = {7.5, 7.5, 7.5};
+    c.eye = c.target + Vec3d{40 * std::cos(angle), 12, 40 * std::sin(angle)};
+    return c;
+}
+
+// One session of the test: what arrived and when, and the frames it has given back.
+struct Session {
+    RenderScheduler &scheduler;
+    RenderScheduler::SlotId slot = 0;
+    std::mutex mutex;
+    std::condition_variable arrived;
+    struct Got {
+        Clock::time_point at;
+        protocol::FrameHeader header;
+    };
+    std::vector<Got> frames;
+    std::vector<protocol::ProgressMessage> progress;
+    std::vector<std::string> failures;
+    std::shared_ptr<FrameRenderer> renderer;
+    uint64_t volumeId;
+
+    Session(RenderScheduler &s, std::shared_ptr<FrameRenderer> r, uint64_t id)
+        : scheduler(s), renderer(std::move(r)), volumeId(id) {
+        slot = scheduler.addSession(
+            [this](RenderedFrame f) {
+                {
+                    std::lock_guard lock(mutex);
+                    frames.push_back({Clock::now(), f.header});
+                }
+                arrived.notify_all();
+                scheduler.frameDone(slot);   // written at once: a client that reads fast
+            },
+            [this](const std::string &message, const nlohmann::json &) {
+                std::lock_guard lock(mutex);
+                failures.push_back(message);
+            },
+            [this](const protocol::ProgressMessage &p) {
+                std::lock_guard lock(mutex);
+                progress.push_back(p);
+            });
+    }
+    ~Session() { scheduler.removeSession(slot); }
+
+    std::shared_ptr<ViewJob> view(int request, double angle, int size, std::vector<Level> ladder) {
+        auto job = std::make_shared<ViewJob>();
+        job->renderer = renderer;
+        job->volumeId = volumeId;
+        job->volumeName = "blob";
+        job->transferFunction = rampTf();
+        job->camera = orbitCamera(angle);
+        job->width = job->height = size;
+        job->ladder = std::move(ladder);
+        job->request = request;
+        return job;
+    }
+    size_t count() {
+        std::lock_guard lock(mutex);
+        return frames.size();
+    }
+    // Waits for a frame satisfying pred among those after index `from`; nullopt on timeout.
+    template <class Pred>
+    std::optional<Got> waitFor(size_t from, Pred pred, double timeoutMs) {
+        std::unique_lock lock(mutex);
+        std::optional<Got> found;
+        arrived.wait_for(lock, Ms(timeoutMs), [&] {
+            for (size_t i = from; i < frames.size(); ++i)
+                if (pred(frames[i].header)) {
+                    found = frames[i];
+                    return true;
+                }
+            return false;
+        });
+        return found;
+    }
+};
+
+std::vector<Level> ladderFor(double step, Interpolation interpolation = Interpolation::Linear) {
+    Quality f;
+    f.step = step;
+    f.interpolation = interpolation;
+    return automaticLadder(f, 1);
+}
+
+SchedulerOptions options(double unitMs) {
+    SchedulerOptions o;
+    o.idleMs = 30;
+    o.errorCalibration = false;
+    o.unitMs = unitMs;
+    return o;
+}
+
+double percentile(std::vector<double> v, double p) {
+    std::sort(v.begin(), v.end());
+    return v.empty() ? 0 : v[std::min(v.size() - 1, size_t(p * double(v.size() - 1) + 0.5))];
+}
+
+TEST(RenderScheduler, LatestViewWinsAndRefinesToTheFinalFrame) {
+    Metrics metrics;
+    RenderScheduler scheduler(metrics, options(20));
+    auto renderer = std::make_shared<SlowRenderer>(smallVolume(), 0.05);
+    Session s(scheduler, renderer, 1);
+    // 30 views submitted faster than they can be rendered: most are never rendered.
+    for (int i = 0; i < 30; ++i) {
+        scheduler.submit(s.slot, s.view(i, 0.05 * i, 96, ladderFor(1)));
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    const auto final = s.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 20000);
+    ASSERT_TRUE(final) << "no final frame within 20 s";
+    EXPECT_EQ(final->header.request, 29) << "the final frame is of the newest view";
+    EXPECT_LT(s.count(), 15u) << "views replaced before their turn must not be rendered";
+    EXPECT_EQ(renderer->overlaps(), 0);
+}
+
+TEST(RenderScheduler, NewInputCancelsRefinementAtTheNextUnit) {
+    Metrics metrics;
+    const double unitMs = 20;
+    RenderScheduler scheduler(metrics, options(unitMs));
+    // 160² at 0.05 ms a ray: the final frame alone is 1.3 s, about 64 units.
+    auto renderer = std::make_shared<SlowRenderer>(smallVolume(), 0.05);
+    Session s(scheduler, renderer, 1);
+    scheduler.submit(s.slot, s.view(1, 0, 160, ladderFor(1)));
+    // Let it reach the refinement levels, then move.
+    ASSERT_TRUE(s.waitFor(0, [](const protocol::FrameHeader &h) { return h.level >= 1; }, 10000));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const size_t before = s.count();
+    const auto moved = Clock::now();
+    scheduler.submit(s.slot, s.view(2, 1.0, 160, ladderFor(1)));
+    const auto next = s.waitFor(before, [](const protocol::FrameHeader &h) { return h.request == 2; }, 10000);
+    ASSERT_TRUE(next);
+    const double waitedMs = Ms(next->at - moved).count();
+    // One unit of the old view (planned at unitMs; a unit's estimate may be off by 2x before
+    // the level is measured) plus the new interactive frame (40 ms target) and scheduling slack.
+    EXPECT_LT(waitedMs, 2 * unitMs + 40 + 100) << "the refinement was not cancelled at a unit boundary";
+    std::lock_guard lock(s.mutex);
+    for (size_t i = before; i < s.frames.size(); ++i)
+        if (s.frames[i].at > next->at) {
+            EXPECT_EQ(s.frames[i].header.request, 2) << "a frame of the old view after the new one";
+        }
+}
+
+TEST(RenderScheduler, InteractiveFramesWaitAtMostOneUnitWhileAnotherSessionRendersAnExpensiveFinal) {
+    Metrics metrics;
+    const double unitMs = 20;
+    RenderScheduler scheduler(metrics, options(unitMs));
+    // A asks for a 256² still: 65536 rays at 0.05 ms = 3.3 s in one piece.
+    auto slowA = std::make_shared<SlowRenderer>(smallVolume(), 0.05);
+    auto slowB = std::make_shared<SlowRenderer>(smallVolume(), 0.05);
+    Session a(scheduler, slowA, 1), b(scheduler, slowB, 2);
+    auto still = a.view(1, 0, 256, ladderFor(1));
+    still->stillOnly = true;
+    const auto started = Clock::now();
+    scheduler.submit(a.slot, still);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    // B drags: a new camera as soon as the previous frame arrived, 30 times.
+    std::vector<double> latency;
+    for (int i = 0; i < 30; ++i) {
+        const size_t from = b.count();
+        const auto moved = Clock::now();
+        scheduler.submit(b.slot, b.view(100 + i, 0.1 * i, 64, ladderFor(1)));
+        const int id = 100 + i;
+        const auto got = b.waitFor(from, [id](const protocol::FrameHeader &h) { return h.request == id; }, 10000);
+        ASSERT_TRUE(got) << "B's frame " << i << " never came";
+        latency.push_back(Ms(got->at - moved).count());
+    }
+    const auto final = a.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 30000);
+    ASSERT_TRUE(final) << "A's final frame never came";
+    // B's interactive frame is at most 40 ms (the target) and waits for at most one of A's
+    // units (planned at unitMs, up to twice that before A's level is measured); 60 ms for a
+    // loaded 2-core machine. Rendering A's frame in one piece would make B wait ~3 s.
+    const double bound = 40 + 2 * unitMs + 60;
+    EXPECT_LT(percentile(latency, 0.95), bound) << "p50 " << percentile(latency, 0.5) << " ms";
+    EXPECT_GT(Ms(final->at - started).count(), 3000) << "A's final cannot be faster than its rays";
+}
+
+TEST(RenderScheduler, DraggingSessionsShareTheRendererFairly) {
+    Metrics metrics;
+    RenderScheduler scheduler(metrics, options(20));
+    constexpr int kSessions = 4;
+    std::vector<std::unique_ptr<Session>> sessions;
+    for (int i = 0; i < kSessions; ++i)
+        sessions.push_back(std::make_unique<Session>(
+            scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.05), uint64_t(i + 1)));
+    // Each drags on its own thread: a new camera as soon as its previous frame arrived.
+    std::vector<std::thread> threads;
+    const auto begin = Clock::now();
+    const auto until = begin + std::chrono::milliseconds(3000);
+    for (int i = 0; i < kSessions; ++i)
+        threads.emplace_back([&, i] {
+            Session &s = *sessions[size_t(i)];
+            for (int k = 0; Clock::now() < until; ++k) {
+                const size_t from = s.count();
+                const int id = i * 100000 + k;
+                s.scheduler.submit(s.slot, s.view(id, 0.05 * k, 64, ladderFor(1)));
+                s.waitFor(from, [id](const protocol::FrameHeader &h) { return h.request == id; }, 5000);
+            }
+        });
+    for (auto &t : threads) t.join();
+    // Frames after the first half second, when each session's levels have been measured.
+    std::vector<double> counts;
+    for (auto &s : sessions) {
+        std::lock_guard lock(s->mutex);
+        counts.push_back(double(std::count_if(s->frames.begin(), s->frames.end(), [&](const Session::Got &g) {
+            return g.at > begin + std::chrono::milliseconds(500);
+        })));
+    }
+    const double mean = (counts[0] + counts[1] + counts[2] + counts[3]) / kSessions;
+    for (int i = 0; i < kSessions; ++i)
+        EXPECT_NEAR(counts[size_t(i)], mean, 0.2 * mean) << "session " << i << " got an unfair share: " << [&] {
+            std::ostringstream levels;
+            std::lock_guard lock(sessions[size_t(i)]->mutex);
+            for (const auto &g : sessions[size_t(i)]->frames) levels << g.header.level << ' ';
+            return levels.str();
+        }();
+    EXPECT_GT(mean, 5) << "too few frames to judge fairness";
+}
+
+TEST(RenderScheduler, PreparationRunsInTheBackgroundWithProgressAndOtherSessionsCarryOn) {
+    Metrics metrics;
+    RenderScheduler scheduler(metrics, options(20));
+    // A's cubic quality needs 1.5 s of preparation; B drags meanwhile on its own volume.
+    auto slowA = std::make_shared<SlowRenderer>(smallVolume(), 0.02, 1500);
+    auto slowB = std::make_shared<SlowRenderer>(smallVolume(), 0.05);
+    Session a(scheduler, slowA, 1), b(scheduler, slowB, 2);
+    const auto started = Clock::now();
+    scheduler.submit(a.slot, a.view(1, 0, 96, ladderFor(1, Interpolation::Cubic)));
+    std::vector<double> latency;
+    for (int i = 0; i < 20; ++i) {
+        const size_t from = b.count();
+        const auto moved = Clock::now();
+        const int id = 100 + i;
+        scheduler.submit(b.slot, b.view(id, 0.1 * i, 64, ladderFor(1)));
+        ASSERT_TRUE(b.waitFor(from, [id](const protocol::FrameHeader &h) { return h.request == id; }, 10000));
+        latency.push_back(Ms(Clock::now() - moved).count());
+    }
+    // B's first frames measure its levels (the first unit of an unmeasured level is one row).
+    latency.erase(latency.begin(), latency.begin() + 3);
+    EXPECT_LT(percentile(latency, 0.95), 40 + 40 + 60) << "B waited for A's preparation";
+    const auto final = a.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 20000);
+    ASSERT_TRUE(final) << "A's final frame never came";
+    EXPECT_EQ(final->header.quality.value("interpolation", ""), "cubic");
+    EXPECT_EQ(slowA->preparations(), 1);
+    std::lock_guard lock(a.mutex);
+    ASSERT_GE(a.progress.size(), 2u) << "A was not told what is being prepared";
+    EXPECT_EQ(a.progress.front().task, "bspline_coefficients");
+    EXPECT_EQ(a.progress.front().fraction, 0);
+    EXPECT_EQ(a.progress.back().fraction, 1);
+    // While the coefficients were prepared A got its final level trilinear, marked as such
+    // (the frame's quality says linear, and it is not final).
+    const int last = int(ladderFor(1, Interpolation::Cubic).size()) - 1;
+    EXPECT_TRUE(std::any_of(a.frames.begin(), a.frames.end(), [&](const Session::Got &g) {
+        return g.header.level == last && !g.header.final && g.header.quality.value("interpolation", "linear") == "linear";
+    })) << "no trilinear stand-in for the final level while it was prepared";
+    EXPECT_GT(Ms(final->at - started).count(), 1500) << "the final frame cannot come before its preparation";
+}
+
+} // namespace
