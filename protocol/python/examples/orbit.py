@@ -14,7 +14,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-import volcast_client as vc  # noqa: E402
+import volcast as vc  # noqa: E402
 
 
 def describe(frame: vc.Frame) -> str:
