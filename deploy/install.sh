@@ -20,6 +20,9 @@ packages=(
   zlib1g-dev
   # Tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
+  # The Python client package (protocol/python): Frame.to_numpy decodes with numpy and Pillow;
+  # its test installs the package offline into a venv with the system's setuptools and wheel.
+  python3-numpy python3-pil python3-venv python3-setuptools python3-wheel
   # Web client tests: Debian's Chromium driven by playwright-core
   chromium
   # Container tests: podman with runc and netavark's bridge network (iptables),
