@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
-from typing import Any, Callable, Deque, Dict, Optional, Protocol, Union
+from typing import Any, Callable, Deque, Dict, List, Optional, Protocol, Union
 
 from .frames import Frame, decode_frame
 from .messages import RequestId, ServerError, close, dumps, hello, parse_server_message
@@ -37,7 +37,7 @@ class Client:
     @classmethod
     async def connect(cls, url: str, token: Optional[str] = None,
                       client_name: str = "volcast (Python)",
-                      max_size: int = 256 * 1024 * 1024) -> "Client":
+                      max_size: int = 256 * 1024 * 1024) -> Client:
         """Open a WebSocket to url and say hello; raises ServerError if the server refuses."""
         import websockets  # Debian: python3-websockets
 
@@ -51,7 +51,7 @@ class Client:
             raise
         return client
 
-    async def __aenter__(self) -> "Client":
+    async def __aenter__(self) -> Client:
         return self
 
     async def __aexit__(self, *exc: Any) -> None:
@@ -92,7 +92,7 @@ class Client:
         and return that answer; raises ServerError for an error answering it. Progress
         messages for it go to on_progress; anything else read meanwhile is kept for receive()."""
         id = await self.send(message)
-        kept: list = []
+        kept: List[Union[Message, Frame]] = []
         try:
             while True:
                 reply = await self._read(timeout)
