@@ -8,8 +8,8 @@ and waits for the final frame of its starting view (a PNG). With --stop, it then
 session open, runs COMMAND (which should send SIGTERM to the server: `podman stop ...`) and
 checks that the server closes the session with WebSocket close 1001 ("going away", the reason
 naming SIGTERM) and that COMMAND returns within S seconds. Prints one JSON line of figures;
-exits non-zero, naming what failed, otherwise. Uses protocol/python/volcast_client.py and
-Debian's python3-websockets.
+exits non-zero, naming what failed, otherwise. Uses the volcast package
+(protocol/python/volcast) and Debian's python3-websockets.
 """
 
 import argparse
@@ -20,7 +20,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "protocol", "python"))
-import volcast_client as vc  # noqa: E402
+import volcast as vc  # noqa: E402
 
 GOING_AWAY = 1001
 FINAL_FRAME_TIMEOUT_S = 180  # s: the first frame of a fresh container compiles PoCL kernels

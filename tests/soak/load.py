@@ -28,7 +28,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "protocol", "python"))
-import volcast_client as vc  # noqa: E402
+import volcast as vc  # noqa: E402
 
 from rawws import RawWebSocket, frame_bytes, OP_TEXT  # noqa: E402
 from scripted import DragSession  # noqa: E402

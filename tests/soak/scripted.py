@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from typing import List, Optional
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "protocol", "python"))
-import volcast_client as vc  # noqa: E402
+import volcast as vc  # noqa: E402
 
 from rawws import Closed, ConnectionLost, RawWebSocket  # noqa: E402
 

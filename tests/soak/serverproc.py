@@ -157,7 +157,7 @@ async def stop_with_sessions_open(server: "Server", token=None, sessions: int = 
     import asyncio
     import sys as _sys
     _sys.path.insert(0, os.path.join(REPO, "protocol", "python"))
-    import volcast_client as vc
+    import volcast as vc
     from rawws import Closed, ConnectionLost, RawWebSocket
 
     open_ws = []

@@ -30,7 +30,7 @@ from typing import Dict, List, Optional
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "protocol", "python"))
-import volcast_client as vc  # noqa: E402
+import volcast as vc  # noqa: E402
 
 from hostile import Generator, Hostile, strict_parse  # noqa: E402
 from rawws import OP_TEXT, Closed, ConnectionLost, RawWebSocket, frame_bytes  # noqa: E402

@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
 """Open a volume, orbit the camera once around it, wait for the final frame and save it.
 
-    PYTHONPATH=protocol/python protocol/python/examples/orbit.py --volume bonsai -o out/orbit.png
+    /usr/bin/python3 protocol/python/examples/orbit.py --volume bonsai -o out/orbit.png
 
-Needs a running volcast server and Debian's python3-websockets (run it with /usr/bin/python3).
-Prints one line per frame: sequence number, level, codec, size, render and encode times and
-the error estimate, so the ladder from interactive to final frames can be watched.
+Needs a running volcast server and websockets (Debian: python3-websockets, so run it with
+/usr/bin/python3). Uses the volcast package beside this folder, or the installed one
+(pip install ./protocol/python). Prints one line per frame: sequence number, level, codec,
+size, render and encode times and the error estimate, so the ladder from interactive to final
+frames can be watched; with numpy and Pillow, also the final frame's mean colour.
 """
 
 import argparse
@@ -13,8 +15,9 @@ import asyncio
 import os
 import sys
 
+# The source tree's package when run from it; otherwise the installed one.
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-import volcast_client as vc  # noqa: E402
+import volcast as vc  # noqa: E402
 
 
 def describe(frame: vc.Frame) -> str:
@@ -63,6 +66,11 @@ async def orbit(args) -> int:
         with open(args.output, "wb") as out:
             out.write(final.image)
         print(f"wrote {args.output} ({final.codec}, {len(final.image)} bytes)")
+        try:
+            pixels = final.to_numpy()  # height x width x RGBA, uint8
+            print(f"mean RGBA {pixels.reshape(-1, 4).mean(axis=0).round(1).tolist()}")
+        except vc.MissingDependencyError as e:
+            print(f"(no pixel statistics: {e})")
     return 0
 
 

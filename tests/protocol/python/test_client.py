@@ -1,8 +1,8 @@
-"""Offline tests of protocol/python/volcast_client.py: frames, message building, the README's
-example session, and the Client's request/frame logic against a stand-in socket.
+"""Offline tests of the volcast package (protocol/python/volcast): frames, message building,
+the README's example session, and the Client's request/frame logic against a stand-in socket.
 
 Run: PYTHONPATH=protocol/python /usr/bin/python3 -m unittest discover -s tests/protocol/python
-(ctest runs it as protocol_python_client)."""
+(ctest runs it as protocol.python_client)."""
 
 import asyncio
 import json
@@ -10,7 +10,7 @@ import os
 import struct
 import unittest
 
-import volcast_client as vc
+import volcast as vc
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = os.environ.get("VOLCAST_PROTOCOL_TEST_DATA", os.path.join(HERE, "..", "data"))

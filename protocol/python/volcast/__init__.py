@@ -1,0 +1,40 @@
+"""volcast: a client for volcast's WebSocket protocol (protocol/README.md).
+
+    import asyncio
+    import volcast
+
+    async def main() -> None:
+        async with await volcast.Client.connect("ws://127.0.0.1:8080/ws") as client:
+            state = await client.request(volcast.open_volume("bonsai"))
+            last = await client.send(volcast.camera(state["scene"]["camera"]))
+            frame = await client.wait_for_final_frame(request=last)
+            open("bonsai.png", "wb").write(frame.image)
+            pixels = frame.to_numpy()  # height x width x 4 uint8; needs numpy and Pillow
+
+    asyncio.run(main())
+
+Message building and frame decoding are standard library only and work offline; only
+Client.connect needs websockets, and only Frame.to_numpy needs numpy and Pillow.
+"""
+
+from .client import Client, Socket
+from .frames import (CODECS, FRAME_MAGIC, FRAME_PREAMBLE_BYTES, MAX_FRAME_HEADER_BYTES, Frame,
+                     FrameError, MissingDependencyError, decode_frame, encode_frame)
+from .messages import (CLIENT_TYPES, ERROR_CODES, PROTOCOL_VERSION, SERVER_TYPES, MessageError,
+                       RequestId, ServerError, camera, clip_planes, close, dumps, get_state, hello,
+                       interaction_end, interaction_start, list_volumes, open_volume, orbit_camera,
+                       parse_server_message, quality_automatic, quality_explicit, still,
+                       transfer_function, viewport)
+
+__version__ = "0.1.0"  # the project's version (CMakeLists.txt) and pyproject.toml's
+
+__all__ = [
+    "Client", "Socket",
+    "CODECS", "FRAME_MAGIC", "FRAME_PREAMBLE_BYTES", "MAX_FRAME_HEADER_BYTES", "Frame",
+    "FrameError", "MissingDependencyError", "decode_frame", "encode_frame",
+    "CLIENT_TYPES", "ERROR_CODES", "PROTOCOL_VERSION", "SERVER_TYPES", "MessageError",
+    "RequestId", "ServerError", "camera", "clip_planes", "close", "dumps", "get_state", "hello",
+    "interaction_end", "interaction_start", "list_volumes", "open_volume", "orbit_camera",
+    "parse_server_message", "quality_automatic", "quality_explicit", "still",
+    "transfer_function", "viewport",
+]

@@ -1,0 +1,150 @@
+"""The text messages of protocol/README.md: builders for every client request, parsing of
+the server's messages, and the error a server's refusal becomes. Standard library only."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, Dict, List, Optional, Union
+
+PROTOCOL_VERSION = 1
+
+# The stable error codes of protocol/README.md; a newer server may add more.
+ERROR_CODES = (
+    "malformed_json", "too_large", "bad_message", "unknown_type", "bad_field",
+    "unsupported_version", "unauthorized", "bad_state", "bad_volume_name", "not_found",
+    "load_failed", "busy", "render_failed", "internal",
+)
+CLIENT_TYPES = (
+    "hello", "list_volumes", "open_volume", "camera", "interaction_start", "interaction_end",
+    "viewport", "transfer_function", "quality_policy", "clip_planes", "still", "get_state",
+    "close",
+)
+SERVER_TYPES = ("hello", "volumes", "progress", "state", "error")
+
+RequestId = Union[int, str, None]
+
+
+class MessageError(ValueError):
+    """A server text message that does not follow the protocol."""
+
+
+class ServerError(Exception):
+    """An `error` message from the server, raised where a request expected its answer."""
+
+    def __init__(self, message: Dict[str, Any]) -> None:
+        self.code = message.get("code")
+        self.message = message.get("message")
+        self.id = message.get("id")
+        self.request_type = message.get("request_type")
+        super().__init__(f"{self.code}: {self.message} (request {self.request_type} id {self.id!r})")
+
+
+def _message(type_: str, id: RequestId, **fields: Any) -> Dict[str, Any]:
+    message: Dict[str, Any] = {"type": type_}
+    if id is not None:
+        message["id"] = id
+    message.update({k: v for k, v in fields.items() if v is not None})
+    return message
+
+
+def hello(token: Optional[str] = None, client: Optional[str] = None, id: RequestId = None,
+          protocol: int = PROTOCOL_VERSION) -> Dict[str, Any]:
+    return _message("hello", id, protocol=protocol, token=token, client=client)
+
+
+def list_volumes(id: RequestId = None) -> Dict[str, Any]:
+    return _message("list_volumes", id)
+
+
+def open_volume(name: str, id: RequestId = None) -> Dict[str, Any]:
+    if not isinstance(name, str):
+        raise TypeError("open_volume: name must be a string")
+    return _message("open_volume", id, name=name)
+
+
+def camera(camera: Dict[str, Any], id: RequestId = None) -> Dict[str, Any]:
+    """camera: docs/design.md's scene-file camera, e.g. {"eye", "target", "up", "projection", "fov_y_deg"}."""
+    return _message("camera", id, camera=camera)
+
+
+def interaction_start(id: RequestId = None) -> Dict[str, Any]:
+    return _message("interaction_start", id)
+
+
+def interaction_end(id: RequestId = None) -> Dict[str, Any]:
+    return _message("interaction_end", id)
+
+
+def viewport(width: int, height: int, id: RequestId = None) -> Dict[str, Any]:
+    return _message("viewport", id, image={"width": width, "height": height})
+
+
+def transfer_function(transfer_function: Dict[str, Any], id: RequestId = None) -> Dict[str, Any]:
+    """transfer_function: {"points": [[value, r, g, b, a], ...], "opacity_unit"} or {"preset": ...}."""
+    return _message("transfer_function", id, transfer_function=transfer_function)
+
+
+def quality_automatic(target_frame_ms: float = 40, quality: Optional[Dict[str, Any]] = None,
+                      id: RequestId = None) -> Dict[str, Any]:
+    """Server-chosen levels; quality, when given, is the final level's switches."""
+    return _message("quality_policy", id, mode="automatic", target_frame_ms=target_frame_ms,
+                    quality=quality)
+
+
+def quality_explicit(quality: Dict[str, Any], id: RequestId = None) -> Dict[str, Any]:
+    """Every frame rendered with exactly these docs/design.md switches."""
+    return _message("quality_policy", id, mode="explicit", quality=quality)
+
+
+def clip_planes(planes: List[Dict[str, Any]], id: RequestId = None) -> Dict[str, Any]:
+    """planes: [{"point": [x, y, z], "normal": [x, y, z]}, ...]; [] removes all."""
+    return _message("clip_planes", id, clip_planes=list(planes))
+
+
+def still(width: Optional[int] = None, height: Optional[int] = None, id: RequestId = None) -> Dict[str, Any]:
+    """A final frame of the current view now; at the viewport's size unless both are given."""
+    if (width is None) != (height is None):
+        raise ValueError("still: give both width and height, or neither")
+    image = None if width is None else {"width": width, "height": height}
+    return _message("still", id, image=image)
+
+
+def get_state(id: RequestId = None) -> Dict[str, Any]:
+    return _message("get_state", id)
+
+
+def close(id: RequestId = None) -> Dict[str, Any]:
+    return _message("close", id)
+
+
+def dumps(message: Dict[str, Any]) -> str:
+    """Compact JSON text of a message, as sent."""
+    return json.dumps(message, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+
+
+def parse_server_message(text: Union[str, bytes]) -> Dict[str, Any]:
+    """A server text message as a dict; raises MessageError if it is not one."""
+    try:
+        message = json.loads(text)
+    except ValueError as e:
+        raise MessageError(f"server message: malformed JSON: {e}") from None
+    if not isinstance(message, dict):
+        raise MessageError(f"server message: must be a JSON object, got {type(message).__name__}")
+    if not isinstance(message.get("type"), str):
+        raise MessageError("server message: type: is required and must be a string")
+    return message
+
+
+def orbit_camera(base: Dict[str, Any], angle_deg: float) -> Dict[str, Any]:
+    """base's camera with its eye turned by angle_deg about the axis through target along up."""
+    eye, target, up = base["eye"], base["target"], base["up"]
+    norm = math.sqrt(sum(u * u for u in up))
+    k = [u / norm for u in up]
+    v = [e - t for e, t in zip(eye, target)]
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    # Rodrigues' rotation: v cos + (k x v) sin + k (k . v)(1 - cos).
+    cross = [k[1] * v[2] - k[2] * v[1], k[2] * v[0] - k[0] * v[2], k[0] * v[1] - k[1] * v[0]]
+    dot = sum(a * b for a, b in zip(k, v))
+    rotated = [v[i] * c + cross[i] * s + k[i] * dot * (1 - c) for i in range(3)]
+    return dict(base, eye=[t + r for t, r in zip(target, rotated)])

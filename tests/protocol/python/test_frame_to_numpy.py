@@ -1,0 +1,125 @@
+"""Frame.to_numpy: PNG and JPEG frames as height x width x 4 uint8 arrays, the refusals, and
+the error that names a missing numpy or Pillow.
+
+The PNGs are written here with the standard library (zlib), so their pixels are known exactly
+without Pillow's encoder. Needs Debian's python3-numpy and python3-pil (deploy/install.sh);
+the tests that decode skip, saying which is absent, where they are not installed."""
+
+import io
+import struct
+import sys
+import unittest
+import zlib
+from unittest import mock
+
+import volcast as vc
+
+try:
+    import numpy
+except ImportError:
+    numpy = None
+try:
+    import PIL.Image
+except ImportError:
+    PIL = None
+
+NEEDS = "numpy and Pillow are not both installed (Debian: python3-numpy python3-pil, in deploy/install.sh)"
+
+
+def png(width, height, channels, pixel):
+    """An 8-bit PNG (channels 3: RGB, 4: RGBA) whose pixel (x, y) is pixel(x, y)."""
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    color_type = {3: 2, 4: 6}[channels]
+    rows = b"".join(b"\x00" + bytes(v for x in range(width) for v in pixel(x, y)) for y in range(height))
+    return (b"\x89PNG\r\n\x1a\n"
+            + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, color_type, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b""))
+
+
+def frame(image, width, height, codec="png"):
+    header = {"seq": 7, "level": 0, "width": width, "height": height, "codec": codec,
+              "render_ms": 1.0, "encode_ms": 0.5, "final": True}
+    return vc.decode_frame(vc.encode_frame(header, image))
+
+
+def rgba(x, y):
+    # Every channel different and position-dependent, so a transposed or flipped decode fails.
+    return (x * 40, y * 60, (x * 7 + y * 13) % 256, 255 - x - y)
+
+
+@unittest.skipUnless(numpy is not None and PIL is not None, NEEDS)
+class Decode(unittest.TestCase):
+    def test_png_rgba_decodes_to_its_exact_pixels(self):
+        width, height = 5, 3
+        pixels = frame(png(width, height, 4, rgba), width, height).to_numpy()
+        self.assertEqual(pixels.shape, (height, width, 4), "rows x columns x RGBA")
+        self.assertEqual(pixels.dtype, numpy.uint8)
+        want = numpy.array([[rgba(x, y) for x in range(width)] for y in range(height)], numpy.uint8)
+        numpy.testing.assert_array_equal(pixels, want, "PNG is lossless: every value must match")
+
+    def test_png_rgb_gets_opaque_alpha(self):
+        pixels = frame(png(4, 2, 3, lambda x, y: rgba(x, y)[:3]), 4, 2).to_numpy()
+        self.assertEqual(pixels.shape, (2, 4, 4))
+        self.assertTrue((pixels[:, :, 3] == 255).all(), f"alpha of an RGB PNG: {pixels[:, :, 3]}")
+
+    def test_jpeg_decodes_within_quantization_error(self):
+        # Two flat 8x8 blocks: JPEG then keeps only each block's DC term, which quality 95
+        # quantizes to within a few levels (libjpeg's tables; measured 0-1 here), so 4 of 255.
+        width, height = 16, 8
+        colors = [(200, 40, 90), (30, 160, 220)]
+        picture = PIL.Image.new("RGB", (width, height))
+        picture.putdata([colors[x // 8] for y in range(height) for x in range(width)])
+        encoded = io.BytesIO()
+        picture.save(encoded, "JPEG", quality=95, subsampling=0)
+        pixels = frame(encoded.getvalue(), width, height, codec="jpeg").to_numpy()
+        self.assertEqual(pixels.shape, (height, width, 4))
+        want = numpy.array([[colors[x // 8] for x in range(width)] for y in range(height)], numpy.int16)
+        worst = int(numpy.abs(pixels[:, :, :3].astype(numpy.int16) - want).max())
+        self.assertLessEqual(worst, 4, f"JPEG decode differs by {worst} levels from the flat colours")
+        self.assertTrue((pixels[:, :, 3] == 255).all(), "JPEG has no alpha: 255 everywhere")
+
+    def test_image_of_another_size_than_the_header_is_refused(self):
+        bad = frame(png(5, 3, 4, rgba), 6, 3)
+        with self.assertRaisesRegex(vc.FrameError, r"frame 7: the image is 5x3 but the header says 6x3"):
+            bad.to_numpy()
+
+    def test_bytes_that_are_not_the_codec_are_refused(self):
+        with self.assertRaisesRegex(vc.FrameError, "frame 7: the png image does not decode"):
+            frame(b"not a png at all", 2, 2).to_numpy()
+        # A PNG sent as a JPEG frame: the header's codec is what is decoded, not a guess.
+        with self.assertRaisesRegex(vc.FrameError, "frame 7: the jpeg image does not decode"):
+            frame(png(2, 2, 4, rgba), 2, 2, codec="jpeg").to_numpy()
+
+
+class MissingPackages(unittest.TestCase):
+    # sys.modules[name] = None makes `import name` raise ImportError: the package's absence,
+    # whether or not it is installed here.
+
+    def test_without_numpy_the_error_names_numpy(self):
+        with mock.patch.dict(sys.modules, {"numpy": None}):
+            with self.assertRaises(vc.MissingDependencyError) as caught:
+                frame(png(2, 2, 4, rgba), 2, 2).to_numpy()
+        self.assertIsInstance(caught.exception, ImportError)
+        self.assertIn("'numpy'", str(caught.exception))
+        self.assertIn("python3-numpy", str(caught.exception))
+
+    @unittest.skipUnless(numpy is not None, "numpy is not installed (Debian: python3-numpy, in "
+                         "deploy/install.sh); the Pillow check runs after numpy's")
+    def test_without_pillow_the_error_names_pillow(self):
+        with mock.patch.dict(sys.modules, {"PIL": None, "PIL.Image": None}):
+            with self.assertRaises(vc.MissingDependencyError) as caught:
+                frame(png(2, 2, 4, rgba), 2, 2).to_numpy()
+        self.assertIn("'Pillow'", str(caught.exception))
+        self.assertIn("python3-pil", str(caught.exception))
+        self.assertIn("decoding png", str(caught.exception))
+
+    def test_the_rest_of_the_package_works_without_numpy(self):
+        with mock.patch.dict(sys.modules, {"numpy": None, "PIL": None, "PIL.Image": None}):
+            decoded = frame(png(2, 2, 4, rgba), 2, 2)
+            self.assertEqual((decoded.width, decoded.height, decoded.codec), (2, 2, "png"))
+            self.assertEqual(vc.dumps(vc.still()), '{"type":"still"}')
+
+
+if __name__ == "__main__":
+    unittest.main()
