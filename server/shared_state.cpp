@@ -120,7 +120,7 @@ void SharedState::warmUp(std::shared_ptr<VolumeEntry> entry) {
             computeStatistics(tiny);
             own = std::make_unique<OpenClRenderer>(*cl_, tiny);
         }
-        OpenClRenderer &renderer = entry ? *entry->renderer : *own;
+        FrameRenderer &renderer = entry ? *entry->renderer : *own;
         const Volume &v = renderer.volume();
         Camera camera;
         camera.target = v.center();

@@ -11,6 +11,7 @@
 #include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/synthetic.hpp"
+#include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>
