@@ -155,8 +155,15 @@ TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongRender) {
         EXPECT_TRUE(WIFEXITED(status)) << status;
         EXPECT_EQ(WEXITSTATUS(status), 0);
         EXPECT_LT(took.count(), 2500);
-        // The log says what was still running when the grace period ended.
-        EXPECT_NE(readAll(tmp / "log.txt").find("render worker"), std::string::npos) << readAll(tmp / "log.txt");
+        // Either the render stopped at a unit boundary and the server stopped cleanly, or the
+        // watchdog ended it and the log says what was still running. (Since the scheduler runs
+        // bounded units, the first is what happens; the watchdog stays for what units do not
+        // bound: a load inside one read, a preparation.)
+        const std::string log = readAll(tmp / "log.txt");
+        const bool watchdog = log.find("still not stopped") != std::string::npos;
+        EXPECT_TRUE(watchdog ? log.find("render worker") != std::string::npos || log.find("loader") != std::string::npos
+                             : log.find("[info] stopped") != std::string::npos)
+            << log;
     }
 }
 
