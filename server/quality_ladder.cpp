@@ -5,43 +5,50 @@
 
 namespace volcast::server {
 
+namespace {
+// The non-final levels, cheapest first, as server/README.md's table shows them. Each is
+// derived from the final quality f: step max(stepAtLeast, stepTimesFinal · f.step), mip level
+// at least mipAtLeast, image scale and early termination at most the given values; linear
+// and unshaded-as-f, pre-integration only where keepsPreintegration, jittered where jittered
+// (unless pre-integrated: the table already removes the rings jitter would hide).
+struct LevelRule {
+    double stepAtLeast;
+    double stepTimesFinal;
+    int mipAtLeast;
+    double imageScaleAtMost;
+    double earlyTerminationAtMost;
+    bool keepsPreintegration;
+    bool jittered;
+    int jpegQuality;
+};
+constexpr double kNoLimit = 1e300;
+constexpr LevelRule kLadder[] = {
+    // 1/16 of the rays on the quarter-resolution mip, for big viewports on slow devices.
+    {4, 8, 2, 0.25, 0.9, false, false, 50},
+    {2, 4, 1, 0.5, 0.95, false, false, 60},
+    {1, 2, 0, 0.5, 0.98, false, false, 70},
+    // Full size at twice the final step; jitter hides its onion rings until the final replaces it.
+    {0, 2, 0, kNoLimit, kNoLimit, true, true, 80},
+};
+constexpr int kFinalJpegQuality = 90;   // the final level's frames sent before it is final (the final itself is PNG)
+} // namespace
+
 std::vector<Level> automaticLadder(const Quality &f, int jitterPasses) {
     std::vector<Level> ladder;
-    Quality q = f;
-    q.jitter = false;
-    q.preintegrated = false;
-    q.interpolation = Interpolation::Linear;
-    q.shading = f.shading;
-
-    // The cheapest: 1/16 of the rays on the quarter-resolution mip, for big viewports on slow devices.
-    Quality lq = q;
-    lq.step = std::max(4.0, 8 * f.step);
-    lq.mipLevel = std::max(2, f.mipLevel);
-    lq.imageScale = std::min(0.25, f.imageScale);
-    lq.earlyTermination = std::min(0.9, f.earlyTermination);
-    ladder.push_back({lq, 1, 50});
-
-    Quality l0 = q;
-    l0.step = std::max(2.0, 4 * f.step);
-    l0.mipLevel = std::max(1, f.mipLevel);
-    l0.imageScale = std::min(0.5, f.imageScale);
-    l0.earlyTermination = std::min(0.95, f.earlyTermination);
-    ladder.push_back({l0, 1, 60});
-
-    Quality l1 = q;
-    l1.step = std::max(1.0, 2 * f.step);
-    l1.imageScale = std::min(0.5, f.imageScale);
-    l1.earlyTermination = std::min(0.98, f.earlyTermination);
-    ladder.push_back({l1, 1, 70});
-
-    // Jitter hides the onion rings of the coarser step until the final level replaces it.
-    Quality l2 = q;
-    l2.step = 2 * f.step;
-    l2.preintegrated = f.preintegrated;
-    l2.jitter = !f.preintegrated;
-    ladder.push_back({l2, 1, 80});
-
-    ladder.push_back({f, f.jitter ? jitterPasses : 1, 90});
+    for (const LevelRule &r : kLadder) {
+        Quality q = f;
+        q.jitter = false;
+        q.preintegrated = false;
+        q.interpolation = Interpolation::Linear;
+        q.step = std::max(r.stepAtLeast, r.stepTimesFinal * f.step);
+        q.mipLevel = std::max(r.mipAtLeast, f.mipLevel);
+        q.imageScale = std::min(r.imageScaleAtMost, f.imageScale);
+        q.earlyTermination = std::min(r.earlyTerminationAtMost, f.earlyTermination);
+        if (r.keepsPreintegration) q.preintegrated = f.preintegrated;
+        if (r.jittered) q.jitter = !q.preintegrated;
+        ladder.push_back({q, 1, r.jpegQuality});
+    }
+    ladder.push_back({f, f.jitter ? jitterPasses : 1, kFinalJpegQuality});
 
     // Leave out a level identical to the next one (a coarse final quality).
     std::vector<Level> unique;
