@@ -16,7 +16,9 @@ from typing import List, Optional
 
 REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 DEFAULT_SERVER = os.path.join(REPO, "build", "server", "volcast-server")
-DEFAULT_DATA = "/work/shared/data/volumes"
+# The real scans stay outside the repository: VOLCAST_DATA_DIR names their folder (as for
+# CMake), else the default beside the checkout (tests/CMakeLists.txt).
+DEFAULT_DATA = os.environ.get("VOLCAST_DATA_DIR") or os.path.join(REPO, "..", "shared", "data", "volumes")
 
 
 def rss_kib(pid: int) -> Optional[int]:
