@@ -94,6 +94,12 @@ class PathTracker {
 } // namespace
 
 ParsedText parseText(std::string_view text, int maxDepth) {
+    // The JSON library stops at a NUL byte as at the end of the text, so `{...}\0anything` would
+    // be taken as the message before it with no word about the rest. JSON text never holds a
+    // raw NUL (inside a string it is written \u0000).
+    if (const size_t nul = text.find('\0'); nul != std::string_view::npos)
+        fail(ErrorCode::MalformedJson,
+             "malformed JSON: a NUL byte at byte " + std::to_string(nul) + " (write it as \\u0000 inside a string)");
     auto tracker = std::make_shared<PathTracker>(maxDepth);
     ParsedText out;
     try {

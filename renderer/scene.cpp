@@ -349,6 +349,10 @@ class PathTracker {
 };
 
 json parseJson(std::string_view text) {
+    // The JSON library stops at a NUL byte as at the end of the text: a file with one would be
+    // read only up to it. JSON text never holds a raw NUL.
+    if (const size_t nul = text.find('\0'); nul != std::string_view::npos)
+        fail("", "malformed JSON: a NUL byte at byte " + std::to_string(nul));
     auto tracker = std::make_shared<PathTracker>();
     try {
         // parse() copies its callback, so the tracker is shared to be read afterwards.

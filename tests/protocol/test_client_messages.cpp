@@ -151,6 +151,18 @@ TEST(ClientMessageErrors, MalformedJson) {
     EXPECT_NE(errorOf("{\"type\": \"close\",\n  oops}").message.find("line 2"), std::string::npos);
 }
 
+// The soak's one finding: the JSON library ends the text at a NUL byte, so a valid request
+// followed by a NUL and anything was applied with no answer about the rest.
+TEST(ClientMessageErrors, NulByteAfterAValidMessageIsMalformedNotIgnored) {
+    using namespace std::string_literals;
+    for (const std::string &text : {"{\"type\":\"get_state\",\"id\":5}\0{{{"s, "{\"type\":\"close\"}\0"s,
+                                   "{\"type\":\"open_volume\",\"name\":\"a\0b\"}"s}) {
+        const ProtocolError e = errorOf(text);
+        EXPECT_EQ(e.code, ErrorCode::MalformedJson) << e.message;
+        EXPECT_NE(e.message.find("NUL byte"), std::string::npos) << e.message;
+    }
+}
+
 TEST(ClientMessageErrors, TooLargeIsRefusedBeforeParsing) {
     Limits limits;
     limits.maxMessageBytes = 100;

@@ -230,6 +230,12 @@ TEST(SceneRefuses, MalformedJsonIsNamedWithItsLine) {
     EXPECT_SCENE_ERROR((""), "malformed JSON");
 }
 
+TEST(SceneRefuses, NulByteInTheFileIsMalformedNotTheEndOfTheText) {
+    using namespace std::string_literals;
+    const std::string message = errorOf("{\"volume\": \"builtin:demo\"}\0{\"camera\": 1}"s);
+    EXPECT_TRUE(contains(message, "NUL byte at byte 26")) << message;
+}
+
 TEST(SceneRefuses, TopLevelThatIsNotAnObject) {
     EXPECT_SCENE_ERROR(("[1, 2]"), "scene: must be a JSON object");
     EXPECT_SCENE_ERROR(("\"scene\""), "scene: must be a JSON object");
