@@ -47,17 +47,8 @@ TransferFunction constantTf(double a) { return test::constantTf(0.9, 0.5, 0.2, a
 Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 30); }
 Quality plain(double step) { return test::plainQuality(step); }
 
-TransferFunction blobTf() {
-    TransferFunction tf;
-    tf.points = {{0, 0, 0, 0, 0}, {40, 0, 0, 0, 0}, {90, 1, 0.4, 0.1, 0.15}, {150, 0.3, 0.7, 1, 0.4},
-                 {220, 1, 1, 1, 0.7}};
-    return tf;
-}
-
-const SyntheticVolume &blob() {
-    static const SyntheticVolume v = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 4, 220);
-    return v;
-}
+using test::blob;
+using test::blobTf;
 
 Image reference(const Volume &v, const TransferFunction &tf, Reconstruction rec, const Camera &cam, int w, int h,
                 bool shading = false, double tolerance = 1e-6, const std::vector<ClipPlane> &clip = {}) {

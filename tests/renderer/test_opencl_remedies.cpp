@@ -19,17 +19,8 @@ OpenClContext &cl() { return test::sharedOpenClContext(); }
 
 Quality plain(double step) { return test::plainQuality(step); }
 
-TransferFunction blobTf() {
-    TransferFunction tf;
-    tf.points = {{0, 0, 0, 0, 0}, {40, 0, 0, 0, 0}, {90, 1, 0.4, 0.1, 0.15}, {150, 0.3, 0.7, 1, 0.4},
-                 {220, 1, 1, 1, 0.7}};
-    return tf;
-}
-
-const SyntheticVolume &blob() {
-    static const SyntheticVolume v = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 4, 220);
-    return v;
-}
+using test::blob;
+using test::blobTf;
 
 TEST(OpenClRemedies, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
     OpenClRenderer r(cl(), blob().volume);

@@ -3,6 +3,7 @@
 
 #include "renderer/camera.hpp"
 #include "renderer/scene.hpp"
+#include "renderer/synthetic.hpp"
 #include "renderer/transfer_function.hpp"
 #include "renderer/volume.hpp"
 
@@ -35,6 +36,20 @@ inline Camera obliqueCamera(const Volume &v, double fovYDeg) {
     c.up = {0.1, 1, 0.2};
     c.fovYDeg = fovYDeg;
     return c;
+}
+
+// A smooth Gaussian blob (24³) and a transfer function with three visible bands: the scene
+// the remedy tests of both back ends share.
+inline TransferFunction blobTf() {
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {40, 0, 0, 0, 0}, {90, 1, 0.4, 0.1, 0.15}, {150, 0.3, 0.7, 1, 0.4},
+                 {220, 1, 1, 1, 0.7}};
+    return tf;
+}
+
+inline const SyntheticVolume &blob() {
+    static const SyntheticVolume v = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 4, 220);
+    return v;
 }
 
 } // namespace volcast::test

@@ -1,16 +1,29 @@
 #pragma once
-// HTTP helpers shared by the server's test files: a GET, and a request sent byte for byte
-// as given (for the malformed ones no client library would write).
+// Helpers shared by the server's test files: a GET, a request sent byte for byte as given
+// (for the malformed ones no client library would write), and a camera orbiting the demo.
 
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 
+#include <nlohmann/json.hpp>
+
 #include <chrono>
+#include <cmath>
 #include <optional>
 #include <string>
 
 namespace volcast::test {
+
+// A scene-file camera on a circle around the demo volume's centre (63.5³), angleDeg around y.
+inline nlohmann::json cameraAt(double angleDeg) {
+    const double a = angleDeg * M_PI / 180.0, r = 420;
+    return {{"eye", {63.5 + r * std::sin(a), 63.5 + 250, 63.5 + r * std::cos(a)}},
+            {"target", {63.5, 63.5, 63.5}},
+            {"up", {0, 1, 0}},
+            {"projection", "perspective"},
+            {"fov_y_deg", 30}};
+}
 
 struct HttpReply {
     int status = 0;

@@ -77,14 +77,7 @@ std::vector<volcast::client::Frame> framesUntilFinal(Client &c, std::vector<Mess
     return frames;
 }
 
-json cameraAt(double angleDeg) {
-    const double a = angleDeg * M_PI / 180.0, r = 420;
-    return {{"eye", {63.5 + r * std::sin(a), 63.5 + 250, 63.5 + r * std::cos(a)}},
-            {"target", {63.5, 63.5, 63.5}},
-            {"up", {0, 1, 0}},
-            {"projection", "perspective"},
-            {"fov_y_deg", 30}};
-}
+using volcast::test::cameraAt;
 
 // Decode a PNG frame to 8-bit RGBA.
 std::vector<uint8_t> decodePng(const std::vector<uint8_t> &png, int &w, int &h, int &channels) {

@@ -3,6 +3,7 @@
 // Each test runs its own in-process server with the limits it exercises set small, so that
 // it takes seconds; the built-in demo volume (128³) and 64² viewports keep renders cheap.
 
+#include "tests/server/server_fixture.hpp"
 #include "client/ws_client.hpp"
 #include "server/server.hpp"
 
@@ -69,14 +70,7 @@ json hello(int id, const std::string &token = "") {
     return h;
 }
 
-json cameraAt(double angleDeg) {
-    const double a = angleDeg * M_PI / 180.0, r = 420;
-    return {{"eye", {63.5 + r * std::sin(a), 63.5 + 250, 63.5 + r * std::cos(a)}},
-            {"target", {63.5, 63.5, 63.5}},
-            {"up", {0, 1, 0}},
-            {"projection", "perspective"},
-            {"fov_y_deg", 30}};
-}
+using volcast::test::cameraAt;
 
 // A session past hello with the demo open at side², after its first final frame.
 std::unique_ptr<Client> openDemo(uint16_t port, int side, const std::string &token = "") {
