@@ -80,7 +80,13 @@ struct Session {
                 progress.push_back(p);
             });
     }
-    ~Session() { scheduler.removeSession(slot); }
+    // Sessions live only until their test ends. The worker calls deliver outside its lock, so
+    // removeSession alone could leave a delivery running into a destroyed Session (the server's
+    // sessions post through a weak pointer instead): stop the worker first.
+    ~Session() {
+        scheduler.stop();
+        scheduler.removeSession(slot);
+    }
 
     std::shared_ptr<ViewJob> view(int request, double angle, int size, std::vector<Level> ladder) {
         auto job = std::make_shared<ViewJob>();
