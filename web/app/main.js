@@ -287,13 +287,13 @@ session.on("frame", async (f) => {
       // A frame answering a later request shows the scene works again: earlier scene errors go.
       const answered = f.header.request;
       if (typeof answered === "number") errors.clear((e) => SCENE_REQUESTS.includes(e.requestType) && e.request !== null && e.request < answered);
-      errors.clear((e) => e.code === "client");
+      errors.clear((e) => e.code === "decode");
       window.volcast.shown = f.header;
       stats.refresh();
       updateMessage();
     }
   } catch (e) {
-    errors.show({ code: "client", message: `cannot decode frame ${f.header.seq} (${f.header.codec}): ${e.message}` });
+    errors.show({ code: "decode", message: `cannot decode frame ${f.header.seq} (${f.header.codec}): ${e.message}` });
   }
 });
 
