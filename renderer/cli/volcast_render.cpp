@@ -1,6 +1,6 @@
 // volcast-render: render one scene file offline and print one JSON line about it.
 //
-//   volcast-render scene.json -o out.exr [--reference] [--compare other.exr]
+//   volcast-render scene.json -o out.exr [--reference] [--compare other.exr] [--data FOLDER]...
 
 #include "renderer/error_metrics.hpp"
 #include "renderer/image.hpp"
@@ -8,6 +8,7 @@
 #include "renderer/reference_renderer.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/io/volume_source.hpp"
+#include "protocol/volume_name.hpp"
 
 #include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -17,6 +18,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <memory>
 
@@ -27,6 +30,46 @@ double msSince(Clock::time_point t) { return std::chrono::duration<double, std::
 
 // JSON has no infinity: identical images report PSNR as null.
 nlohmann::json finiteOrNull(double x) { return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json(nullptr); }
+
+namespace fs = std::filesystem;
+
+// The scene file's own "volume" string, before the scene parser makes a relative name
+// relative to the scene file's folder.
+std::string sceneVolumeName(const std::string &scenePath) {
+    std::ifstream in(scenePath, std::ios::binary);
+    const nlohmann::json j = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+    const auto it = j.is_object() ? j.find("volume") : j.end();
+    return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+}
+
+bool isInside(const fs::path &p, const fs::path &folder) {
+    const auto rel = p.lexically_relative(folder);
+    return !rel.empty() && *rel.begin() != "..";
+}
+
+// A server-relative volume name (what a scene saved from volcast-server holds) found in
+// the --data folders, confined as the server confines it: the same name rules
+// (protocol/volume_name.hpp: no absolute path, no "..", no "~"), and a name whose real path
+// (symbolic links followed) leaves its folder is refused. The first folder that has it wins.
+fs::path resolveInDataFolders(const std::string &name, const std::vector<std::string> &folders) {
+    if (const auto problem = volcast::protocol::validateVolumeName(name))
+        throw std::invalid_argument("scene volume \"" + name + "\" " + *problem +
+                                    " (with --data the scene must name a volume relative to the data folders)");
+    std::string searched;
+    for (const std::string &folder : folders) {
+        std::error_code ec;
+        const fs::path root = fs::canonical(folder, ec);
+        if (ec) throw std::invalid_argument("--data " + folder + ": " + ec.message());
+        const fs::path p = fs::weakly_canonical(root / fs::path(name), ec);
+        searched += (searched.empty() ? "" : ", ") + root.string();
+        if (ec || !fs::exists(p, ec)) continue;
+        if (!isInside(p, root))
+            throw std::invalid_argument("scene volume \"" + name + "\" resolves outside the data folder " +
+                                        root.string() + " (a symbolic link?)");
+        return p;
+    }
+    throw std::invalid_argument("scene volume \"" + name + "\" is in none of the --data folders (" + searched + ")");
+}
 
 } // namespace
 
@@ -58,6 +101,11 @@ int main(int argc, char **argv) {
     app.add_option("--compare", comparePath, "Print RMSE, PSNR and max error against this image")
         ->check(CLI::ExistingFile);
     app.add_option("--error-image", errorImagePath, "With --compare: write the per-pixel error here");
+    std::vector<std::string> dataFolders;
+    app.add_option("--data", dataFolders,
+                   "Data folder the scene's volume name is relative to, as volcast-server's --data (repeatable, "
+                   "searched in order); without it a relative name is relative to the scene file")
+        ->check(CLI::ExistingDirectory);
     CLI11_PARSE(app, argc, argv);
     // Warnings (non-finite voxels replaced, a step raised) go to stderr: stdout is the JSON line.
     spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-render"));
@@ -65,7 +113,11 @@ int main(int argc, char **argv) {
     try {
         nlohmann::json report;
         if (analytic) reference = true;
-        const volcast::Scene scene = volcast::loadSceneFile(scenePath);
+        volcast::Scene scene = volcast::loadSceneFile(scenePath);
+        // A scene saved from the server keeps the server-relative name (an absolute server
+        // path would tell every client the server's layout); --data finds it as the server does.
+        if (!dataFolders.empty() && !scene.volume.starts_with("builtin:"))
+            scene.volume = resolveInDataFolders(sceneVolumeName(scenePath), dataFolders).string();
 
         auto t = Clock::now();
         volcast::LoadedVolume loaded = volcast::loadSceneVolume(scene.volume);

@@ -2,7 +2,8 @@
 //
 // URL parameters: ?volume=NAME opens that volume first; ?server=ws://host:port/ws talks to
 // another server than the one that served the page; ?token=T for a server started with
-// --token.
+// --token. A view link's fragment (#volume=…&eye=…, core/view_link.js) opens its volume
+// with its camera and transfer function.
 
 import { orbit, pan, volumeBounds, zoom } from "../core/camera.js";
 import { defaultServerUrl } from "../core/connection.js";
@@ -14,6 +15,7 @@ import { StatsOverlay } from "./stats_overlay.js";
 import { ConnectionIndicator, ErrorList, ViewMessage } from "./status.js";
 import { TransferFunctionEditor } from "./tf_editor.js";
 import { View } from "./view.js";
+import { formatViewLink, parseViewLink } from "../core/view_link.js";
 
 const CLIENT_NAME = "volcast-web 0.1.0";
 const MAX_FRAMES_KEPT = 400;           // frame headers kept in window.volcast.frames (tests, console)
@@ -24,11 +26,12 @@ const STAGE_SHARE = { loading: [0, 0.6], preprocessing: [0.6, 0.9], uploading: [
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const serverUrl = params.get("server") || defaultServerUrl(location);
+const viewLink = parseViewLink(location.hash);   // {view, error}: refused whole when wrong
 
 const session = new Session(serverUrl, {
   client: CLIENT_NAME,
   token: params.get("token") || undefined,
-  preferredVolume: params.get("volume") || null,
+  preferredVolume: viewLink.view?.volume ?? (params.get("volume") || null),
 });
 
 // What the page holds beyond the session: the camera being navigated, the view to reset
@@ -43,6 +46,7 @@ const app = {
   renderError: null,        // why the server could not render, while no frame is on screen
   frameSinceOpen: false,
   resolution: "auto",
+  pendingLink: viewLink.view,   // the view link's camera and transfer function, until its volume opens
 };
 
 // --- widgets --------------------------------------------------------------------------
@@ -51,6 +55,7 @@ const errors = new ErrorList(document);
 const message = new ViewMessage(document);
 const indicator = new ConnectionIndicator(document, () => session.connection.retryNow());
 const stats = new StatsOverlay(document, session.stats);
+if (viewLink.error) errors.show({ code: "view_link", message: viewLink.error });
 
 // One send per animation frame for continuous edits (TF drags, clip slider); the latest
 // value wins, as on the server.
@@ -111,6 +116,7 @@ for (const p of TF_PRESETS) $("tf-preset").append(new Option(p.label, p.name));
 function onTfEdited(points, interactive) {
   const bad = problems(points);
   if (bad.length) { errors.show({ code: "transfer_function", message: bad.join("; ") }); return; }
+  errors.clear((e) => e.code === "transfer_function");
   app.tf = { points: tidyPoints(points) };
   if (app.tfOpacityUnit !== undefined) app.tf.opacity_unit = app.tfOpacityUnit;
   $("tf-preset").value = "";
@@ -188,17 +194,36 @@ session.on("hello", (hello) => {
     Object.assign(document.createElement("dd"), { textContent: v ?? "?" }));
 });
 
+// The picker: the server's scans first, the synthetic builtin: phantoms in a group apart.
 session.on("volumes", (volumes) => {
-  const list = $("volume-list");
-  list.replaceChildren(...volumes.map((v) => {
-    const o = new Option(v.dims ? `${v.dims.join("×")}${v.loaded ? " · loaded" : ""}` : v.loaded ? "loaded" : "", v.name);
-    return o;
-  }));
+  const select = $("volume-select");
+  const option = (v) => {
+    const facts = [v.dims?.join("×"), v.loaded ? "loaded" : null].filter(Boolean).join(" · ");
+    return new Option(facts ? `${v.name} (${facts})` : v.name, v.name);
+  };
+  const group = (label, list) => {
+    const g = document.createElement("optgroup");
+    g.label = label;
+    g.append(...list.map(option));
+    return g;
+  };
+  const scans = volumes.filter((v) => !v.name.startsWith("builtin:")).sort((a, b) => a.name.localeCompare(b.name));
+  const phantoms = volumes.filter((v) => v.name.startsWith("builtin:"));
+  const placeholder = new Option(scans.length ? "choose a volume…" : "no scans on the server: choose a phantom…", "");
+  placeholder.disabled = true;
+  select.replaceChildren(placeholder, group(`Scans (${scans.length})`, scans), group("Synthetic phantoms", phantoms));
+  showOpenVolume();
 });
+
+function showOpenVolume() {
+  const select = $("volume-select"), name = session.volume?.name ?? "";
+  if (name && ![...select.options].some((o) => o.value === name)) select.append(new Option(name, name));
+  select.value = name;
+}
 
 session.on("loading", (l) => {
   if (l) { app.progress = null; app.openError = null; }
-  $("open-volume").disabled = !!l;
+  $("open-volume").disabled = $("volume-select").disabled = !!l;
   updateMessage();
 });
 
@@ -219,21 +244,30 @@ session.on("opened", ({ state, restored }) => {
     view.clear();
     window.volcast.shown = null;
   }
+  // A volume that opened makes the errors of opening and of the scene before it stale (not
+  // a refused view link's: the user has yet to read why the link's view is not there).
+  if (!restored) errors.clear((e) => e.requestType === "open_volume" || SCENE_REQUESTS.includes(e.requestType) || ["volume", "client", "transfer_function"].includes(e.code));
   tfEditor.setVolume(volume);
+  applyPendingLink(volume);
   showTransferFunction(session.scene.transfer_function ?? state.scene?.transfer_function);
   quality.showState(state);
   quality.setVolume(volume, session.scene.clip_planes);
-  $("volume-name").value = volume?.name ?? "";
+  showOpenVolume();
+  $("volume-name").value = "";
   $("volume-info").textContent = $("volume-info").title = describeVolume(volume);
   document.title = volume?.name ? `${volume.name} — volcast` : "volcast";
   const url = new URL(location.href);
   url.searchParams.set("volume", volume?.name ?? "");
+  // A view link names the view it opened; another volume makes it wrong.
+  if (url.hash && parseViewLink(url.hash).view?.volume !== volume?.name && !app.pendingLink) url.hash = "";
   history.replaceState(null, "", url);
   updateMessage();
 });
 
 session.on("server_error", (e) => {
   errors.show(e);
+  // A refused quality policy leaves the server's: show that, not the refused values.
+  if (e.request_type === "quality_policy") session.getState().then((s) => quality.showState(s), () => {});
   if (e.request_type === "open_volume" && !session.volume) app.openError = e;
   if ((e.code === "render_failed" || e.code === "internal") && !app.frameSinceOpen) app.renderError = e;
   updateMessage();
@@ -250,14 +284,20 @@ session.on("frame", async (f) => {
     if (await view.show(f)) {
       app.frameSinceOpen = true;
       app.renderError = null;
+      // A frame answering a later request shows the scene works again: earlier scene errors go.
+      const answered = f.header.request;
+      if (typeof answered === "number") errors.clear((e) => SCENE_REQUESTS.includes(e.requestType) && e.request !== null && e.request < answered);
+      errors.clear((e) => e.code === "decode");
       window.volcast.shown = f.header;
       stats.refresh();
       updateMessage();
     }
   } catch (e) {
-    errors.show({ code: "client", message: `cannot decode frame ${f.header.seq} (${f.header.codec}): ${e.message}` });
+    errors.show({ code: "decode", message: `cannot decode frame ${f.header.seq} (${f.header.codec}): ${e.message}` });
   }
 });
+
+const SCENE_REQUESTS = ["camera", "viewport", "transfer_function", "quality_policy", "clip_planes", "still"];
 
 function describeVolume(v) {
   if (!v) return "";
@@ -303,12 +343,21 @@ function updateMessage() {
 
 // --- volume picker and saving -----------------------------------------------------------
 
+function openNamed(name) {
+  if (!name) return errors.show({ code: "volume", message: "choose a volume (or type a name) first" });
+  if (!session.ready) return errors.show({ code: "volume", message: "not connected to the server yet" });
+  errors.clear((e) => e.code === "volume");
+  session.openVolume(name).catch((err) => errors.show({ code: "client", message: err.message }));
+}
+
+// The typed name when there is one, else the list's choice; choosing in the list opens at once.
 $("volume-form").addEventListener("submit", (e) => {
   e.preventDefault();
-  const name = $("volume-name").value.trim();
-  if (!name) return errors.show({ code: "volume", message: "type or choose a volume name first" });
-  if (!session.ready) return errors.show({ code: "volume", message: "not connected to the server yet" });
-  session.openVolume(name).catch((err) => errors.show({ code: "client", message: err.message }));
+  openNamed($("volume-name").value.trim() || $("volume-select").value);
+});
+$("volume-select").addEventListener("change", () => {
+  $("volume-name").value = "";
+  openNamed($("volume-select").value);
 });
 
 function download(blob, filename) {
@@ -343,12 +392,88 @@ async function saveScene() {
   }
 }
 
+// --- view link, stats, full screen, phone layout ------------------------------------------
+
+// The view link's camera and transfer function, once its volume (or, naming none, the
+// first volume) has opened; the link's own problems were shown at start.
+function applyPendingLink(volume) {
+  const link = app.pendingLink;
+  if (!link || (link.volume && link.volume !== volume?.name)) return;
+  app.pendingLink = null;
+  if (link.transfer_function) session.setTransferFunction(link.transfer_function);
+  if (link.camera) { app.camera = link.camera; session.setCamera(app.camera); }
+}
+
+function copyViewLink() {
+  if (!session.volume) return errors.show({ code: "view_link", message: "open a volume first" });
+  const url = new URL(location.href);
+  url.hash = formatViewLink({ volume: session.volume.name, camera: app.camera, transfer_function: app.tf });
+  history.replaceState(null, "", url);
+  const button = $("copy-link");
+  const said = (text) => { button.textContent = text; setTimeout(() => { button.textContent = "Link"; }, 1500); };
+  // The address bar holds the link either way; the clipboard needs a secure context.
+  (navigator.clipboard?.writeText(url.href) ?? Promise.reject(new Error("no clipboard"))).then(() => said("Copied"), () => said("In the address"));
+}
+
+const STATS_HIDDEN_KEY = "volcast.statsHidden";
+function showStats(visible) {
+  $("stats").hidden = !visible;
+  $("toggle-stats").setAttribute("aria-pressed", String(visible));
+  try { localStorage.setItem(STATS_HIDDEN_KEY, visible ? "" : "1"); } catch { /* storage off */ }
+}
+showStats((() => { try { return !localStorage.getItem(STATS_HIDDEN_KEY); } catch { return true; } })());
+
+function toggleFullscreen() {
+  if (document.fullscreenElement) return document.exitFullscreen();
+  $("view").requestFullscreen().catch((e) => errors.show({ code: "client", message: `full screen refused: ${e.message}` }));
+}
+document.addEventListener("fullscreenchange", () => {
+  $("fullscreen").setAttribute("aria-pressed", String(document.fullscreenElement === $("view")));
+});
+
+// Keys anywhere but in a field: S hides or shows the stats, F full screen.
+document.addEventListener("keydown", (e) => {
+  if (e.ctrlKey || e.metaKey || e.altKey || e.target.closest?.("input, select, textarea")) return;
+  if (e.key === "s" || e.key === "S") showStats($("stats").hidden);
+  else if (e.key === "f" || e.key === "F") toggleFullscreen();
+});
+
+// On a phone the stats leave the view for the top of the panel below it: nothing covers the image.
+const PHONE = matchMedia("(max-width: 600px)");
+function placeStats() {
+  const box = $("stats");
+  if (PHONE.matches) $("panel").prepend(box); else $("view").insertBefore(box, $("errors"));
+  box.classList.toggle("docked", PHONE.matches);
+}
+PHONE.addEventListener("change", placeStats);
+placeStats();
+
+// A number field shows what is applied: a value the field's own limits refuse (or no
+// number at all) is not sent; the applied one comes back, marked invalid until retyped.
+const panel = $("panel");
+panel.addEventListener("focusin", (e) => { if (e.target.type === "number") e.target.dataset.applied = e.target.value; });
+panel.addEventListener("change", (e) => {
+  const el = e.target;
+  if (el.type !== "number") return;
+  const v = el.validity;
+  if (!(v.badInput || v.rangeOverflow || v.rangeUnderflow || el.value.trim() === "")) { el.dataset.applied = el.value; return; }
+  e.stopImmediatePropagation();
+  const refused = el.value;
+  el.value = el.dataset.applied ?? "";
+  el.setAttribute("aria-invalid", "true");
+  el.title = `${refused === "" ? "no number" : `"${refused}"`} refused: ${el.min !== "" ? `at least ${el.min}` : ""}${el.min !== "" && el.max !== "" ? ", " : ""}${el.max !== "" ? `at most ${el.max}` : ""}; showing the value in use`;
+  el.addEventListener("input", () => { el.removeAttribute("aria-invalid"); el.title = ""; }, { once: true });
+}, true);
+
+$("copy-link").addEventListener("click", copyViewLink);
+$("toggle-stats").addEventListener("click", () => showStats($("stats").hidden));
+$("fullscreen").addEventListener("click", toggleFullscreen);
 $("save-png").addEventListener("click", savePng);
 $("save-scene").addEventListener("click", saveScene);
 $("reset-view").addEventListener("click", resetView);
 
 // For the console and the browser tests: the session and the frame headers seen.
-window.volcast = { session, view, frames, shown: null, savePng, saveScene };
+window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene };
 
 // Closing the tab says goodbye, so the server frees the session at once.
 window.addEventListener("pagehide", () => session.stop());

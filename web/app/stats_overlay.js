@@ -1,6 +1,7 @@
 // The stats overlay: fps, latency, level, render and encode times, error estimate, image
 // size, and a small chart of the error estimate against time while the view refines.
 
+import { describeFrame } from "../core/frame_facts.js";
 import { psnrOf } from "../core/protocol.js";
 
 export const STATS_REFRESH_MS = 250;   // ms between refreshes of the time-dependent numbers (fps)
@@ -23,8 +24,10 @@ export class StatsOverlay {
     if (!h) {
       for (const id of ["stat-level", "stat-render", "stat-encode", "stat-error", "stat-image"]) this.$(id).textContent = "–";
     } else {
+      // The frame as rendered: a reduced-scale frame says its own ray grid, not the viewport.
+      const d = describeFrame(h);
       const level = this.$("stat-level");
-      level.textContent = `${h.level}${h.final ? " · final" : ""} (${h.codec})`;
+      level.textContent = level.title = d.level;
       level.classList.toggle("final", h.final);
       this.$("stat-render").textContent = fmtMs(h.render_ms);
       this.$("stat-encode").textContent = fmtMs(h.encode_ms);
@@ -32,7 +35,8 @@ export class StatsOverlay {
       const err = this.$("stat-error");
       err.textContent = e ? `${e.value.toExponential(1)} · ${psnrOf(e.value).toFixed(1)} dB` : "not estimated";
       err.title = e ? `RMSE ${e.value} (${e.method})` : "";
-      this.$("stat-image").textContent = `${h.width}×${h.height}`;
+      const image = this.$("stat-image");
+      image.textContent = image.title = d.image;
     }
     this.drawChart();
   }

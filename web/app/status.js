@@ -53,6 +53,8 @@ export class ErrorList {
     item.className = "error";
     item.setAttribute("role", "alert");
     item.dataset.code = e.code ?? "";
+    item.dataset.requestType = e.request_type ?? "";
+    if (typeof e.id === "number") item.dataset.request = String(e.id);
     const code = document.createElement("span");
     code.className = "code";
     code.textContent = e.code ?? "error";
@@ -68,6 +70,15 @@ export class ErrorList {
     this.box.prepend(item);
     while (this.box.children.length > MAX_ERRORS_SHOWN) this.box.lastElementChild.remove();
     setTimeout(() => item.remove(), ERROR_SHOW_MS);
+  }
+
+  // Take down the errors that something which has since worked makes stale:
+  // which({code, requestType, request}) says whether an error goes.
+  clear(which = () => true) {
+    for (const item of [...this.box.children]) {
+      const d = item.dataset;
+      if (which({ code: d.code, requestType: d.requestType, request: d.request === undefined ? null : Number(d.request) })) item.remove();
+    }
   }
 }
 

@@ -11,6 +11,17 @@ const PAD = { left: 8, right: 8, top: 8, bottom: 20 };   // CSS px around the pl
 const HIT_RADIUS_PX = 9;                                  // CSS px: how near a click must be to take a point
 const POINT_RADIUS_PX = 5;                                // CSS px
 
+const KEY_VALUE_STEP = 0.01;    // of the value range per arrow key (Shift: ×10)
+const KEY_ALPHA_STEP = 0.01;    // opacity per arrow key (Shift: ×10)
+
+// A field the editor could not apply: show what is applied instead, and say why until the
+// next edit of that field.
+function markInvalid(field, why) {
+  field.setAttribute("aria-invalid", "true");
+  field.title = why;
+  field.addEventListener("input", () => { field.removeAttribute("aria-invalid"); field.title = field.dataset.title ?? ""; }, { once: true });
+}
+
 const yOfAlpha = (a) => Math.sqrt(Math.max(0, a));
 const alphaOfY = (y) => Math.min(1, Math.max(0, y)) ** 2;
 
@@ -124,28 +135,98 @@ export class TransferFunctionEditor {
       if (i >= 0) this.remove(i);
     });
     c.tabIndex = 0;
-    c.addEventListener("keydown", (e) => {
-      if ((e.key === "Delete" || e.key === "Backspace") && this.selected >= 0) { this.remove(this.selected); e.preventDefault(); }
-    });
+    c.addEventListener("keydown", (e) => this.onKey(e));
 
-    const edit = (fn) => () => {
+    // A field shows what is applied once its edit is taken: a value clamped between its
+    // neighbours, or the old value back (marked invalid) when the text is no number.
+    const edit = (field, fn) => () => {
       if (this.selected < 0) return;
-      this.points = fn(this.points, this.selected);
-      this.syncFields();
+      const x = field.value.trim() === "" ? NaN : Number(field.value);
+      if (field !== this.el.color && !Number.isFinite(x)) {
+        markInvalid(field, `"${field.value}" is not a number: the point keeps its value`);
+      } else {
+        this.points = fn(this.points, this.selected, x);
+        this.onChange(this.points, { interactive: false });
+      }
+      this.syncFields({ force: true });
       this.draw();
-      this.onChange(this.points, { interactive: false });
     };
-    this.el.value.addEventListener("change", edit((p, i) => movePoint(p, i, Number(this.el.value.value), p[i][4], this.range)));
-    this.el.alpha.addEventListener("change", edit((p, i) => movePoint(p, i, p[i][0], Number(this.el.alpha.value), this.range)));
-    this.el.color.addEventListener("input", edit((p, i) => setColor(p, i, fromHex(this.el.color.value))));
+    this.el.value.addEventListener("change", edit(this.el.value, (p, i, x) => movePoint(p, i, x, p[i][4], this.range)));
+    this.el.alpha.addEventListener("change", edit(this.el.alpha, (p, i, x) => movePoint(p, i, p[i][0], x, this.range)));
+    this.el.color.addEventListener("input", edit(this.el.color, (p, i) => setColor(p, i, fromHex(this.el.color.value))));
     this.el.remove.addEventListener("click", () => { if (this.selected >= 0) this.remove(this.selected); });
-    const wl = () => {
-      const w = Number(this.el.window.value), l = Number(this.el.level.value);
-      if (!(w > 0) || !Number.isFinite(l)) return;
+    const wl = (e) => {
+      const w = this.el.window.value.trim() === "" ? NaN : Number(this.el.window.value);
+      const l = this.el.level.value.trim() === "" ? NaN : Number(this.el.level.value);
+      if (!(w > 0) || !Number.isFinite(l)) {
+        markInvalid(e.target, !(w > 0) ? "the window must be a positive number" : "the level must be a number");
+        this.syncFields({ force: true });
+        return;
+      }
       this.applyWindowLevel(w, l, false);
+      this.syncFields({ force: true });
     };
     this.el.window.addEventListener("change", wl);
     this.el.level.addEventListener("change", wl);
+  }
+
+  // Keyboard (the curve focused): ←/→ select the previous/next point, Shift+←/→ move its
+  // value, ↑/↓ its opacity (Shift: ×10), Insert or + adds a point after it, Delete removes it.
+  onKey(e) {
+    const n = this.points.length;
+    if (n === 0) return;
+    const i = this.selected, span = this.range[1] - this.range[0];
+    const big = e.shiftKey ? 10 : 1;
+    if ((e.key === "ArrowLeft" || e.key === "ArrowRight") && !e.shiftKey) {
+      const d = e.key === "ArrowLeft" ? -1 : 1;
+      this.select(i < 0 ? (d > 0 ? 0 : n - 1) : Math.min(n - 1, Math.max(0, i + d)));
+    } else if ((e.key === "ArrowLeft" || e.key === "ArrowRight") && i >= 0) {
+      const d = (e.key === "ArrowLeft" ? -1 : 1) * KEY_VALUE_STEP * span;
+      this.keyEdit(movePoint(this.points, i, this.points[i][0] + d, this.points[i][4], this.range));
+    } else if ((e.key === "ArrowUp" || e.key === "ArrowDown") && i >= 0) {
+      const d = (e.key === "ArrowUp" ? 1 : -1) * KEY_ALPHA_STEP * big;
+      this.keyEdit(movePoint(this.points, i, this.points[i][0], this.points[i][4] + d, this.range));
+    } else if ((e.key === "Insert" || e.key === "+") && n >= 1) {
+      // Halfway to the next point (or the previous one, after the last).
+      const a = Math.max(0, i), b = a < n - 1 ? a + 1 : a - 1;
+      const value = b >= 0 ? (this.points[a][0] + this.points[b][0]) / 2 : this.points[a][0] + 0.1 * span;
+      const added = addPoint(this.points, value, evaluate(this.points, value)[3]);
+      this.selected = added.index;
+      this.keyEdit(added.points);
+    } else if ((e.key === "Delete" || e.key === "Backspace") && i >= 0) {
+      this.remove(i);
+    } else if (e.key === "Escape" && i >= 0) {
+      this.select(-1);
+    } else {
+      return;
+    }
+    e.preventDefault();
+  }
+
+  select(i) {
+    this.selected = i;
+    this.syncFields({ force: true });
+    this.draw();
+  }
+
+  keyEdit(points) {
+    this.points = points;
+    this.syncFields({ force: true });
+    this.draw();
+    this.onChange(this.points, { interactive: false });
+  }
+
+  // What a screen reader hears on the curve: the selected point.
+  describeSelection() {
+    const p = this.points[this.selected];
+    // role="slider" over the points: which one is selected, and what it is.
+    const c = this.el.canvas;
+    c.setAttribute("aria-valuemin", "1");
+    c.setAttribute("aria-valuemax", String(Math.max(1, this.points.length)));
+    c.setAttribute("aria-valuenow", String(Math.max(1, this.selected + 1)));
+    c.setAttribute("aria-valuetext", p
+      ? `point ${this.selected + 1} of ${this.points.length}: value ${round(p[0])}, opacity ${round(p[4], 4)}`
+      : `${this.points.length} points, none selected`);
   }
 
   remove(i) {
@@ -168,9 +249,11 @@ export class TransferFunctionEditor {
 
   get windowLevel() { return this.points.length >= 2 ? windowLevelOf(this.points) : null; }
 
-  syncFields() {
+  // force: also the field being typed in (its edit was just taken or refused).
+  syncFields({ force = false } = {}) {
     const p = this.points[this.selected];
-    const active = document.activeElement;
+    const active = force ? null : document.activeElement;
+    this.describeSelection();
     for (const f of [this.el.value, this.el.alpha, this.el.color, this.el.remove]) f.disabled = !p;
     if (p) {
       if (active !== this.el.value) this.el.value.value = round(p[0]);

@@ -8,6 +8,8 @@
 //                          ▲   │ close/error        │ close              │ socket closed
 //                  timer   │   ▼                    ▼                    ▼
 //                        waiting ◀────────────────────────────────────────
+//   While waiting out a back-off longer than PROBE_INTERVAL_MS, a cheap GET of /healthz
+//   every PROBE_INTERVAL_MS notices a server that answers again and connects at once.
 //   failed: the server refused us for good (unauthorized, unsupported_version); no retry.
 //   closed: close() was called; nothing reconnects.
 
@@ -49,9 +51,31 @@ export class ConnectionLost extends Error {
 export const BACKOFF_DEFAULTS = Object.freeze({
   initialMs: 250,        // ms, first retry
   factor: 2,
-  maxMs: 8000,           // ms, ceiling: a restarted server is found within ~8 s
+  maxMs: 8000,           // ms, ceiling between WebSocket attempts (the probe below finds a restarted server sooner)
   jitter: 0.2,           // ±20 %, so that many tabs do not retry in step
 });
+
+// The probe: one small HTTP request at a time, at most one per PROBE_INTERVAL_MS (a dead
+// server costs a refused TCP connection twice a second per tab), so that a restarted server
+// is found within PROBE_INTERVAL_MS + one round trip of answering again, well inside 1 s.
+export const PROBE_INTERVAL_MS = 500;
+
+// The server's /healthz beside its WebSocket address. `no-cors`: a page served by another
+// origin cannot read the answer, but any answer at all means the server is back.
+export function healthUrl(wsUrl) {
+  const u = new URL(wsUrl);
+  u.protocol = u.protocol === "wss:" ? "https:" : "http:";
+  u.pathname = u.pathname.replace(/[^/]*$/, "healthz");   // behind a proxy prefix too
+  u.search = "";
+  u.hash = "";
+  return u.href;
+}
+
+export function fetchProbe(wsUrl, fetchFn = globalThis.fetch) {
+  const url = healthUrl(wsUrl);
+  return () => fetchFn(url, { mode: "no-cors", cache: "no-store", signal: AbortSignal.timeout(PROBE_INTERVAL_MS) })
+    .then(() => true, () => false);
+}
 
 export function backoffDelay(attempt, options = BACKOFF_DEFAULTS, random = Math.random) {
   const { initialMs, factor, maxMs, jitter } = { ...BACKOFF_DEFAULTS, ...options };
@@ -66,7 +90,9 @@ export const HANDSHAKE_TIMEOUT_MS = 10000;   // ms from socket open to the serve
 // answers no awaited request), "protocol_error" (undecodable input), "sent" {id, message, at}.
 export class Connection extends Emitter {
   // url: ws:// or wss:// address. options: WebSocket (constructor), client (name for hello),
-  // token, backoff (BACKOFF_DEFAULTS overrides), setTimeout/clearTimeout/now/random (tests).
+  // token, backoff (BACKOFF_DEFAULTS overrides), setTimeout/clearTimeout/now/random (tests),
+  // probe (() => Promise<boolean>: does the server answer at all; null: no probing; default
+  // fetchProbe(url) where fetch exists), probeIntervalMs.
   constructor(url, options = {}) {
     super();
     this.url = url;
@@ -80,6 +106,15 @@ export class Connection extends Emitter {
     };
     this.now = options.now ?? (() => (globalThis.performance ?? Date).now());
     this.random = options.random ?? Math.random;
+    this.probe = options.probe !== undefined ? options.probe : globalThis.fetch ? fetchProbe(url) : null;
+    this.probeIntervalMs = options.probeIntervalMs ?? PROBE_INTERVAL_MS;
+    this.probeTimer = null;
+    this.probeInFlight = false;
+    this.probeGeneration = 0;
+    // Seen down: an attempt failed before its socket opened, or a probe got no answer. Only a
+    // probe answered after that is news; a server that answers but refuses (busy) is left
+    // to the back-off.
+    this.serverSeenDown = false;
     this.state = STATES.idle;
     this.socket = null;
     this.serverHello = null;
@@ -192,6 +227,7 @@ export class Connection extends Emitter {
     this.clearHandshakeTimer();
     this.serverHello = hello;
     this.attempt = 0;
+    this.serverSeenDown = false;
     this.transition(STATES.ready, { hello });
     this.emit("hello", hello);
   }
@@ -236,6 +272,7 @@ export class Connection extends Emitter {
   }
 
   onClose(ev) {
+    if (this.state === STATES.connecting) this.serverSeenDown = true;
     this.socket = null;
     this.clearHandshakeTimer();
     const reason = ev?.reason || (ev?.code ? `WebSocket closed (code ${ev.code})` : "WebSocket closed");
@@ -279,12 +316,34 @@ export class Connection extends Emitter {
       this.retryAt = null;
       if (this.state === STATES.waiting) this.connect();
     }, delay);
+    if (this.probe && delay > this.probeIntervalMs) this.scheduleProbe();
+  }
+
+  // A chain of probes for one waiting period; cancelRetry() ends it (its generation).
+  scheduleProbe() {
+    const generation = this.probeGeneration;
+    this.probeTimer = this.timers.set(() => {
+      this.probeTimer = null;
+      if (this.state !== STATES.waiting || generation !== this.probeGeneration) return;
+      if (this.probeInFlight) { this.scheduleProbe(); return; }   // one at a time: an older one still out
+      this.probeInFlight = true;
+      Promise.resolve().then(() => this.probe()).catch(() => false).then((answered) => {
+        this.probeInFlight = false;
+        if (this.state !== STATES.waiting || generation !== this.probeGeneration) return;
+        if (!answered) this.serverSeenDown = true;
+        else if (this.serverSeenDown) { this.serverSeenDown = false; this.connect(); return; }
+        this.scheduleProbe();
+      });
+    }, this.probeIntervalMs);
   }
 
   cancelRetry() {
     if (this.retryTimer !== null) this.timers.clear(this.retryTimer);
     this.retryTimer = null;
     this.retryAt = null;
+    if (this.probeTimer !== null) this.timers.clear(this.probeTimer);
+    this.probeTimer = null;
+    this.probeGeneration += 1;
   }
 
   clearHandshakeTimer() {

@@ -37,7 +37,7 @@ test("the page loads and connects", async () => {
   assert.match(await page.title(), /volcast$/);
   // The server's default volume opens by itself, and the picker names it.
   await page.waitForFunction(() => window.volcast.session.volume?.name === "builtin:demo", null, { timeout: 60000 });
-  assert.equal(await page.inputValue("#volume-name"), "builtin:demo");
+  assert.equal(await page.inputValue("#volume-select"), "builtin:demo");
   assert.equal(await page.title(), "builtin:demo — volcast");
   await screenshot(page, "01-connected.png");
   assert.deepEqual(problems, []);

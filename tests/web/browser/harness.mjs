@@ -67,12 +67,14 @@ export function freePort() {
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 // Start volcast-server on `port` (0: a free one) and wait until /readyz answers 200.
+// extraArgs: more command-line arguments (another --data folder).
 let serverRuns = 0;
-export async function startServer(port = 0) {
+export async function startServer(port = 0, { extraArgs = [] } = {}) {
   const dir = mkdtempSync(path.join(os.tmpdir(), "volcast-web-test-"));
   const portFile = path.join(dir, "port");
   const args = ["--port", String(port), "--port-file", portFile, "--web-root", path.join(REPO, "web"), "--log-level", "info"];
   if (DATA_DIR && existsSync(DATA_DIR)) args.push("--data", DATA_DIR);
+  args.push(...extraArgs);
   const log = createWriteStream(artifact(`server-${++serverRuns}.log`));
   const proc = spawn(SERVER_EXE, args, { stdio: ["ignore", "pipe", "pipe"] });
   proc.stdout.pipe(log);

@@ -4,8 +4,8 @@ import { test, beforeEach } from "node:test";
 import assert from "node:assert/strict";
 
 import {
-  BACKOFF_DEFAULTS, Connection, ConnectionLost, HANDSHAKE_TIMEOUT_MS, IllegalTransition, STATES, backoffDelay,
-  defaultServerUrl,
+  BACKOFF_DEFAULTS, Connection, ConnectionLost, HANDSHAKE_TIMEOUT_MS, IllegalTransition, PROBE_INTERVAL_MS, STATES,
+  backoffDelay, defaultServerUrl, healthUrl,
 } from "../../../web/core/connection.js";
 import { ServerError } from "../../../web/core/protocol.js";
 import { FakeTimers, FakeWebSocket, encodeFrame, flush } from "../lib/fakes.mjs";
@@ -17,7 +17,7 @@ beforeEach(() => { FakeWebSocket.reset(); timers = new FakeTimers(); });
 function make(options = {}) {
   const c = new Connection("ws://test/ws", {
     WebSocket: FakeWebSocket, setTimeout: timers.setTimeout, clearTimeout: timers.clearTimeout,
-    now: timers.now, random: () => 0.5, client: "unit", ...options,
+    now: timers.now, random: () => 0.5, client: "unit", probe: null, ...options,
   });
   const states = [];
   c.on("state", (s) => states.push(s.state));
@@ -216,4 +216,82 @@ test("retryNow skips the wait", () => {
 test("the default address is the page's own host at /ws", () => {
   assert.equal(defaultServerUrl({ protocol: "http:", host: "127.0.0.1:8080" }), "ws://127.0.0.1:8080/ws");
   assert.equal(defaultServerUrl({ protocol: "https:", host: "viewer.example" }), "wss://viewer.example/ws");
+});
+
+// A server that the test switches on and off, seen through the probe (its /healthz): a
+// connection attempt while it is off fails before the socket opens, as a refused TCP
+// connection does.
+function probedServer() {
+  const server = { up: false, probes: [], inFlight: 0, maxInFlight: 0 };
+  server.probe = () => {
+    server.probes.push(timers.now());
+    server.inFlight += 1;
+    server.maxInFlight = Math.max(server.maxInFlight, server.inFlight);
+    const answer = server.up;
+    return new Promise((resolve) => timers.setTimeout(() => { server.inFlight -= 1; resolve(answer); }, 5));
+  };
+  return server;
+}
+
+// Advance the fake clock in small steps, letting promise callbacks run between them.
+async function advanceAsync(ms, step = 5) {
+  for (let t = 0; t < ms; t += step) { timers.advance(step); await flush(); }
+}
+
+test("a restarted server is found within 1 s of answering again, however long it was away", async () => {
+  for (const downMs of [3000, 20000, 120000]) {
+    FakeWebSocket.reset();
+    timers = new FakeTimers();
+    const server = probedServer();
+    const { c } = make({ probe: server.probe });
+    c.connect();
+    FakeWebSocket.last.handshake();
+    FakeWebSocket.last.serverClose(1001, "server shutting down");
+    // Every attempt while it is down fails before its socket opens.
+    const refuse = () => { const ws = FakeWebSocket.last; if (ws.readyState === FakeWebSocket.CONNECTING && !ws.closedWith) ws.serverClose(1006); };
+    for (let t = 0; t < downMs; t += 50) { await advanceAsync(50); refuse(); }
+    assert.equal(c.state, STATES.waiting, `down ${downMs} ms: still waiting`);
+    // Bounded: no more than one probe per interval, never two at once.
+    assert.ok(server.probes.length <= downMs / PROBE_INTERVAL_MS + 1, `down ${downMs} ms: ${server.probes.length} probes`);
+    assert.equal(server.maxInFlight, 1);
+    const attemptsWhileDown = FakeWebSocket.instances.length;
+    server.up = true;
+    const upAt = timers.now();
+    let readyAt = null;
+    c.on("state", (s) => { if (s.state === STATES.connecting && readyAt === null) readyAt = timers.now(); });
+    for (let t = 0; t < 2000 && readyAt === null; t += 5) await advanceAsync(5);
+    assert.ok(readyAt !== null, `down ${downMs} ms: no attempt within 2 s of the server answering`);
+    // Within the probe interval plus the probe's own 5 ms round trip (the fake's).
+    assert.ok(readyAt - upAt <= PROBE_INTERVAL_MS + 10, `down ${downMs} ms: reconnected ${readyAt - upAt} ms after the server answered`);
+    FakeWebSocket.last.handshake();
+    assert.equal(c.state, STATES.ready);
+    // The WebSocket attempts themselves kept their exponential back-off (8 s ceiling).
+    assert.ok(attemptsWhileDown <= 7 + downMs / BACKOFF_DEFAULTS.maxMs / 0.8 + 1, `${attemptsWhileDown} WebSocket attempts in ${downMs} ms`);
+    c.close();
+  }
+});
+
+test("a server that answers but refuses (busy) is left to the back-off: the probe is no news", async () => {
+  const server = probedServer();
+  server.up = true;
+  const { c } = make({ probe: server.probe });
+  c.connect();
+  // Each attempt opens and is told busy: the server is up all along.
+  const busy = () => {
+    const ws = FakeWebSocket.last;
+    if (ws.readyState !== FakeWebSocket.CONNECTING || ws.closedWith) return;
+    ws.serverOpen();
+    ws.serverSend({ type: "error", id: ws.lastSent("hello").id, code: "busy", message: "16 sessions already", request_type: "hello" });
+  };
+  busy();
+  for (let t = 0; t < 20000; t += 50) { await advanceAsync(50); busy(); }
+  // 250 + 500 + 1000 + 2000 + 4000 + 8000 = 15750 ms: 7 attempts in 20 s, not one per probe.
+  assert.equal(FakeWebSocket.instances.length, 7);
+  assert.ok(server.probes.length > 10, "it did probe");
+  c.close();
+});
+
+test("the probe asks /healthz beside the WebSocket address", () => {
+  assert.equal(healthUrl("ws://127.0.0.1:8080/ws"), "http://127.0.0.1:8080/healthz");
+  assert.equal(healthUrl("wss://example.org/volcast/ws?x=1"), "https://example.org/volcast/healthz");
 });

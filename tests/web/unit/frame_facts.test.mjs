@@ -1,0 +1,30 @@
+// core/frame_facts.js: the stats overlay states the size a frame was rendered at, not the
+// viewport the server scaled it up to, and its level's mip level and step.
+import { test } from "node:test";
+import assert from "node:assert/strict";
+
+import { describeFrame, frameFacts, raysForScale } from "../../../web/core/frame_facts.js";
+
+const header = (quality, extra = {}) => ({ seq: 1, request: 3, level: 0, width: 950, height: 755, codec: "jpeg", final: false, quality, ...extra });
+
+test("an interactive frame at a quarter scale says it was rendered at a quarter of the viewport", () => {
+  const h = header({ step: 2, mip_level: 1, image_scale: 0.25 });
+  const f = frameFacts(h);
+  // raysForScale as the server rounds: lround(950 · 0.25) = 238 (237.5 rounds away from 0), lround(755 · 0.25) = 189.
+  assert.deepEqual(f.rendered, [238, 189]);
+  assert.deepEqual(f.sent, [950, 755]);
+  const d = describeFrame(h);
+  assert.equal(d.image, "238×189 (¼ scale, sent as 950×755)");
+  assert.equal(d.level, "0 · mip 1 · step 2 (jpeg)");
+});
+
+test("a full-scale final frame says its size once, and final", () => {
+  const d = describeFrame(header({ step: 0.5, mip_level: 0, image_scale: 1 }, { level: 2, final: true, codec: "png" }));
+  assert.equal(d.image, "950×755");
+  assert.equal(d.level, "2 · final · step 0.5 (png)");
+});
+
+test("a header without quality (an older server) is taken at full scale", () => {
+  assert.equal(describeFrame({ level: 0, width: 10, height: 20, codec: "jpeg", final: false }).image, "10×20");
+  assert.equal(raysForScale(3, 0.1), 1, "never an empty grid");
+});
