@@ -2,6 +2,7 @@
 
 #include "renderer/synthetic.hpp"
 #include "renderer/io/volume_io.hpp"
+#include "renderer/make_frame_renderer.hpp"
 #include "renderer/io/volume_source.hpp"
 
 #include <spdlog/fmt/fmt.h>
@@ -66,9 +67,9 @@ protocol::VolumeInfo VolumeEntry::info() const {
     return i;
 }
 
-VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBytes, OpenClContext &cl,
+VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBytes, std::shared_ptr<OpenClContext> cl,
                                Metrics &metrics, double loadTimeoutSeconds)
-    : budgetBytes_(budgetBytes), loadTimeoutSeconds_(loadTimeoutSeconds), cl_(cl), metrics_(metrics) {
+    : budgetBytes_(budgetBytes), loadTimeoutSeconds_(loadTimeoutSeconds), cl_(std::move(cl)), metrics_(metrics) {
     for (const auto &d : dataDirs) {
         std::error_code ec;
         fs::path c = fs::canonical(d, ec);
@@ -297,7 +298,7 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         }
         entry->volume = std::make_shared<const Volume>(std::move(loaded.volume));
         progress(p.name, ProgressStage::Uploading, "", 0.0);
-        entry->renderer = std::make_unique<OpenClRenderer>(cl_, entry->volume);
+        entry->renderer = makeFrameRenderer(cl_, entry->volume);
         progress(p.name, ProgressStage::Uploading, "", 1.0);
         return entry;
     } catch (const VolumeTooLarge &e) {

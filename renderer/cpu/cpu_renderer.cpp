@@ -97,9 +97,12 @@ CpuRenderer::CpuRenderer(std::shared_ptr<const Volume> volume, CpuRendererOption
 CpuRenderer::CpuRenderer(const Volume &volume, CpuRendererOptions options)
     : CpuRenderer(std::make_shared<const Volume>(volume), options) {}
 
-std::string CpuRenderer::description() const {
+std::string CpuRenderer::description() const { return describe(options_); }
+
+std::string CpuRenderer::describe(const CpuRendererOptions &options) {
+    const int threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
     return "cpu: " + cpu::marchTarget() + ", " + std::to_string(cpu::raysPerPacket()) + " rays per packet, " +
-           std::to_string(threads_) + " threads";
+           std::to_string(threads) + " threads";
 }
 
 std::string CpuRenderer::featureNames(const Quality &q, bool hasClipPlanes) {

@@ -37,6 +37,10 @@ class CpuRenderer : public FrameRenderer {
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }
 
+    // What description() says for a renderer with these options, before any volume exists
+    // (the server's start-up log and hello).
+    static std::string describe(const CpuRendererOptions &options = {});
+
     // The switches a frame uses, as the OpenCL back end names them ("JITTER CLIP_PLANES …").
     static std::string featureNames(const Quality &quality, bool hasClipPlanes);
 

@@ -2,7 +2,6 @@
 // the load time limit, and the messages clients get. Built-in volumes (64³: 1.2 MiB counted
 // each, float32 plus 20 %) and small files the tests write; budgets of a few MiB.
 
-#include "renderer/opencl/opencl_context.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "server/metrics.hpp"
 #include "server/volume_registry.hpp"
@@ -26,12 +25,9 @@ constexpr uint64_t kMiB = uint64_t(1) << 20;
 
 class VolumeRegistryTest : public ::testing::Test {
   protected:
-    static inline std::unique_ptr<volcast::OpenClContext> cl;
     volcast::server::Metrics metrics;
     fs::path data;
 
-    static void SetUpTestSuite() { cl = std::make_unique<volcast::OpenClContext>(); }
-    static void TearDownTestSuite() { cl.reset(); }
     void SetUp() override {
         const auto *info = ::testing::UnitTest::GetInstance()->current_test_info();
         data = fs::temp_directory_path() / ("volcast_registry_" + std::to_string(::getpid()) + "_" + info->name());
@@ -41,7 +37,8 @@ class VolumeRegistryTest : public ::testing::Test {
     void TearDown() override { fs::remove_all(data); }
 
     std::unique_ptr<VolumeRegistry> registry(uint64_t budget, double loadTimeout = 120) {
-        return std::make_unique<VolumeRegistry>(std::vector<fs::path>{data}, budget, *cl, metrics, loadTimeout);
+        // The native CPU path (no OpenCL context): what the registry does is the same for both.
+        return std::make_unique<VolumeRegistry>(std::vector<fs::path>{data}, budget, nullptr, metrics, loadTimeout);
     }
     // A uint8 NRRD of dims x*y*z: counted as x*y*z*4*1.2 bytes once loaded.
     void writeVolume(const std::string &name, int x, int y, int z) {
