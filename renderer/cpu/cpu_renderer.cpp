@@ -181,7 +181,20 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
 
 Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
+    return castRays(tf, camera, width, height, quality, clipPlanes, nullptr, stats);
+}
+
+Image CpuRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                                const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
+                                const RayWindow &window, RenderStats *stats) {
+    return castRays(tf, camera, width, height, quality, clipPlanes, &window, stats);
+}
+
+Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
+                            const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
+                            RenderStats *stats) {
     validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
+    if (window) validateRayWindow(*window, width, height, quality);
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -300,17 +313,25 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     p.brickVisible = quality.emptySpaceSkipping ? data.brickVisible.data() : nullptr;
     p.brickSize = options_.brickSize;
 
+    // A window casts only its own rays, tiled from its corner; each ray is cast as in the
+    // whole grid (its lanes do not depend on the other rays of its packet).
+    const RayWindow all{0, 0, raysWide, raysHigh};
+    const RayWindow &win = window ? *window : all;
+    p.outX = win.x;
+    p.outY = win.y;
+    p.outWidth = win.width;
+
     const auto t = Clock::now();
-    Image cast(raysWide, raysHigh);
+    Image cast(win.width, win.height);
     cpu::Counters counters;
-    const int tilesWide = (raysWide + kTileEdge - 1) / kTileEdge, tilesHigh = (raysHigh + kTileEdge - 1) / kTileEdge;
+    const int tilesWide = (win.width + kTileEdge - 1) / kTileEdge, tilesHigh = (win.height + kTileEdge - 1) / kTileEdge;
     const int tiles = tilesWide * tilesHigh;
     std::atomic<int> next{0};
     auto work = [&] {
         for (int i; (i = next.fetch_add(1)) < tiles;) {
-            const int x0 = (i % tilesWide) * kTileEdge, y0 = (i / tilesWide) * kTileEdge;
-            cpu::marchTile(p, x0, y0, std::min(x0 + kTileEdge, raysWide), std::min(y0 + kTileEdge, raysHigh),
-                           cast.rgba.data(), counters);
+            const int x0 = win.x + (i % tilesWide) * kTileEdge, y0 = win.y + (i / tilesWide) * kTileEdge;
+            cpu::marchTile(p, x0, y0, std::min(x0 + kTileEdge, win.x + win.width),
+                           std::min(y0 + kTileEdge, win.y + win.height), cast.rgba.data(), counters);
         }
     };
     {
@@ -324,7 +345,8 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     st.skippedSegmentsPerRay = double(counters.segmentsSkipped) / hit;
     st.earlyTerminatedFraction = double(counters.terminatedEarly) / hit;
     st.raysTruncated = counters.truncated;
-    Image image = raysWide == width && raysHigh == height ? std::move(cast) : resizeBilinear(cast, width, height);
+    Image image = window || (raysWide == width && raysHigh == height) ? std::move(cast)
+                                                                       : resizeBilinear(cast, width, height);
     st.renderSeconds = secondsSince(t);
     if (stats) *stats = st;
     return image;

@@ -33,6 +33,11 @@ class CpuRenderer : public FrameRenderer {
 
     Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
                  const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
+    // Casts only the window's rays (the tiles over it), each exactly as render() casts it.
+    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
+                       RenderStats *stats = nullptr) override;
+    bool rendersWindowsCheaply() const override { return true; }
     std::string description() const override;
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }
@@ -56,6 +61,9 @@ class CpuRenderer : public FrameRenderer {
         double emptyFraction = 0;
     };
 
+    // render() and renderWindow(): the whole grid (upsampled to the frame) or one window of it.
+    Image castRays(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
+                   const std::vector<ClipPlane> &clipPlanes, const RayWindow *window, RenderStats *stats);
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st);
 
