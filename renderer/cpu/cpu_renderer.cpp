@@ -130,6 +130,8 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
     const int levelsBefore = pyramid_.levelsBuilt();
     const std::vector<float> &voxels = pyramid_.level(level);
     if (pyramid_.levelsBuilt() != levelsBefore) {
+        for (int l = levelsBefore + 1; l <= pyramid_.levelsBuilt(); ++l)
+            heldBytes_ += uint64_t(pyramid_.level(l).size()) * sizeof(float);
         st.mipSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
         counts_.mipLevels += pyramid_.levelsBuilt() - levelsBefore;
@@ -148,7 +150,23 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
         std::lock_guard lock(countsMutex_);
         ++counts_.coefficientVolumes;
     }
+    heldBytes_ += uint64_t(data.padded.size()) * sizeof(float);
     return dataSets_.emplace(key, std::move(data)).first->second;
+}
+
+uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options) {
+    const auto count = [](Vec3i d, int pad) { return uint64_t(d.x + pad) * uint64_t(d.y + pad) * uint64_t(d.z + pad); };
+    const int b = std::max(1, options.brickSize);
+    uint64_t bytes = 0;
+    for (int level = 0;; ++level) {
+        const Vec3i d = mipLevelDims(dims, level);
+        if (level > 0) bytes += count(d, 0) * sizeof(float);                  // the mip level
+        bytes += (count(d, 1) + count(d, 3)) * sizeof(float);                 // trilinear and cubic copies
+        const Vec3i bricks{(d.x + b - 1) / b, (d.y + b - 1) / b, (d.z + b - 1) / b};
+        bytes += 2 * count(bricks, 0) * (2 * sizeof(float) + sizeof(int32_t)); // min-max and visible, both
+        if (d.x == 1 && d.y == 1 && d.z == 1) break;
+    }
+    return bytes;
 }
 
 void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st) {
@@ -159,6 +177,8 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
         if (data.cubic) data.bricks = buildMinMaxBricks(unpadMirror(data.padded, data.dims).data(), data.dims,
                                                         options_.brickSize, 2);
         else data.bricks = buildMinMaxBricks(pyramid_.level(level).data(), data.dims, options_.brickSize, 1);
+        heldBytes_ += uint64_t(data.bricks->minmax.size()) * sizeof(float) +
+                      uint64_t(data.bricks->brickCount()) * sizeof(int32_t); // and the visible flags below
         st.brickGridSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
         ++counts_.brickGrids;

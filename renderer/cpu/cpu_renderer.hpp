@@ -13,6 +13,7 @@
 #include "renderer/mip_pyramid.hpp"
 #include "renderer/preintegration.hpp"
 
+#include <atomic>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -41,6 +42,15 @@ class CpuRenderer : public FrameRenderer {
     std::string description() const override;
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }
+
+    // Bytes of volume-sized data the renderer holds now, beyond the volume's own voxels:
+    // padded copies of the sampled levels, mip levels, B-spline coefficients, brick grids.
+    // (The transfer-function and pre-integration tables, at most ~17 MiB per renderer
+    // whatever the volume, are not counted.) Never waits for a frame.
+    uint64_t memoryBytes() const { return heldBytes_.load(); }
+    // What memoryBytes() reaches at most for a volume of `dims`: every mip level sampled,
+    // trilinear and cubic, with empty-space skipping. The server's memory budget counts it.
+    static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {});
 
     // What description() says for a renderer with these options, before any volume exists
     // (the server's start-up log and hello).
@@ -81,6 +91,7 @@ class CpuRenderer : public FrameRenderer {
     TransferFunction preintegrationFor_;
     PreprocessCounts counts_;
     mutable std::mutex countsMutex_;
+    std::atomic<uint64_t> heldBytes_{0};
 };
 
 } // namespace volcast
