@@ -56,14 +56,40 @@ std::string DeviceChoice::text() const {
 std::shared_ptr<OpenClContext> openContextFor(const DeviceChoice &choice, const std::string &kernelCacheDir) {
     switch (choice.kind) {
     case DeviceChoice::Kind::Cpu: return nullptr;
-    case DeviceChoice::Kind::OpenCl: return std::make_shared<OpenClContext>(DeviceOptions{choice.openClDevice, kernelCacheDir});
+    case DeviceChoice::Kind::OpenCl:
+        // Plain "opencl" is OpenCL's own choice, not $VOLCAST_DEVICE: the server reads that
+        // variable as its --device, so it holds "opencl" itself there.
+        return std::make_shared<OpenClContext>(
+            DeviceOptions{choice.openClDevice.empty() ? "auto" : choice.openClDevice, kernelCacheDir});
     case DeviceChoice::Kind::Auto: break;
     }
+    // No OpenCL, or no GPU among its devices: the native path is faster than PoCL. With a GPU,
+    // a failure to open it (its kernel cache, say) is an error, not a silent fall-back.
+    if (!openClGpuPresent()) return nullptr;
+    return std::make_shared<OpenClContext>(DeviceOptions{"gpu", kernelCacheDir});
+}
+
+bool openClGpuPresent() {
     try {
-        return std::make_shared<OpenClContext>(DeviceOptions{"gpu", kernelCacheDir});
-    } catch (const OpenClError &) {
-        return nullptr; // no OpenCL, or no GPU among its devices: the native path is faster than PoCL
+        std::vector<cl::Platform> platforms;
+        cl::Platform::get(&platforms);
+        for (auto &p : platforms) {
+            std::vector<cl::Device> devices;
+            try {
+                p.getDevices(CL_DEVICE_TYPE_GPU, &devices);
+            } catch (const cl::Error &) {
+                continue; // CL_DEVICE_NOT_FOUND: a platform without GPUs
+            }
+            if (!devices.empty()) return true;
+        }
+    } catch (const cl::Error &) {
+        // no platform at all (no ICD installed)
     }
+    return false;
+}
+
+std::string backEndDescription(const std::shared_ptr<OpenClContext> &cl) {
+    return cl ? "opencl: " + cl->deviceName() : CpuRenderer::describe();
 }
 
 std::unique_ptr<FrameRenderer> makeFrameRenderer(std::shared_ptr<OpenClContext> cl,

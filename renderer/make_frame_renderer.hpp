@@ -1,7 +1,7 @@
 #pragma once
 // Picks the back end that draws a volume's frames from a --device value:
 //   cpu                 the native CPU ray caster (renderer/cpu/)
-//   opencl              an OpenCL device: $VOLCAST_DEVICE, else OpenCL's "auto" choice
+//   opencl              OpenCL's own choice of device: a GPU if there is one, else a CPU device
 //   opencl:<name part>  the OpenCL device whose name contains it (or gpu, cpu)
 //   auto                a GPU through OpenCL if there is one, else the native CPU ray caster
 // PoCL is an OpenCL *CPU* device: auto never picks it, opencl:cpu or opencl:pthread do.
@@ -27,8 +27,16 @@ struct DeviceChoice {
 };
 
 // Opens the OpenCL context a choice needs: nullptr for cpu, and for auto when no OpenCL GPU
-// exists. Throws OpenClError when an explicit opencl choice finds no such device.
+// exists. Throws OpenClError when an explicit opencl choice finds no such device, and when
+// the chosen device's kernel cache folder is unusable (only then is the cache checked).
 std::shared_ptr<OpenClContext> openContextFor(const DeviceChoice &choice, const std::string &kernelCacheDir = {});
+
+// Whether some OpenCL platform offers a GPU (false without OpenCL at all).
+bool openClGpuPresent();
+
+// What description() of a renderer made by makeFrameRenderer(cl, …) says: "opencl: <device>"
+// or the native path's "cpu: <instruction set>, …".
+std::string backEndDescription(const std::shared_ptr<OpenClContext> &cl);
 
 // A renderer for `volume` on `cl` (OpenCL) or, with cl null, on the native CPU path. The
 // renderer keeps `cl` alive.

@@ -1,5 +1,7 @@
 #include "server/config.hpp"
 
+#include "renderer/make_frame_renderer.hpp"
+
 #include <CLI/CLI.hpp>
 
 #include <cstdlib>
@@ -26,8 +28,19 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
         ->envname("VOLCAST_DATA")
         ->delimiter(':');
     app.add_option("--web-root", webRoot, "Folder of static files served over HTTP")->envname("VOLCAST_WEB_ROOT");
-    app.add_option("--device", c.device, "OpenCL device: auto, gpu, cpu or part of its name")
-        ->envname("VOLCAST_DEVICE");
+    app.add_option("--device", c.device,
+                   "Back end: auto (an OpenCL GPU if present, else cpu), cpu (native SIMD), opencl (OpenCL's "
+                   "choice), opencl:<part of an OpenCL device's name, gpu or cpu>")
+        ->envname("VOLCAST_DEVICE")
+        ->capture_default_str()
+        ->check([](const std::string &value) {
+            try {
+                volcast::DeviceChoice::parse(value);
+                return std::string();
+            } catch (const std::invalid_argument &e) {
+                return std::string(e.what());
+            }
+        });
     app.add_option("--kernel-cache", c.kernelCacheDir, "Folder for PoCL's compiled-kernel cache")
         ->envname("VOLCAST_KERNEL_CACHE");
     app.add_option("--memory-budget-mib", budgetMiB, "Host memory for loaded volumes, MiB")

@@ -16,7 +16,7 @@ struct ServerConfig {
     uint16_t port = 8080;                     // 0: any free port (tests)
     std::vector<std::filesystem::path> dataDirs;   // empty: only the built-in volumes
     std::filesystem::path webRoot;            // static files (the browser client)
-    std::string device;                       // OpenCL device: auto, gpu, cpu or part of a name
+    std::string device = "auto";              // back end: auto, cpu, opencl, opencl:<part of a device name> (DeviceChoice)
     std::string kernelCacheDir;               // PoCL's kernel cache folder
     uint64_t memoryBudgetBytes = uint64_t(4096) << 20;   // loaded volumes, host side
     int maxSessions = 16;

@@ -90,6 +90,25 @@ uint64_t Metrics::volumeLoads() const {
     return volumeLoads_;
 }
 
+void Metrics::setBackEnd(const std::string &description, const std::string &type) {
+    std::lock_guard lock(mutex_);
+    backEnd_ = description;
+    backEndType_ = type;
+}
+
+namespace {
+// A Prometheus label value: backslash, quote and newline escaped.
+std::string labelValue(const std::string &s) {
+    std::string o;
+    for (char c : s) {
+        if (c == '\\' || c == '"') o += '\\';
+        if (c == '\n') o += "\\n";
+        else o += c;
+    }
+    return o;
+}
+} // namespace
+
 std::string Metrics::prometheusText() const {
     std::lock_guard lock(mutex_);
     std::ostringstream o;
@@ -115,6 +134,10 @@ std::string Metrics::prometheusText() const {
     writeScalar(o, "volcast_volumes_loaded", "gauge", "Volumes in memory", volumesLoaded_);
     writeScalar(o, "volcast_outgoing_queue_bytes", "gauge", "Bytes waiting to be written to clients, all sessions",
                 double(queuedBytes_));
+    if (!backEnd_.empty())
+        o << "# HELP volcast_back_end_info The back end drawing frames (--device)\n# TYPE volcast_back_end_info gauge\n"
+          << "volcast_back_end_info{back_end=\"" << labelValue(backEnd_) << "\",type=\"" << labelValue(backEndType_)
+          << "\"} 1\n";
     return o.str();
 }
 

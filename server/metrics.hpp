@@ -34,6 +34,8 @@ class Metrics {
     void volumeEvicted(uint64_t bytes);
     void setVolumeMemory(uint64_t bytes, int loaded);
     void setQueuedBytes(int64_t delta);   // bytes waiting to be written to clients, all sessions
+    // The back end drawing frames ("cpu: …" or "opencl: …") and its device type: volcast_back_end_info.
+    void setBackEnd(const std::string &description, const std::string &type);
 
     int sessions() const;
     uint64_t volumeLoads() const;
@@ -52,6 +54,7 @@ class Metrics {
     uint64_t volumeMemory_ = 0;
     int volumesLoaded_ = 0;
     int64_t queuedBytes_ = 0;
+    std::string backEnd_, backEndType_;
 };
 
 } // namespace volcast::server

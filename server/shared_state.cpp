@@ -9,14 +9,22 @@
 namespace volcast::server {
 
 SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
-    cl_ = std::make_unique<OpenClContext>(DeviceOptions{config_.device, config_.kernelCacheDir});
-    device_.name = cl_->deviceName();
-    const auto type = cl_->device().getInfo<CL_DEVICE_TYPE>();
-    device_.type = (type & CL_DEVICE_TYPE_GPU)           ? "gpu"
-                   : (type & CL_DEVICE_TYPE_CPU)         ? "cpu"
-                   : (type & CL_DEVICE_TYPE_ACCELERATOR) ? "accelerator"
-                                                         : "other";
-    registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, *cl_, metrics_,
+    cl_ = openContextFor(DeviceChoice::parse(config_.device), config_.kernelCacheDir);
+    backEnd_ = backEndDescription(cl_);
+    // Clients see the back end's description as the device's name ("cpu: AVX3, …" for the
+    // native path, "opencl: <device>"), so they can tell the native path from PoCL's CPU device.
+    device_.name = backEnd_;
+    device_.type = "cpu";
+    if (cl_) {
+        const auto type = cl_->device().getInfo<CL_DEVICE_TYPE>();
+        device_.type = (type & CL_DEVICE_TYPE_GPU)           ? "gpu"
+                       : (type & CL_DEVICE_TYPE_CPU)         ? "cpu"
+                       : (type & CL_DEVICE_TYPE_ACCELERATOR) ? "accelerator"
+                                                             : "other";
+    }
+    spdlog::info("back end (--device {}): {}", DeviceChoice::parse(config_.device).text(), backEnd_);
+    metrics_.setBackEnd(backEnd_, device_.type);
+    registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, cl_, metrics_,
                                                  config_.loadTimeoutS);
     scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration, config_.defaultTargetFrameMs});
 }
@@ -107,10 +115,11 @@ void SharedState::startWarmUp(std::shared_ptr<VolumeEntry> entry) {
 }
 
 void SharedState::warmUp(std::shared_ptr<VolumeEntry> entry) {
-    // A frame at 8 x 8 pixels: cheap, but it builds the ray-casting program (seconds with a
-    // cold PoCL cache), which the first session would otherwise wait for.
+    // A frame at 8 x 8 pixels by the chosen back end: cheap, but on OpenCL it builds the
+    // ray-casting program (seconds with a cold PoCL cache), which the first session would
+    // otherwise wait for.
     try {
-        std::unique_ptr<OpenClRenderer> own;
+        std::unique_ptr<FrameRenderer> own;
         if (!entry) {
             Volume tiny;
             tiny.name = "warm-up";
@@ -118,7 +127,7 @@ void SharedState::warmUp(std::shared_ptr<VolumeEntry> entry) {
             tiny.voxels.resize(tiny.voxelCount());
             for (size_t i = 0; i < tiny.voxels.size(); ++i) tiny.voxels[i] = float(i % 7);
             computeStatistics(tiny);
-            own = std::make_unique<OpenClRenderer>(*cl_, tiny);
+            own = makeFrameRenderer(cl_, std::make_shared<const Volume>(std::move(tiny)));
         }
         FrameRenderer &renderer = entry ? *entry->renderer : *own;
         const Volume &v = renderer.volume();
@@ -126,6 +135,7 @@ void SharedState::warmUp(std::shared_ptr<VolumeEntry> entry) {
         camera.target = v.center();
         camera.eye = camera.target + Vec3d(0, 0, 3 * length(v.extent()));
         renderer.render(presetTransferFunction("mr", v.range), camera, 8, 8, Quality{}, {});
+        ++warmUpFrames_;
         std::lock_guard lock(mutex_);
         kernelReady_ = true;
     } catch (const std::exception &e) {

@@ -1,6 +1,6 @@
 #pragma once
 // What every session shares (Beast chat-multi's shared_state): the configuration, the
-// OpenCL device, the volume registry, the render scheduler, the metrics, and the open
+// back end that draws frames (--device: the native CPU path, or an OpenCL device), the volume registry, the render scheduler, the metrics, and the open
 // WebSocket sessions (to refuse past their limits and to close them all at shutdown).
 //
 // A connection is *pending* from the WebSocket handshake until its hello succeeds (with the
@@ -9,6 +9,7 @@
 // have their own bound (max_pending_sessions) and a hello deadline.
 
 #include "protocol/server_messages.hpp"
+#include "renderer/make_frame_renderer.hpp"
 #include "renderer/opencl/opencl_context.hpp"
 #include "server/config.hpp"
 #include "server/metrics.hpp"
@@ -28,7 +29,9 @@ class WebsocketSession;
 
 class SharedState {
   public:
-    // Opens the OpenCL device (throws OpenClError naming it if there is none).
+    // Chooses the back end from config.device (DeviceChoice) and, only when that is OpenCL,
+    // opens the device and checks its kernel cache (throws OpenClError naming what failed;
+    // std::invalid_argument for a device value that is none of the accepted forms).
     explicit SharedState(ServerConfig config);
     ~SharedState();
 
@@ -53,12 +56,19 @@ class SharedState {
     void closeAll(const std::string &reason);
     bool stopping() const { return stopping_; }
 
-    // Start loading the default volume, then build the ray-casting program with a tiny
-    // warm-up render of it (of an 8³ volume when there is no default volume): /readyz
-    // reports ready once both are done.
+    // Start loading the default volume, then draw a tiny warm-up frame of it with the chosen
+    // back end (of an 8³ volume when there is no default volume; on OpenCL this builds the
+    // ray-casting program): /readyz reports ready once both are done.
     void preloadDefaultVolume();
-    // Programs the device has built (tests: readiness implies at least one).
-    size_t programsBuilt() const { return cl_->programsBuilt(); }
+    // The back end that draws every volume's frames: "cpu: …" (native) or "opencl: <device>".
+    const std::string &backEnd() const { return backEnd_; }
+    // True when frames are drawn through OpenCL.
+    bool usesOpenCl() const { return cl_ != nullptr; }
+    // Programs the OpenCL device has built; 0 on the native path (tests: readiness on OpenCL
+    // implies at least one).
+    size_t programsBuilt() const { return cl_ ? cl_->programsBuilt() : 0; }
+    // Warm-up frames drawn (tests: readiness implies one, on either back end).
+    int warmUpFrames() const { return warmUpFrames_; }
     // Empty when ready, else why not.
     std::string notReadyReason() const;
     bool originAllowed(std::string_view origin) const;
@@ -68,7 +78,8 @@ class SharedState {
   private:
     ServerConfig config_;
     Metrics metrics_;
-    std::unique_ptr<OpenClContext> cl_;
+    std::shared_ptr<OpenClContext> cl_;   // null on the native CPU path
+    std::string backEnd_;
     protocol::DeviceInfo device_;
     std::unique_ptr<VolumeRegistry> registry_;
     std::unique_ptr<RenderScheduler> scheduler_;
@@ -83,6 +94,7 @@ class SharedState {
     void startWarmUp(std::shared_ptr<VolumeEntry> entry);   // with mutex_ held
     std::thread warmUp_;
     bool kernelReady_ = false;
+    std::atomic<int> warmUpFrames_{0};
     std::string kernelError_;
 };
 

@@ -2,6 +2,8 @@
 
 #include "renderer/synthetic.hpp"
 #include "renderer/io/volume_io.hpp"
+#include "renderer/cpu/cpu_renderer.hpp"
+#include "renderer/make_frame_renderer.hpp"
 #include "renderer/io/volume_source.hpp"
 
 #include <spdlog/fmt/fmt.h>
@@ -27,10 +29,18 @@ std::string lower(std::string s) {
     std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
     return s;
 }
-// The in-memory cost of a volume: float32 voxels, plus the mip pyramid (1/7) and slack for
-// bricks and tables the renderer builds on demand.
-constexpr double kMemoryFactor = 1.2;
-uint64_t memoryOf(const Volume &v) { return uint64_t(double(v.voxelCount()) * 4.0 * kMemoryFactor); }
+// The in-memory cost of a volume: its voxels (float32 in memory, whatever the file's type),
+// and what its renderer builds from them at most: every mip level, a padded copy of each
+// for trilinear sampling and one of B-spline coefficients for cubic, brick grids
+// (CpuRenderer::plannedBytes; the OpenCL back end holds about the same, as host or device
+// buffers). Counted in full at load, so that frames asking for coarse levels or cubic later
+// never take the server past its budget.
+uint64_t memoryOf(const Volume &v) {
+    return uint64_t(v.voxels.size()) * sizeof(float) + CpuRenderer::plannedBytes(v.dims);
+}
+// The least memoryOf() / float32 voxel bytes, for refusing a file from its header: 1 (the
+// voxels) + 1/7 (mips) + 8/7 (trilinear copies) + 8/7 (coefficients), less rounding.
+constexpr double kMemoryFactor = 3.4;
 uint64_t mib(uint64_t bytes) { return (bytes + (uint64_t(1) << 20) - 1) >> 20; }
 
 // What a session holds: every copy of the returned pointer (the session's, its render jobs')
@@ -66,9 +76,9 @@ protocol::VolumeInfo VolumeEntry::info() const {
     return i;
 }
 
-VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBytes, OpenClContext &cl,
+VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBytes, std::shared_ptr<OpenClContext> cl,
                                Metrics &metrics, double loadTimeoutSeconds)
-    : budgetBytes_(budgetBytes), loadTimeoutSeconds_(loadTimeoutSeconds), cl_(cl), metrics_(metrics) {
+    : budgetBytes_(budgetBytes), loadTimeoutSeconds_(loadTimeoutSeconds), cl_(std::move(cl)), metrics_(metrics) {
     for (const auto &d : dataDirs) {
         std::error_code ec;
         fs::path c = fs::canonical(d, ec);
@@ -297,7 +307,7 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         }
         entry->volume = std::make_shared<const Volume>(std::move(loaded.volume));
         progress(p.name, ProgressStage::Uploading, "", 0.0);
-        entry->renderer = std::make_unique<OpenClRenderer>(cl_, entry->volume);
+        entry->renderer = makeFrameRenderer(cl_, entry->volume);
         progress(p.name, ProgressStage::Uploading, "", 1.0);
         return entry;
     } catch (const VolumeTooLarge &e) {
@@ -317,7 +327,8 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
 }
 
 std::string VolumeRegistry::tooLargeMessage(const std::string &name, uint64_t bytes) const {
-    return fmt::format("{}: needs {} MiB (float32 voxels and the renderer's 20 %), more than the whole memory "
+    return fmt::format("{}: needs {} MiB (float32 voxels, mip levels, the renderer's padded copies and B-spline "
+                       "coefficients), more than the whole memory "
                        "budget of {} MiB (--memory-budget-mib); it cannot be loaded on this server",
                        name, mib(bytes), budgetBytes_ >> 20);
 }

@@ -16,7 +16,8 @@
 
 #include "protocol/errors.hpp"
 #include "protocol/server_messages.hpp"
-#include "renderer/opencl/opencl_renderer.hpp"
+#include "renderer/frame_renderer.hpp"
+#include "renderer/opencl/opencl_context.hpp"
 #include "renderer/volume.hpp"
 #include "server/metrics.hpp"
 
@@ -59,8 +60,9 @@ class VolumeRegistry {
     using Result = std::variant<std::shared_ptr<VolumeEntry>, protocol::ProtocolError>;
     using Done = std::function<void(Result)>;
 
+    // cl: the OpenCL device every volume's renderer draws on; null: the native CPU path.
     // loadTimeoutSeconds: a load running longer fails (load_failed naming the limit); 0: none.
-    VolumeRegistry(std::vector<std::filesystem::path> dataDirs, uint64_t budgetBytes, OpenClContext &cl,
+    VolumeRegistry(std::vector<std::filesystem::path> dataDirs, uint64_t budgetBytes, std::shared_ptr<OpenClContext> cl,
                    Metrics &metrics, double loadTimeoutSeconds = 120);
     ~VolumeRegistry();   // stops the loader after its current load (which stops at its next step)
 
@@ -112,7 +114,7 @@ class VolumeRegistry {
     double loadTimeoutSeconds_;
     std::atomic<bool> stopRequested_{false};   // read by the load in progress at each step
     std::string loading_;                      // guarded by mutex_
-    OpenClContext &cl_;
+    std::shared_ptr<OpenClContext> cl_;
     Metrics &metrics_;
 
     mutable std::mutex mutex_;

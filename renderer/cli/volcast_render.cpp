@@ -82,12 +82,12 @@ int main(int argc, char **argv) {
     app.add_option("scene", scenePath, "Scene JSON file")->required()->check(CLI::ExistingFile);
     app.add_option("-o,--output", outPath, "Output image: .exr or .tif (premultiplied float RGBA), .png (8-bit)")
         ->required();
-    std::string device = "opencl", kernelCache;
-    app.add_flag("--reference", reference, "Use the exact double-precision reference integrator instead of OpenCL");
-    // The default stays OpenCL while the documents and remedies.py describe OpenCL output;
-    // the native path has every switch, so `auto` is the candidate default.
+    std::string device = "auto", kernelCache;
+    app.add_flag("--reference", reference, "Use the exact double-precision reference integrator instead of a ray caster");
+    // auto, as the server: an OpenCL GPU where there is one, else the native path (every
+    // switch, and faster than PoCL). remedies.py asks for opencl, the output its page describes.
     app.add_option("--device", device,
-                   "Back end: cpu (native SIMD), opencl ($VOLCAST_DEVICE or OpenCL's choice), "
+                   "Back end: cpu (native SIMD), opencl (OpenCL's choice: a GPU, else its CPU device), "
                    "opencl:<part of a device name, gpu or cpu>, or auto (an OpenCL GPU, else cpu)")
         ->capture_default_str();
     app.add_option("--kernel-cache", kernelCache, "Folder for PoCL's compiled-kernel cache (default: $VOLCAST_KERNEL_CACHE)");

@@ -30,7 +30,10 @@ struct FrameParams {
     float clipPlanes[6][4];         // (n, w): keeps dot(n, x) + w >= 0, world
     int clipPlaneCount = 0;
     int dims[3];                    // level-0 samples per axis: the box rays are clipped to
-    int width = 0, height = 0;      // rays cast (after image_scale)
+    int width = 0, height = 0;      // rays of the whole grid (after image_scale)
+    // The window of the grid that rgba holds: rays [outX, outX + outWidth) × [outY, …); the
+    // whole grid is 0, 0, width. Rays keep their grid coordinates (camera, jitter).
+    int outX = 0, outY = 0, outWidth = 0;
     bool orthographic = false;
     float levelScale = 1;           // 2^-mip_level
     float step = 1;                 // world units
@@ -70,7 +73,8 @@ struct Counters {
     std::atomic<uint64_t> samples{0}, raysHit{0}, terminatedEarly{0}, truncated{0}, segmentsSkipped{0};
 };
 
-// Casts the rays of pixels [x0, x1) × [y0, y1) into rgba (width × height × 4, premultiplied).
+// Casts the rays of pixels [x0, x1) × [y0, y1) into rgba (the window outX, outY, outWidth wide,
+// × 4, premultiplied).
 void marchTile(const FrameParams &p, int x0, int y0, int x1, int y1, float *rgba, Counters &counters);
 
 // The instruction set the march runs on here ("AVX3", "AVX2", …) and its rays per packet.

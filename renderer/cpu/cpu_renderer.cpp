@@ -97,9 +97,12 @@ CpuRenderer::CpuRenderer(std::shared_ptr<const Volume> volume, CpuRendererOption
 CpuRenderer::CpuRenderer(const Volume &volume, CpuRendererOptions options)
     : CpuRenderer(std::make_shared<const Volume>(volume), options) {}
 
-std::string CpuRenderer::description() const {
+std::string CpuRenderer::description() const { return describe(options_); }
+
+std::string CpuRenderer::describe(const CpuRendererOptions &options) {
+    const int threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
     return "cpu: " + cpu::marchTarget() + ", " + std::to_string(cpu::raysPerPacket()) + " rays per packet, " +
-           std::to_string(threads_) + " threads";
+           std::to_string(threads) + " threads";
 }
 
 std::string CpuRenderer::featureNames(const Quality &q, bool hasClipPlanes) {
@@ -127,6 +130,8 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
     const int levelsBefore = pyramid_.levelsBuilt();
     const std::vector<float> &voxels = pyramid_.level(level);
     if (pyramid_.levelsBuilt() != levelsBefore) {
+        for (int l = levelsBefore + 1; l <= pyramid_.levelsBuilt(); ++l)
+            heldBytes_ += uint64_t(pyramid_.level(l).size()) * sizeof(float);
         st.mipSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
         counts_.mipLevels += pyramid_.levelsBuilt() - levelsBefore;
@@ -145,7 +150,23 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
         std::lock_guard lock(countsMutex_);
         ++counts_.coefficientVolumes;
     }
+    heldBytes_ += uint64_t(data.padded.size()) * sizeof(float);
     return dataSets_.emplace(key, std::move(data)).first->second;
+}
+
+uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options) {
+    const auto count = [](Vec3i d, int pad) { return uint64_t(d.x + pad) * uint64_t(d.y + pad) * uint64_t(d.z + pad); };
+    const int b = std::max(1, options.brickSize);
+    uint64_t bytes = 0;
+    for (int level = 0;; ++level) {
+        const Vec3i d = mipLevelDims(dims, level);
+        if (level > 0) bytes += count(d, 0) * sizeof(float);                  // the mip level
+        bytes += (count(d, 1) + count(d, 3)) * sizeof(float);                 // trilinear and cubic copies
+        const Vec3i bricks{(d.x + b - 1) / b, (d.y + b - 1) / b, (d.z + b - 1) / b};
+        bytes += 2 * count(bricks, 0) * (2 * sizeof(float) + sizeof(int32_t)); // min-max and visible, both
+        if (d.x == 1 && d.y == 1 && d.z == 1) break;
+    }
+    return bytes;
 }
 
 void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st) {
@@ -156,6 +177,8 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
         if (data.cubic) data.bricks = buildMinMaxBricks(unpadMirror(data.padded, data.dims).data(), data.dims,
                                                         options_.brickSize, 2);
         else data.bricks = buildMinMaxBricks(pyramid_.level(level).data(), data.dims, options_.brickSize, 1);
+        heldBytes_ += uint64_t(data.bricks->minmax.size()) * sizeof(float) +
+                      uint64_t(data.bricks->brickCount()) * sizeof(int32_t); // and the visible flags below
         st.brickGridSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
         ++counts_.brickGrids;
@@ -178,7 +201,20 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
 
 Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
+    return castRays(tf, camera, width, height, quality, clipPlanes, nullptr, stats);
+}
+
+Image CpuRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                                const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
+                                const RayWindow &window, RenderStats *stats) {
+    return castRays(tf, camera, width, height, quality, clipPlanes, &window, stats);
+}
+
+Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
+                            const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
+                            RenderStats *stats) {
     validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
+    if (window) validateRayWindow(*window, width, height, quality);
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -297,17 +333,25 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     p.brickVisible = quality.emptySpaceSkipping ? data.brickVisible.data() : nullptr;
     p.brickSize = options_.brickSize;
 
+    // A window casts only its own rays, tiled from its corner; each ray is cast as in the
+    // whole grid (its lanes do not depend on the other rays of its packet).
+    const RayWindow all{0, 0, raysWide, raysHigh};
+    const RayWindow &win = window ? *window : all;
+    p.outX = win.x;
+    p.outY = win.y;
+    p.outWidth = win.width;
+
     const auto t = Clock::now();
-    Image cast(raysWide, raysHigh);
+    Image cast(win.width, win.height);
     cpu::Counters counters;
-    const int tilesWide = (raysWide + kTileEdge - 1) / kTileEdge, tilesHigh = (raysHigh + kTileEdge - 1) / kTileEdge;
+    const int tilesWide = (win.width + kTileEdge - 1) / kTileEdge, tilesHigh = (win.height + kTileEdge - 1) / kTileEdge;
     const int tiles = tilesWide * tilesHigh;
     std::atomic<int> next{0};
     auto work = [&] {
         for (int i; (i = next.fetch_add(1)) < tiles;) {
-            const int x0 = (i % tilesWide) * kTileEdge, y0 = (i / tilesWide) * kTileEdge;
-            cpu::marchTile(p, x0, y0, std::min(x0 + kTileEdge, raysWide), std::min(y0 + kTileEdge, raysHigh),
-                           cast.rgba.data(), counters);
+            const int x0 = win.x + (i % tilesWide) * kTileEdge, y0 = win.y + (i / tilesWide) * kTileEdge;
+            cpu::marchTile(p, x0, y0, std::min(x0 + kTileEdge, win.x + win.width),
+                           std::min(y0 + kTileEdge, win.y + win.height), cast.rgba.data(), counters);
         }
     };
     {
@@ -321,7 +365,8 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     st.skippedSegmentsPerRay = double(counters.segmentsSkipped) / hit;
     st.earlyTerminatedFraction = double(counters.terminatedEarly) / hit;
     st.raysTruncated = counters.truncated;
-    Image image = raysWide == width && raysHigh == height ? std::move(cast) : resizeBilinear(cast, width, height);
+    Image image = window || (raysWide == width && raysHigh == height) ? std::move(cast)
+                                                                       : resizeBilinear(cast, width, height);
     st.renderSeconds = secondsSince(t);
     if (stats) *stats = st;
     return image;

@@ -13,6 +13,7 @@
 #include "renderer/mip_pyramid.hpp"
 #include "renderer/preintegration.hpp"
 
+#include <atomic>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -33,9 +34,27 @@ class CpuRenderer : public FrameRenderer {
 
     Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
                  const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
+    // Casts only the window's rays (the tiles over it), each exactly as render() casts it.
+    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
+                       RenderStats *stats = nullptr) override;
+    bool rendersWindowsCheaply() const override { return true; }
     std::string description() const override;
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }
+
+    // Bytes of volume-sized data the renderer holds now, beyond the volume's own voxels:
+    // padded copies of the sampled levels, mip levels, B-spline coefficients, brick grids.
+    // (The transfer-function and pre-integration tables, at most ~17 MiB per renderer
+    // whatever the volume, are not counted.) Never waits for a frame.
+    uint64_t memoryBytes() const { return heldBytes_.load(); }
+    // What memoryBytes() reaches at most for a volume of `dims`: every mip level sampled,
+    // trilinear and cubic, with empty-space skipping. The server's memory budget counts it.
+    static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {});
+
+    // What description() says for a renderer with these options, before any volume exists
+    // (the server's start-up log and hello).
+    static std::string describe(const CpuRendererOptions &options = {});
 
     // The switches a frame uses, as the OpenCL back end names them ("JITTER CLIP_PLANES …").
     static std::string featureNames(const Quality &quality, bool hasClipPlanes);
@@ -52,6 +71,9 @@ class CpuRenderer : public FrameRenderer {
         double emptyFraction = 0;
     };
 
+    // render() and renderWindow(): the whole grid (upsampled to the frame) or one window of it.
+    Image castRays(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
+                   const std::vector<ClipPlane> &clipPlanes, const RayWindow *window, RenderStats *stats);
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st);
 
@@ -69,6 +91,7 @@ class CpuRenderer : public FrameRenderer {
     TransferFunction preintegrationFor_;
     PreprocessCounts counts_;
     mutable std::mutex countsMutex_;
+    std::atomic<uint64_t> heldBytes_{0};
 };
 
 } // namespace volcast

@@ -163,8 +163,8 @@ def montage(paths, out, gap=4, background=(48, 48, 48)):
 # Running volcast-render
 
 class Runner:
-    def __init__(self, exe, out, data_dir, tolerance, verbose):
-        self.exe, self.out, self.data_dir = exe, out, data_dir
+    def __init__(self, exe, out, data_dir, tolerance, verbose, device="opencl"):
+        self.exe, self.out, self.data_dir, self.device = exe, out, data_dir, device
         self.tolerance, self.verbose = tolerance, verbose
         self.scenes = out / "scenes"
         self.images = out / "images"
@@ -189,6 +189,8 @@ class Runner:
         cmd = [str(self.exe), str(scene_path), "-o", str(image)]
         if reference:
             cmd += ["--reference", "--tolerance", repr(self.tolerance)]
+        else:
+            cmd += ["--device", self.device]
         if repeat:
             cmd += ["--repeat", str(repeat)]
         if compare:
@@ -506,6 +508,9 @@ def main():
     ap.add_argument("--repeat", type=int, default=6, help="frames per table row; the later ones are timed (default 6)")
     ap.add_argument("--rounds", type=int, default=3,
                     help="times each table row is rendered, interleaved; its time is the best round's median (default 3)")
+    ap.add_argument("--device", default="opencl",
+                    help="volcast-render's back end for the pictures and timings (default opencl: docs/remedies.md "
+                         "describes the OpenCL ray caster; cpu for the native path)")
     ap.add_argument("--tolerance", type=float, default=1e-5, help="reference tolerance per pixel (default 1e-5)")
     ap.add_argument("-q", "--quiet", action="store_true")
     args = ap.parse_args()
@@ -522,7 +527,7 @@ def main():
                  "or pass --render-exe")
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    r = Runner(exe.resolve(), out, Path(args.data_dir).resolve(), args.tolerance, not args.quiet)
+    r = Runner(exe.resolve(), out, Path(args.data_dir).resolve(), args.tolerance, not args.quiet, args.device)
 
     started = time.monotonic()
     meta = {"command": " ".join([Path(sys.argv[0]).as_posix()] + sys.argv[1:]), "machine": machine(),

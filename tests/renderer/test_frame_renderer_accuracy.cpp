@@ -93,6 +93,57 @@ TEST_P(FrameRendererAccuracy, DescribesItsBackEnd) {
     EXPECT_EQ(r->description().rfind(GetParam() == Backend::Cpu ? "cpu: " : "opencl: ", 0), 0u) << r->description();
 }
 
+// The scheduler renders refinements band by band (renderWindow): a window must be exactly
+// the same rays as the whole grid, with jitter, skipping, clip planes, shading, cubic and
+// pre-integration on, for windows that do not start on a tile or packet boundary.
+TEST_P(FrameRendererAccuracy, AWindowIsExactlyThoseRaysOfTheWholeGrid) {
+    const SyntheticVolume sphere = makeSphere({48, 40, 44}, {1, 1, 1.2}, 9, 2, 200);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 0}, {60, 0, 0, 0, 0}, {120, 1, 0.6, 0.3, 0.3}, {200, 1, 1, 1, 0.5}};
+    const auto r = renderer(sphere.volume);
+    EXPECT_TRUE(r->rendersWindowsCheaply()) << r->description() << " casts the whole grid for every window";
+    const Camera cam = test::obliqueCamera(sphere.volume, 40);
+    const std::vector<ClipPlane> clip = {{{30, 20, 22}, {-0.6, 0, 0.8}}};
+    constexpr int kW = 61, kH = 47;
+    for (double scale : {1.0, 0.5})
+        for (bool cubic : {false, true})
+            for (bool preintegrated : {false, true}) {
+                Quality q = plain(0.7);
+                q.jitter = true;
+                q.seed = 12345;
+                q.emptySpaceSkipping = true;
+                q.earlyTermination = 0.95;
+                q.shading = !preintegrated;
+                q.interpolation = cubic ? Interpolation::Cubic : Interpolation::Linear;
+                q.preintegrated = preintegrated;
+                q.imageScale = scale;
+                const std::string what = "scale " + std::to_string(scale) + (cubic ? " cubic" : " linear") +
+                                         (preintegrated ? " pre-integrated" : "");
+                const int gw = raysForScale(kW, scale), gh = raysForScale(kH, scale);
+                // At scale 1 the whole grid is render()'s own image; below, its un-upsampled rays.
+                const Image whole = scale == 1 ? r->render(tf, cam, kW, kH, q, clip)
+                                               : r->renderWindow(tf, cam, kW, kH, q, clip, RayWindow{0, 0, gw, gh});
+                ASSERT_EQ(whole.width, gw) << what;
+                ASSERT_EQ(whole.height, gh) << what;
+                for (const RayWindow w : {RayWindow{0, 0, gw, gh}, RayWindow{0, 7, gw, 3}, RayWindow{3, 5, 17, 9},
+                                          RayWindow{gw - 5, gh - 4, 5, 4}, RayWindow{11, 0, 1, gh}}) {
+                    RenderStats st;
+                    const Image part = r->renderWindow(tf, cam, kW, kH, q, clip, w, &st);
+                    ASSERT_EQ(part.width, w.width);
+                    ASSERT_EQ(part.height, w.height);
+                    int differ = 0;
+                    for (int y = 0; y < w.height; ++y)
+                        for (int x = 0; x < w.width; ++x)
+                            for (int c = 0; c < 4; ++c)
+                                differ += part.pixel(x, y)[c] != whole.pixel(w.x + x, w.y + y)[c];
+                    EXPECT_EQ(differ, 0) << what << ": window " << w.width << "x" << w.height << "+" << w.x << "+"
+                                         << w.y << " differs from the whole grid in " << differ << " values";
+                }
+            }
+    // A window off the grid is refused.
+    EXPECT_THROW(r->renderWindow(tf, cam, kW, kH, plain(1), {}, RayWindow{60, 0, 2, 1}), std::invalid_argument);
+}
+
 TEST_P(FrameRendererAccuracy, ConstantBoxIsExactWithPartialSegmentsAtAnyStep) {
     const SyntheticVolume box = makeConstantBox({12, 9, 15}, {1.0, 1.5, 0.8}, 100);
     const auto r = renderer(box.volume);

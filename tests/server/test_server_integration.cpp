@@ -3,7 +3,7 @@
 // built-in ones, so each test takes well under a few seconds on the 2-core PoCL machine.
 
 #include "client/ws_client.hpp"
-#include "renderer/opencl/opencl_renderer.hpp"
+#include "renderer/make_frame_renderer.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/io/volume_source.hpp"
@@ -111,7 +111,10 @@ class ServerTest : public ::testing::Test {
     static inline std::unique_ptr<volcast::server::Server> server;
     static inline fs::path tmp;
 
-    static void SetUpTestSuite() {
+    // The server on its default back end (--device auto: the native CPU path on a machine
+    // without an OpenCL GPU); ServerOnOpenClTest repeats some tests with --device opencl.
+    static void SetUpTestSuite() { startSharedServer("auto"); }
+    static void startSharedServer(const std::string &device) {
         tmp = fs::temp_directory_path() / ("volcast_server_test_" + std::to_string(::getpid()));
         fs::remove_all(tmp);
         fs::create_directories(tmp / "data" / "ct");
@@ -139,6 +142,7 @@ class ServerTest : public ::testing::Test {
         config.webRoot = tmp / "web";
         config.idleMs = 100;
         config.ioThreads = 2;
+        config.device = device;
         // ClientThatStopsReadingStallsNoOneAndHoldsOneFrame pauses a reader for longer than
         // the default write timeout and expects it back: closing stuck readers is checked in
         // test_ws_hardening.cpp.
@@ -205,9 +209,18 @@ TEST_F(ServerTest, ServesStaticFilesWithTypesAndRefusesTraversal) {
 
 // ---- sessions -----------------------------------------------------------------------
 
+// The ladder ends in a final frame equal to the scene rendered directly by the back end the
+// server chose (ServerTest: default; ServerOnOpenClTest: --device opencl).
+void expectFinalFrameMatchesTheRenderer(Client &c, const json &state, const volcast::server::SharedState &shared);
+
 TEST_F(ServerTest, FinalFrameMatchesTheRendererExactly) {
     json state;
     auto c = openSession("builtin:demo", &state);
+    expectFinalFrameMatchesTheRenderer(*c, state, server->state());
+}
+
+void expectFinalFrameMatchesTheRenderer(Client &client, const json &state, const volcast::server::SharedState &shared) {
+    Client *c = &client;
     const auto frames = framesUntilFinal(*c);
     ASSERT_FALSE(frames.empty());
     // The ladder: levels rising, only the last frame final and PNG, the others JPEG.
@@ -226,9 +239,10 @@ TEST_F(ServerTest, FinalFrameMatchesTheRendererExactly) {
     // Render the state's scene directly with the same renderer and convert it the same way.
     const volcast::Scene scene = volcast::parseScene(state.at("scene").dump());
     const auto loaded = volcast::loadSceneVolume(scene.volume);
-    volcast::OpenClContext cl;
-    volcast::OpenClRenderer renderer(cl, loaded.volume);
-    const volcast::Image image = renderer.render(volcast::resolvedTransferFunction(scene, loaded.volume.range),
+    const auto renderer = volcast::makeFrameRenderer(volcast::DeviceChoice::parse(shared.config().device),
+                                                     std::make_shared<const volcast::Volume>(loaded.volume));
+    ASSERT_EQ(renderer->description(), shared.backEnd());
+    const volcast::Image image = renderer->render(volcast::resolvedTransferFunction(scene, loaded.volume.range),
                                                  scene.camera, scene.width, scene.height, scene.quality,
                                                  scene.clipPlanes);
     const std::vector<uint8_t> expected = volcast::server::toStraightRgba8(image);
@@ -237,12 +251,55 @@ TEST_F(ServerTest, FinalFrameMatchesTheRendererExactly) {
     ASSERT_EQ(w, 64);
     ASSERT_EQ(h, 64);
     ASSERT_EQ(channels, 4);
-    // PNG is lossless and the kernel is deterministic for the same scene on the same device,
+    // PNG is lossless and both back ends are deterministic for the same scene on the same device,
     // so the bytes agree exactly; 1/255 is allowed only for a last-bit difference in the
     // float image should the device ever reorder its arithmetic.
     int worst = 0;
     for (size_t i = 0; i < got.size(); ++i) worst = std::max(worst, std::abs(int(got[i]) - int(expected[i])));
     EXPECT_LE(worst, 1);
+}
+
+// With the default --device (auto), a machine without an OpenCL GPU draws through the native
+// CPU path, opens no OpenCL device, and says so in hello, the start-up choice and /metrics.
+TEST_F(ServerTest, DefaultDeviceIsTheNativePathWithoutAnOpenClGpu) {
+    const auto &state = server->state();
+    EXPECT_EQ(state.config().device, "auto");
+    auto c = std::make_unique<Client>("127.0.0.1", port());
+    const Message hello = request(*c, {{"type", "hello"}, {"id", 1}, {"protocol", 1}, {"client", "gtest"}});
+    ASSERT_TRUE(hello.decoded && std::holds_alternative<protocol::ServerHello>(*hello.decoded)) << hello.text;
+    const auto &device = std::get<protocol::ServerHello>(*hello.decoded).device;
+    EXPECT_EQ(device.name, state.backEnd());
+    EXPECT_GE(state.warmUpFrames(), 1) << "ready without a warm-up frame";
+    const HttpReply metrics = httpGet(port(), "/metrics");
+    EXPECT_NE(metrics.body.find("volcast_back_end_info{back_end=\"" + state.backEnd() + "\",type=\"" + device.type + "\"} 1"),
+              std::string::npos)
+        << metrics.body;
+    if (volcast::openClGpuPresent()) {
+        EXPECT_EQ(state.backEnd().rfind("opencl: ", 0), 0u) << state.backEnd();
+        EXPECT_EQ(device.type, "gpu");
+        return;
+    }
+    EXPECT_EQ(state.backEnd().rfind("cpu: ", 0), 0u) << "no OpenCL GPU here, yet the server draws on " << state.backEnd();
+    EXPECT_EQ(device.type, "cpu");
+    EXPECT_FALSE(state.usesOpenCl());
+    EXPECT_EQ(state.programsBuilt(), 0u) << "the native path built an OpenCL program";
+}
+
+// The same server on --device opencl (PoCL here): the OpenCL path stays covered end to end.
+class ServerOnOpenClTest : public ServerTest {
+  protected:
+    static void SetUpTestSuite() { startSharedServer("opencl"); }
+};
+
+TEST_F(ServerOnOpenClTest, FinalFrameMatchesTheOpenClRendererExactly) {
+    const auto &state = server->state();
+    ASSERT_TRUE(state.notReadyReason().empty()) << state.notReadyReason();
+    EXPECT_TRUE(state.usesOpenCl());
+    EXPECT_EQ(state.backEnd().rfind("opencl: ", 0), 0u) << state.backEnd();
+    EXPECT_GE(state.programsBuilt(), 1u) << "ready before the warm-up frame built a ray-casting program";
+    json scene;
+    auto c = openSession("builtin:demo", &scene);
+    expectFinalFrameMatchesTheRenderer(*c, scene, state);
 }
 
 TEST_F(ServerTest, DragDropsStaleRequestsThenRefinesToFinal) {

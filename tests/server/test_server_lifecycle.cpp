@@ -1,8 +1,10 @@
-// The server's start and stop: the kernel cache checked at start, readiness that waits for
-// a compiled ray-casting program, and SIGTERM that ends the process within its grace
+// The server's start and stop: the back end --device chooses (native by default without a
+// GPU), the kernel cache checked at start on OpenCL, readiness that waits for a compiled
+// ray-casting program, and SIGTERM that ends the process within its grace
 // period whatever is running.
 
 #include "client/ws_client.hpp"
+#include "renderer/make_frame_renderer.hpp"
 #include "server/server.hpp"
 
 #include <gtest/gtest.h>
@@ -80,11 +82,13 @@ class ServerLifecycle : public ::testing::Test {
 };
 
 // A cache folder that cannot be created (its parent is a regular file: permission bits
-// would not stop root) must be named, not reported as a missing OpenCL device.
+// would not stop root) must be named, not reported as a missing OpenCL device. The cache is
+// checked only when the server draws through OpenCL.
 TEST_F(ServerLifecycle, UnwritableKernelCacheFailsNamingTheFolder) {
     std::ofstream(tmp / "file") << "a regular file, not a folder";
     const fs::path cache = tmp / "file" / "kcache";
-    const pid_t pid = startServer({"--port", "0", "--kernel-cache", cache.string(), "--default-volume", ""},
+    const pid_t pid = startServer({"--port", "0", "--device", "opencl", "--kernel-cache", cache.string(),
+                                   "--default-volume", ""},
                                   tmp / "log.txt");
     ASSERT_GT(pid, 0);
     const int status = waitForExit(pid, 30s);
@@ -96,11 +100,45 @@ TEST_F(ServerLifecycle, UnwritableKernelCacheFailsNamingTheFolder) {
     EXPECT_EQ(log.find("no OpenCL device"), std::string::npos) << log;
 }
 
+// Started as a user starts it, with no --device, on a machine without an OpenCL GPU: the
+// server draws through the native CPU path, says so at start, and neither opens OpenCL nor
+// checks the kernel cache (an unusable one is no reason to refuse to start).
+TEST_F(ServerLifecycle, DefaultsToTheNativePathWithoutAnOpenClGpu) {
+    if (volcast::openClGpuPresent()) GTEST_SKIP() << "this machine has an OpenCL GPU: auto picks it";
+    std::ofstream(tmp / "file") << "a regular file, not a folder";
+    const fs::path portFile = tmp / "port";
+    const pid_t pid = startServer({"--port", "0", "--port-file", portFile.string(), "--kernel-cache",
+                                   (tmp / "file" / "kcache").string(), "--default-volume", "builtin:sphere"},
+                                  tmp / "log.txt");
+    ASSERT_GT(pid, 0);
+    const uint16_t port = waitForPort(portFile, 30s);
+    ::kill(pid, port == 0 ? SIGKILL : SIGTERM);
+    const int status = waitForExit(pid, 30s);
+    const std::string log = readAll(tmp / "log.txt");
+    ASSERT_NE(port, 0) << "the server did not start: " << log;
+    EXPECT_NE(status, -1);
+    EXPECT_NE(log.find("back end (--device auto): cpu: "), std::string::npos) << log;
+    EXPECT_EQ(log.find("opencl"), std::string::npos) << log;
+}
+
+// A --device value that is none of the accepted forms stops the server at once, naming it.
+TEST_F(ServerLifecycle, AnUnknownDeviceIsAClearError) {
+    const pid_t pid = startServer({"--port", "0", "--device", "cuda", "--default-volume", ""}, tmp / "log.txt");
+    ASSERT_GT(pid, 0);
+    const int status = waitForExit(pid, 30s);
+    ASSERT_NE(status, -1) << "the server started with --device cuda";
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) != 0);
+    const std::string log = readAll(tmp / "log.txt");
+    EXPECT_NE(log.find("'cuda'"), std::string::npos) << log;
+    EXPECT_NE(log.find("opencl:<"), std::string::npos) << "the error does not list the accepted forms: " << log;
+}
+
 // Ready means a session's first frame does not wait for the program to build: whenever
-// the server says ready, the device has built a program.
+// the server says ready on OpenCL, the device has built a program.
 TEST_F(ServerLifecycle, ReadinessWaitsForACompiledKernel) {
     volcast::server::ServerConfig config;
     config.port = 0;
+    config.device = "opencl";
     config.defaultVolume = "builtin:sphere";
     volcast::server::Server server(config);
     server.start();
