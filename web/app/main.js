@@ -239,11 +239,12 @@ session.on("opened", ({ state, restored }) => {
   }
   tfEditor.setVolume(volume);
   showTransferFunction(session.scene.transfer_function ?? state.scene?.transfer_function);
+  quality.showState(state);
+  quality.setVolume(volume, session.scene.clip_planes);
+  // After the quality panel shows the state: a preset's shading then overrides it.
   presetPicker.setVolume(volume, app.tf, { restored });
   orientation.setVolume(volume);
   orientation.showCamera(app.camera);
-  quality.showState(state);
-  quality.setVolume(volume, session.scene.clip_planes);
   $("volume-name").value = volume?.name ?? "";
   $("volume-info").textContent = $("volume-info").title = describeVolume(volume);
   document.title = volume?.name ? `${volume.name} — volcast` : "volcast";
