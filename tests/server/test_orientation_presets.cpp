@@ -104,15 +104,6 @@ const std::map<std::string, Mat3d> kDirections = {
     {"left_handed", matrix({-1, 0, 0, 0, 1, 0, 0, 0, 1})},
 };
 
-Camera cameraFrom(const nlohmann::json &j) {
-    Camera c;
-    c.eye = {j["eye"][0], j["eye"][1], j["eye"][2]};
-    c.target = {j["target"][0], j["target"][1], j["target"][2]};
-    c.up = {j["up"][0], j["up"][1], j["up"][2]};
-    c.fovYDeg = j["fov_y_deg"];
-    return c;
-}
-
 struct Centroid {
     double x = 0, y = 0, weight = 0;   // image fractions in [0, 1], x right, y down
 };
@@ -154,7 +145,7 @@ Camera fromPatientsLeft(const Camera &start) {
 void expectMarkerOnPatientsLeftAnteriorSuperior(const Volume &loaded, const std::string &what) {
     SCOPED_TRACE(what);
     ASSERT_TRUE(loaded.orientationKnown) << what << ": the loader lost the patient space";
-    const Camera start = cameraFrom(server::defaultCamera(loaded, false));
+    const Camera start = server::defaultCamera(loaded, false);
     const Centroid front = markerInImage(loaded, start);
     // The marker ball (8 mm radius in a body about 100 mm across, in a view framing the
     // whole volume) covers about 20 pixels of the 64² image; 5 pixels' worth of opacity
@@ -195,7 +186,7 @@ TEST(PatientOrientation, TheStartingViewIsTheSameForEveryVoxelOrder) {
     for (const auto &[name, direction] : kDirections) {
         Volume v = patientVolume(direction);
         v.orientationKnown = true;
-        seen[name] = markerInImage(v, cameraFrom(server::defaultCamera(v, false)));
+        seen[name] = markerInImage(v, server::defaultCamera(v, false));
     }
     for (const auto &[name, c] : seen) {
         // One 64-pixel image: the centroids agree within a pixel's width (the voxel grids
