@@ -30,6 +30,16 @@ json volumeToJson(const VolumeInfo &v) {
     if (!v.voxelType.empty()) j["voxel_type"] = v.voxelType;
     if (v.valueRange) j["value_range"] = *v.valueRange;
     if (v.histogram) j["histogram"] = {{"range", v.histogram->range}, {"counts", v.histogram->counts}};
+    if (v.orientationKnown) j["orientation_known"] = *v.orientationKnown;
+    if (v.modality) {
+        json presets = json::array();
+        for (const PresetInfo &p : v.modality->presets)
+            presets.push_back({{"name", p.name}, {"label", p.label}, {"window", p.window}, {"level", p.level},
+                               {"points", p.points}, {"shading", p.shading}});
+        j["modality"] = {{"name", v.modality->name}, {"source", v.modality->source},
+                         {"reason", v.modality->reason}, {"default_preset", v.modality->defaultPreset},
+                         {"presets", std::move(presets)}};
+    }
     return j;
 }
 
@@ -121,6 +131,30 @@ VolumeInfo readVolume(const json &j, const std::string &path) {
         for (size_t i = 0; i < counts.size(); ++i)
             histogram.counts.push_back(detail::unsignedInteger(counts[i], detail::element(hf.pathOf("counts"), i)));
         v.histogram = std::move(histogram);
+    }
+    if (const json *o = f.find("orientation_known")) v.orientationKnown = detail::boolean(*o, f.pathOf("orientation_known"));
+    if (const json *m = f.find("modality")) {
+        const Fields mf(*m, f.pathOf("modality"), {}, kIgnore);
+        ModalityInfo modality;
+        modality.name = detail::string(mf.require("name"), mf.pathOf("name"), kAnyLength);
+        modality.source = detail::string(mf.require("source"), mf.pathOf("source"), kAnyLength);
+        modality.reason = detail::string(mf.require("reason"), mf.pathOf("reason"), kAnyLength);
+        modality.defaultPreset = detail::string(mf.require("default_preset"), mf.pathOf("default_preset"), kAnyLength);
+        const json &presets = detail::array(mf.require("presets"), mf.pathOf("presets"));
+        for (size_t i = 0; i < presets.size(); ++i) {
+            const Fields pf(presets[i], detail::element(mf.pathOf("presets"), i), {}, kIgnore);
+            PresetInfo p;
+            p.name = detail::string(pf.require("name"), pf.pathOf("name"), kAnyLength);
+            p.label = detail::string(pf.require("label"), pf.pathOf("label"), kAnyLength);
+            p.window = detail::number(pf.require("window"), pf.pathOf("window"));
+            p.level = detail::number(pf.require("level"), pf.pathOf("level"));
+            p.shading = detail::boolean(pf.require("shading"), pf.pathOf("shading"));
+            const json &points = detail::array(pf.require("points"), pf.pathOf("points"));
+            for (size_t k = 0; k < points.size(); ++k)
+                p.points.push_back(numbers<5>(points[k], detail::element(pf.pathOf("points"), k)));
+            modality.presets.push_back(std::move(p));
+        }
+        v.modality = std::move(modality);
     }
     return v;
 }

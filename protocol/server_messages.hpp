@@ -55,6 +55,27 @@ struct HistogramInfo {
     bool operator==(const HistogramInfo &) const = default;
 };
 
+// A display preset resolved on one volume (renderer/presets.hpp): window/level and points
+// in the volume's data units, and whether it shades.
+struct PresetInfo {
+    std::string name;
+    std::string label;
+    double window = 1, level = 0;
+    std::vector<std::array<double, 5>> points;   // [value, r, g, b, a]
+    bool shading = false;
+    bool operator==(const PresetInfo &) const = default;
+};
+
+// The modality the server chose presets by, and why (a line for the user).
+struct ModalityInfo {
+    std::string name;           // "CT", "MR", "micro-CT"
+    std::string source;         // "file" or "inferred"
+    std::string reason;
+    std::string defaultPreset;  // the preset the volume opened with
+    std::vector<PresetInfo> presets;
+    bool operator==(const ModalityInfo &) const = default;
+};
+
 // What is known of one volume. Everything but the name may be missing for a volume not
 // loaded yet: the server lists its data folders without reading every scan.
 struct VolumeInfo {
@@ -66,6 +87,9 @@ struct VolumeInfo {
     std::string voxelType;                         // in the file: "uint8", "int16", "float32", ...
     std::optional<std::array<double, 2>> valueRange;   // [min, max] of the finite voxels
     std::optional<HistogramInfo> histogram;
+    // Whether the file names its patient space (world axes are L, P, S); loaded volumes only.
+    std::optional<bool> orientationKnown;
+    std::optional<ModalityInfo> modality;          // loaded volumes only
     bool operator==(const VolumeInfo &) const = default;
 };
 

@@ -40,6 +40,11 @@ struct Volume {
     ValueRange range;               // of the finite voxels
     Histogram histogram;
     size_t nonFiniteReplaced = 0;   // NaN/Inf voxels replaced under the loader's policy
+    // Whether the file names its patient space (DICOM image orientation, NRRD `space`, NIfTI
+    // qform/sform code > 0): only then are the world axes L, P, S. Otherwise the starting
+    // view is a guess the client must say it is.
+    bool orientationKnown = false;
+    std::string modality;           // the file's own (DICOM 0008,0060: "CT", "MR", ...); empty if none
 
     size_t voxelCount() const { return size_t(dims.x) * size_t(dims.y) * size_t(dims.z); }
     size_t index(int64_t i, int64_t j, int64_t k) const {

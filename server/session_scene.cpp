@@ -1,6 +1,7 @@
 #include "server/session_scene.hpp"
 
 #include "renderer/io/volume_source.hpp"
+#include "renderer/presets.hpp"
 
 #include <cmath>
 
@@ -22,10 +23,13 @@ json defaultTransferFunction(const VolumeEntry &entry) {
                   {225, 0.85, 0.15, 0.1, 0.3},
                   {255, 1, 0.25, 0.2, 0.95}}},
                 {"opacity_unit", 1.0}};
-    const ValueRange r = entry.volume->range;
-    // Hounsfield units reach down to air at -1000; anything else is placed on its value range.
-    if (r.min < -500 && r.max > 300) return {{"preset", "ct_bone"}};
-    return {{"preset", "micro_ct"}};
+    // The default preset of the modality chosen for the volume (renderer/presets.hpp), as
+    // points in data units: a saved scene then renders the same wherever it is opened.
+    const Volume &v = *entry.volume;
+    const std::vector<ResolvedPreset> presets = presetsFor(v, chooseModality(v, entry.name));
+    json points = json::array();
+    for (const auto &p : presets.front().points) points.push_back(p);
+    return {{"points", std::move(points)}};
 }
 
 Camera defaultCamera(const Volume &v, bool builtin) {

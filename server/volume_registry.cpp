@@ -1,5 +1,6 @@
 #include "server/volume_registry.hpp"
 
+#include "renderer/presets.hpp"
 #include "renderer/synthetic.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/cpu/cpu_renderer.hpp"
@@ -73,6 +74,15 @@ protocol::VolumeInfo VolumeEntry::info() const {
     h.range = {v.histogram.range.min, v.histogram.range.max};
     h.counts = v.histogram.counts;
     i.histogram = h;
+    i.orientationKnown = v.orientationKnown;
+    // Built-ins are phantoms with transfer functions of their own (session_scene.cpp).
+    if (!name.starts_with(kBuiltinPrefix)) {
+        const ModalityChoice choice = chooseModality(v, name);
+        protocol::ModalityInfo m{choice.modality, choice.source, choice.reason, choice.defaultPreset, {}};
+        for (const ResolvedPreset &p : presetsFor(v, choice))
+            m.presets.push_back({p.name, p.label, p.window, p.level, p.points, p.shading});
+        i.modality = std::move(m);
+    }
     return i;
 }
 

@@ -1009,6 +1009,8 @@ uint64_t storedDicomSize(itk::GDCMImageIO &io) {
     }
 }
 
+void readPatientSpace(const itk::ImageIOBase &io, Volume &v);
+
 Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgress &progress) {
     {
         std::ifstream probe(path, std::ios::binary);
@@ -1073,6 +1075,7 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
     }
     v.direction = checkedGeometry(path, v.spacing, v.origin, direction);
     v.sourceType = type;
+    readPatientSpace(*io, v);
 
     if (auto *dicom = dynamic_cast<itk::GDCMImageIO *>(io.GetPointer()))
         checkDicomSlice(path, path, uint64_t(v.voxelCount()) * storedDicomSize(*dicom));
@@ -1163,6 +1166,7 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     }
     v.direction = checkedGeometry(dir, v.spacing, v.origin, direction);
     v.sourceType = type;
+    readPatientSpace(*io, v);
     const float *buffer = image->GetBufferPointer();
     v.voxels.assign(buffer, buffer + v.voxelCount());
     return v;
@@ -1185,6 +1189,46 @@ std::vector<T> convertForWriting(const float *src, size_t count) {
 }
 
 std::string dicomNumber(double x) { return fmt::format("{:.10g}", x); }
+
+// A header entry ITK keeps in the image IO's dictionary, as text whatever type ITK stored it
+// as; empty when absent.
+std::string headerText(const itk::MetaDataDictionary &dict, const std::string &key) {
+    if (!dict.HasKey(key)) return {};
+    std::string text;
+    if (itk::ExposeMetaData<std::string>(dict, key, text)) {
+        while (!text.empty() && (text.back() == ' ' || text.back() == '\0')) text.pop_back();
+        return text;
+    }
+    int i = 0;  // ITK keeps NIfTI codes as int or short, by version
+    if (itk::ExposeMetaData<int>(dict, key, i)) return std::to_string(i);
+    short h = 0;
+    if (itk::ExposeMetaData<short>(dict, key, h)) return std::to_string(h);
+    return {};
+}
+
+// Whether the header names the patient space and which modality it states (see Volume).
+// DICOM: image orientation (0020,0037) and modality (0008,0060). NRRD: a `space` field
+// (ITK keeps it as NRRD_space). NIfTI: a qform or sform code other than 0 (unknown). A
+// MetaImage without these, a NIfTI with both codes 0 or an NRRD without `space` keep their
+// numbers as they are: ITK's direction is then no statement about the patient.
+void readPatientSpace(const itk::ImageIOBase &io, Volume &v) {
+    const itk::MetaDataDictionary &dict = io.GetMetaDataDictionary();
+    const std::string ioName = io.GetNameOfClass();
+    if (ioName == "GDCMImageIO") {
+        v.orientationKnown = !headerText(dict, "0020|0037").empty();
+        v.modality = headerText(dict, "0008|0060");
+    } else if (ioName == "NrrdImageIO") {
+        v.orientationKnown = !headerText(dict, "NRRD_space").empty();
+    } else if (ioName == "NiftiImageIO") {
+        const auto coded = [&](const char *code, const char *name) {
+            const std::string n = headerText(dict, name);
+            if (!n.empty()) return n.find("UNKNOWN") == std::string::npos;
+            const std::string c = headerText(dict, code);
+            return !c.empty() && c != "0";
+        };
+        v.orientationKnown = coded("qform_code", "qform_code_name") || coded("sform_code", "sform_code_name");
+    }
+}
 
 } // namespace
 

@@ -24,6 +24,16 @@ VolumeInfo loadedVolume() {
     v.histogram = HistogramInfo{{0, 255}, std::vector<uint64_t>(256, 0)};
     v.histogram->counts[0] = 12000000;
     v.histogram->counts[200] = 3;
+    v.orientationKnown = false;
+    v.modality = ModalityInfo{"micro-CT", "inferred", "uint8 values with no Hounsfield air", "micro_ct.default",
+                              {PresetInfo{"micro_ct.default", "Micro-CT", 160, 130,
+                                          {{{50, 0, 0, 0, 0}, {210, 1, 1, 1, 0.8}}}, true}}};
+    return v;
+}
+
+VolumeInfo notLoaded(std::string name) {
+    VolumeInfo v;
+    v.name = std::move(name);
     return v;
 }
 
@@ -37,8 +47,7 @@ std::vector<ServerMessage> everyMessage() {
 
     VolumesMessage volumes;
     volumes.id = "list";
-    volumes.volumes = {loadedVolume(), VolumeInfo{"ct/head.nrrd", false, std::nullopt, std::nullopt,
-                                                  std::nullopt, "", std::nullopt, std::nullopt}};
+    volumes.volumes = {loadedVolume(), notLoaded("ct/head.nrrd")};
     VolumesMessage noVolumes;
 
     ProgressMessage progress{2, "bonsai", ProgressStage::Preprocessing, "bspline_coefficients", 0.25};

@@ -7,9 +7,11 @@
 
 import { orbit, pan, volumeBounds, zoom } from "../core/camera.js";
 import { defaultServerUrl } from "../core/connection.js";
-import { TF_PRESETS } from "../core/protocol.js";
 import { Session } from "../core/session.js";
 import { presetPoints, problems, resolvePoints, tidyPoints } from "../core/transfer_function.js";
+import { windowLevelStep } from "../core/window_level.js";
+import { OrientationControls } from "./orientation_marker.js";
+import { PresetPicker } from "./preset_picker.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
 import { StatsOverlay } from "./stats_overlay.js";
 import { ConnectionIndicator, ErrorList, ViewMessage } from "./status.js";
@@ -19,8 +21,6 @@ import { formatViewLink, parseViewLink } from "../core/view_link.js";
 
 const CLIENT_NAME = "volcast-web 0.1.0";
 const MAX_FRAMES_KEPT = 400;           // frame headers kept in window.volcast.frames (tests, console)
-const WL_WINDOW_PER_PX = 0.005;        // Alt-drag: log-scale window change per px (horizontal)
-const WL_LEVEL_SPAN_PER_PX = 1 / 400;  // Alt-drag: fraction of the value range per px (vertical)
 const STAGE_SHARE = { loading: [0, 0.6], preprocessing: [0.6, 0.9], uploading: [0.9, 1] };   // of the bar
 
 const $ = (id) => document.getElementById(id);
@@ -109,7 +109,26 @@ const quality = new QualityPanel(document, {
   },
 });
 
-for (const p of TF_PRESETS) $("tf-preset").append(new Option(p.label, p.name));
+const presetPicker = new PresetPicker(document, {
+  apply(preset, { send }) {
+    app.tf = { points: preset.points.map((p) => [...p]) };
+    app.tfOpacityUnit = undefined;
+    tfEditor.setPoints(app.tf.points);
+    $("tf-preset").value = preset.name;
+    const shading = $("q-shading");
+    if (shading.checked !== preset.shading) {
+      shading.checked = preset.shading;
+      shading.dispatchEvent(new Event("change"));   // the quality panel sends it with its policy
+    }
+    if (send && session.volume) session.setTransferFunction(app.tf);
+  },
+});
+
+const orientation = new OrientationControls(document, session, {
+  setCamera(camera) { app.camera = camera; session.setCamera(camera); },
+  getCamera: () => app.camera,
+  getTarget: () => app.startCamera?.target ?? null,
+});
 
 // --- transfer function ----------------------------------------------------------------
 
@@ -128,6 +147,7 @@ function onTfEdited(points, interactive) {
 $("tf-preset").addEventListener("change", () => {
   const name = $("tf-preset").value;
   if (!name || !session.volume) return;
+  if (presetPicker.choose(name)) return;
   app.tf = { preset: name };
   tfEditor.setPoints(presetPoints(name, session.volume.value_range ?? [0, 1]));
   session.setTransferFunction(app.tf);
@@ -135,11 +155,9 @@ $("tf-preset").addEventListener("change", () => {
 
 function windowLevelDrag(step) {
   const wl = tfEditor.windowLevel;
-  const range = session.volume?.value_range ?? [0, 1];
   if (!wl) return;
-  const w = wl.window * Math.exp(step.dx * WL_WINDOW_PER_PX);
-  const l = wl.level + step.dy * (range[1] - range[0]) * WL_LEVEL_SPAN_PER_PX;
-  tfEditor.applyWindowLevel(w, l, true);
+  const next = windowLevelStep(wl, step.dx, step.dy, session.volume?.value_range ?? [0, 1]);
+  tfEditor.applyWindowLevel(next.window, next.level, true);
 }
 
 function showTransferFunction(tf) {
@@ -253,6 +271,10 @@ session.on("opened", ({ state, restored }) => {
   quality.showState(state);
   quality.setVolume(volume, session.scene.clip_planes);
   showOpenVolume();
+  // After the quality panel shows the state: a preset's shading then overrides it.
+  presetPicker.setVolume(volume, app.tf, { restored });
+  orientation.setVolume(volume);
+  orientation.showCamera(app.camera);
   $("volume-name").value = "";
   $("volume-info").textContent = $("volume-info").title = describeVolume(volume);
   document.title = volume?.name ? `${volume.name} — volcast` : "volcast";
@@ -473,7 +495,7 @@ $("save-scene").addEventListener("click", saveScene);
 $("reset-view").addEventListener("click", resetView);
 
 // For the console and the browser tests: the session and the frame headers seen.
-window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene };
+window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene, orientation };
 
 // Closing the tab says goodbye, so the server frees the session at once.
 window.addEventListener("pagehide", () => session.stop());

@@ -100,13 +100,12 @@ export function setColor(points, i, [r, g, b]) {
   return out;
 }
 
-// Window/level of a curve: the span between its first and last point that has any
-// opacity (the part the user sees). Falls back to the whole curve.
+// Window/level of a curve: the span from its first to its last point (outside it the curve
+// is clamped, as a CT viewer's ramp is outside its window). The server's presets
+// (renderer/presets.hpp) put their points exactly across their window, so a preset reads
+// as its radiology window: bone W 2000 / L 400.
 export function windowLevelOf(points) {
-  const visible = points.map((p, i) => (p[4] > 0 ? i : -1)).filter((i) => i >= 0);
-  const first = Math.max(0, (visible[0] ?? 0) - 1);
-  const last = Math.min(points.length - 1, (visible[visible.length - 1] ?? points.length - 1) + 1);
-  const lo = points[first][0], hi = points[last][0];
+  const lo = points[0][0], hi = points[points.length - 1][0];
   return { window: Math.max(hi - lo, 1e-6), level: (lo + hi) / 2 };
 }
 

@@ -23,7 +23,7 @@ from .frames import (CODECS, FRAME_MAGIC, FRAME_PREAMBLE_BYTES, MAX_FRAME_HEADER
 from .messages import (CLIENT_TYPES, ERROR_CODES, PROTOCOL_VERSION, SERVER_TYPES, MessageError,
                        RequestId, ServerError, camera, clip_planes, close, dumps, get_state, hello,
                        interaction_end, interaction_start, list_volumes, open_volume, orbit_camera,
-                       parse_server_message, quality_automatic, quality_explicit, still,
+                       parse_server_message, preset, quality_automatic, quality_explicit, still,
                        transfer_function, viewport)
 
 __version__ = "0.1.0"  # the project's version (CMakeLists.txt) and pyproject.toml's
@@ -35,6 +35,6 @@ __all__ = [
     "CLIENT_TYPES", "ERROR_CODES", "PROTOCOL_VERSION", "SERVER_TYPES", "MessageError",
     "RequestId", "ServerError", "camera", "clip_planes", "close", "dumps", "get_state", "hello",
     "interaction_end", "interaction_start", "list_volumes", "open_volume", "orbit_camera",
-    "parse_server_message", "quality_automatic", "quality_explicit", "still",
+    "parse_server_message", "preset", "quality_automatic", "quality_explicit", "still",
     "transfer_function", "viewport",
 ]

@@ -148,3 +148,19 @@ def orbit_camera(base: Dict[str, Any], angle_deg: float) -> Dict[str, Any]:
     dot = sum(a * b for a, b in zip(k, v))
     rotated = [v[i] * c + cross[i] * s + k[i] * dot * (1 - c) for i in range(3)]
     return dict(base, eye=[t + r for t, r in zip(target, rotated)])
+
+
+def preset(volume: Dict[str, Any], name: Optional[str] = None) -> Dict[str, Any]:
+    """The display preset `name` (default: the one the volume opened with) that the server sent
+    with a loaded volume object (its `modality`, protocol/README.md): a dict with `points` in
+    the volume's data units, `window`, `level` and `shading`. Send it with
+    transfer_function({"points": p["points"]}) and the quality switch shading=p["shading"].
+    Raises KeyError naming the presets there are."""
+    modality = volume.get("modality") or {}
+    presets = modality.get("presets") or []
+    wanted = name if name is not None else modality.get("default_preset")
+    for p in presets:
+        if p.get("name") == wanted:
+            return p
+    known = ", ".join(str(p.get("name")) for p in presets) or "none: the server sent no presets for this volume"
+    raise KeyError(f"no preset {wanted!r} for volume {volume.get('name')!r} (known: {known})")

@@ -335,7 +335,7 @@ test("a real CT scan opens from the picker, with progress, and renders", { skip:
   const openId = await page.evaluate(() => window.sentLog.filter((m) => m.type === "open_volume").at(-1).id);
   const final = await waitForFinal(page, { minRequest: openId, timeout: 120000 });
   assert.equal(final.codec, "png");
-  assert.equal(await page.$eval("#tf-preset", (el) => el.value), "ct_bone", "a CT in Hounsfield units starts with the bone preset");
+  assert.equal(await page.$eval("#tf-preset", (el) => el.value), "ct.bone", "a CT in Hounsfield units starts with the server's CT bone preset");
   const c = await canvasSummary(page);
   assert.ok(c.litFraction > 0.05, `lit fraction ${c.litFraction}`);
   assert.equal(final.quality.step, 0.5, JSON.stringify(final.quality));

@@ -85,11 +85,12 @@ test("adding takes the curve's colour there; removing keeps at least two points"
   assert.equal(removePoint(pts, 0).length, 2);
 });
 
-test("window/level maps the visible part of the curve affinely", () => {
-  const pts = presetPoints("ct_bone", [0, 1]);
+test("window/level is the span of the curve's points, and maps it affinely", () => {
+  // A curve laid across bone's radiology window, as the server's presets are: it reads as
+  // W 2000 / L 400 (the old reading, from the first visible point, gave 2850 / 1575).
+  const pts = [[-600, 0, 0, 0, 0], [150, 0.9, 0.6, 0.4, 0], [300, 0.95, 0.85, 0.7, 0.3], [1400, 1, 1, 1, 0.9]];
   const wl = windowLevelOf(pts);
-  // Opacity starts after 150 HU and lasts to 3000: the window spans 150 … 3000.
-  assert.deepEqual(wl, { window: 2850, level: 1575 });
+  assert.deepEqual(wl, { window: 2000, level: 400 });
   const moved = applyWindowLevel(pts, 400, 40);
   assert.deepEqual(windowLevelOf(moved), { window: 400, level: 40 });
   assert.deepEqual(moved.map((p) => p.slice(1)), pts.map((p) => p.slice(1)), "colours and opacities stay");
