@@ -7,6 +7,8 @@
 #include "client/ws_client.hpp"
 #include "server/server.hpp"
 
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -14,6 +16,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -71,6 +74,35 @@ json turned(const json &camera, double angle) {
     for (int i = 0; i < 3; ++i) d[size_t(i)] = d[size_t(i)] * cs + cross[i] * sn + k[i] * kd * (1 - cs);
     c["eye"] = {target[0] + d[0], target[1] + d[1], target[2] + d[2]};
     return c;
+}
+
+// A frame's image as 8-bit RGB over black (the error estimate's metric, error_calibrator.hpp):
+// JPEG frames are that already; PNG frames carry straight alpha, multiplied in here.
+std::vector<double> rgbOverBlack(const volcast::client::Frame &f) {
+    OIIO::Filesystem::IOMemReader reader(f.image.data(), f.image.size());
+    OIIO::ImageSpec config;
+    config.attribute("oiio:UnassociatedAlpha", 1);
+    OIIO::Filesystem::IOProxy *proxy = &reader;
+    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
+    auto in = OIIO::ImageInput::open(f.header.codec == protocol::Codec::Png ? "frame.png" : "frame.jpg", &config, &reader);
+    if (!in) throw std::runtime_error("decode: " + OIIO::geterror());
+    const int w = in->spec().width, h = in->spec().height, ch = in->spec().nchannels;
+    std::vector<uint8_t> px(size_t(w) * size_t(h) * size_t(ch));
+    in->read_image(0, 0, 0, ch, OIIO::TypeDesc::UINT8, px.data());
+    std::vector<double> rgb(size_t(w) * size_t(h) * 3);
+    for (size_t p = 0; p < size_t(w) * size_t(h); ++p)
+        for (size_t c = 0; c < 3; ++c) {
+            const double a = ch == 4 ? px[p * 4 + 3] / 255.0 : 1.0;
+            rgb[p * 3 + c] = std::round(px[p * size_t(ch) + c] * a) / 255.0;
+        }
+    return rgb;
+}
+
+double rmse(const std::vector<double> &a, const std::vector<double> &b) {
+    if (a.size() != b.size() || a.empty()) return -1;
+    double sum = 0;
+    for (size_t i = 0; i < a.size(); ++i) sum += (a[i] - b[i]) * (a[i] - b[i]);
+    return std::sqrt(sum / double(a.size()));
 }
 
 class SchedulingScenario : public ::testing::Test {
@@ -216,6 +248,56 @@ TEST_F(SchedulingScenario, TabBStaysInteractiveWhileTabAPreparesCubicShadedIguan
     EXPECT_LT(percentile(latency, 0.5), target + unit + 250) << report.str();
     EXPECT_LT(percentile(latency, 0.95), target + unit + 250) << report.str();
     EXPECT_GT(duringPreparation.size(), 3u) << "B did not drag while A's coefficients were computed; " << report.str();
+}
+
+// Issue 15, item 3: each frame's stated error is within a factor of 1.5 of its RMSE against the
+// final frame of the same camera, in the same metric (8-bit RGB over black), over a drag of
+// bonsai, for interactive and refinement levels. Each camera: one interactive frame, then
+// the refinement to the final frame; the estimates come from earlier cameras' measurements.
+TEST_F(SchedulingScenario, ErrorEstimatesAreWithinAFactorOf1Point5OfTheErrorAgainstTheFinalFrame) {
+    Client c("127.0.0.1", server->port());
+    const json scene = openTab(c, "bonsai.nhdr", 256);
+    std::vector<std::string> misses;
+    int compared = 0;
+    std::map<int, std::pair<double, double>> ratios;   // level: lowest and highest stated / measured
+    for (int k = 0; k < 12; ++k) {
+        const int id = 100 + k;
+        c.sendText(json{{"type", "interaction_start"}, {"id", 1000 + k}}.dump());
+        c.sendText(json{{"type", "camera"}, {"id", id}, {"camera", turned(scene.at("camera"), 0.08 * k)}}.dump());
+        c.sendText(json{{"type", "interaction_end"}, {"id", 2000 + k}}.dump());
+        std::vector<volcast::client::Frame> frames;
+        const auto until = Clock::now() + 30s;
+        while (Clock::now() < until && (frames.empty() || !frames.back().header.final))
+            if (auto m = c.next(50ms); m && m->isFrame && m->frame.header.request == id) frames.push_back(m->frame);
+        ASSERT_TRUE(!frames.empty() && frames.back().header.final) << "no final frame for camera " << k;
+        const auto final = rgbOverBlack(frames.back());
+        for (size_t i = 0; i + 1 < frames.size(); ++i) {
+            const auto &h = frames[i].header;
+            if (!h.error) continue;   // not measured yet for this level
+            const double actual = rmse(rgbOverBlack(frames[i]), final);
+            if (actual < 0) continue;   // a different size (never for one view)
+            ++compared;
+            const double ratio = h.error->value / std::max(actual, 1e-6);
+            auto [it, added] = ratios.try_emplace(h.level, ratio, ratio);
+            it->second = {std::min(it->second.first, ratio), std::max(it->second.second, ratio)};
+            if (ratio > 1.5 || ratio < 1 / 1.5) {
+                std::ostringstream m;
+                m << "camera " << k << " level " << h.level << ": stated " << h.error->value << " ("
+                  << h.error->method << "), measured " << actual << ", ratio " << ratio;
+                misses.push_back(m.str());
+            }
+        }
+        std::this_thread::sleep_for(200ms);   // the calibration of this camera's levels, in the background
+    }
+    std::ostringstream all;
+    for (const auto &m : misses) all << "  " << m << "\n";
+    std::cout << compared << " frames compared, " << misses.size() << " outside 1.5x\n" << all.str();
+    for (const auto &[level, r] : ratios)
+        std::cout << "  level " << level << ": stated / measured " << r.first << " to " << r.second << "\n";
+    EXPECT_GT(compared, 10) << "too few estimated frames to judge";
+    // An interactive level and at least one refinement level (the drag's frames, then refinement).
+    EXPECT_GE(ratios.size(), 2u) << "only one level had estimates";
+    EXPECT_TRUE(misses.empty()) << all.str();
 }
 
 } // namespace
