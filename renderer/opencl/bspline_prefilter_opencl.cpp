@@ -2,12 +2,18 @@
 
 #include "renderer/opencl/embedded_kernels.hpp"
 
+#include <algorithm>
+
 namespace volcast {
 
 namespace {
 
 // The program cache is keyed by options alone: this one must differ from the ray caster's.
 constexpr const char *kPrefilterBuildOptions = "-DVOLCAST_PREFILTER";
+// Samples filtered by one kernel launch: ~10-30 ms on the 2-core PoCL machine under load
+// (whole axes of iguana_microct, 9.6 M samples each, held another session's frames for up to 1.5 s in
+// tests/server/test_scheduling_scenarios.cpp).
+constexpr size_t kSlabSamples = size_t(1) << 18;
 
 } // namespace
 
@@ -36,9 +42,16 @@ void bsplinePrefilterOpenCl(OpenClContext &cl, cl::Buffer &data, Vec3i dims) {
             kernel.setArg(3, cl_ulong(a.strideB));
             kernel.setArg(4, cl_ulong(a.strideA));
             // The in-order queue runs the axes one after another, as the separable filter needs.
-            queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(a.countB, a.countA));
+            // In slabs of about kSlabSamples samples, each finished before the next is queued:
+            // the queue is the renderer's too, and a frame queued on another thread then waits
+            // for one slab (milliseconds), not for a whole axis of a large volume (seconds).
+            const size_t slab = std::max<size_t>(1, kSlabSamples / std::max<size_t>(1, a.n * a.countB));
+            for (size_t first = 0; first < a.countA; first += slab) {
+                const size_t count = std::min(slab, a.countA - first);
+                queue.enqueueNDRangeKernel(kernel, cl::NDRange(0, first), cl::NDRange(a.countB, count));
+                queue.finish();
+            }
         }
-        queue.finish();
     } catch (const cl::Error &e) {
         throw OpenClError("B-spline prefilter: " + describe(e));
     }

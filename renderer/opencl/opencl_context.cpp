@@ -130,20 +130,42 @@ std::string OpenClContext::deviceName() const {
 bool OpenClContext::isGpu() const { return (device_.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_GPU) != 0; }
 
 OpenClContext::BuiltProgram OpenClContext::program(const std::string &source, const std::string &options) {
-    std::lock_guard lock(mutex_);
-    if (auto it = programs_.find({source, options}); it != programs_.end()) return {it->second, 0};
+    const std::pair<std::string, std::string> key{source, options};
+    std::promise<cl::Program> promise;
+    std::shared_future<cl::Program> other;
+    {
+        std::lock_guard lock(mutex_);
+        if (auto it = programs_.find(key); it != programs_.end()) return {it->second, 0};
+        if (auto it = building_.find(key); it != building_.end())
+            other = it->second;
+        else
+            building_.emplace(key, promise.get_future().share());
+    }
+    if (other.valid()) return {other.get(), 0};   // rethrows that build's error
     const auto start = std::chrono::steady_clock::now();
     cl::Program program(context_, source);
     try {
-        program.build({device_}, options.c_str());
-    } catch (const cl::Error &) {
-        std::string log;
-        for (auto &[device, text] : program.getBuildInfo<CL_PROGRAM_BUILD_LOG>())
-            log += "\n--- build log for " + device.getInfo<CL_DEVICE_NAME>() + " ---\n" + text;
-        throw OpenClError("OpenCL program failed to build with options '" + options + "':" + log);
+        try {
+            program.build({device_}, options.c_str());
+        } catch (const cl::Error &) {
+            std::string log;
+            for (auto &[device, text] : program.getBuildInfo<CL_PROGRAM_BUILD_LOG>())
+                log += "\n--- build log for " + device.getInfo<CL_DEVICE_NAME>() + " ---\n" + text;
+            throw OpenClError("OpenCL program failed to build with options '" + options + "':" + log);
+        }
+    } catch (...) {
+        std::lock_guard lock(mutex_);
+        building_.erase(key);
+        promise.set_exception(std::current_exception());
+        throw;
     }
-    programs_.emplace(std::pair{source, options}, program);
-    ++programsBuilt_;
+    {
+        std::lock_guard lock(mutex_);
+        programs_.emplace(key, program);
+        building_.erase(key);
+        ++programsBuilt_;
+    }
+    promise.set_value(program);
     return {program, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()};
 }
 

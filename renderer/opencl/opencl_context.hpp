@@ -11,6 +11,7 @@
 #define CL_HPP_ENABLE_EXCEPTIONS
 #include <CL/opencl.hpp>
 
+#include <future>
 #include <map>
 #include <mutex>
 #include <stdexcept>
@@ -48,7 +49,9 @@ class OpenClContext {
         double buildSeconds = 0; // 0 when it came from this process's cache
     };
     // Build `source` with `options` (e.g. "-DCUBIC=1"), or return the program cached for both.
-    // A failure becomes an OpenClError carrying every device's build log.
+    // A failure becomes an OpenClError carrying every device's build log. A build (a second
+    // or more on PoCL) holds up only callers that want the same program: a render on another
+    // thread that finds its program cached is not made to wait for it.
     BuiltProgram program(const std::string &source, const std::string &options);
     size_t programsBuilt() const { return programsBuilt_; }
 
@@ -59,6 +62,8 @@ class OpenClContext {
     std::mutex mutex_;
     // Keyed on (source, options): two kernels' sources may share an option string.
     std::map<std::pair<std::string, std::string>, cl::Program> programs_;
+    // Builds under way, outside mutex_: a second caller for the same key waits for the first.
+    std::map<std::pair<std::string, std::string>, std::shared_future<cl::Program>> building_;
     size_t programsBuilt_ = 0;
 };
 

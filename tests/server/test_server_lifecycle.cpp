@@ -205,4 +205,60 @@ TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongRender) {
     }
 }
 
+// SIGTERM while a session's long preparation runs on the background worker (the B-spline
+// coefficients of iguana_microct, 9.6 M voxels: seconds here) and the error calibration may
+// be queued: the process exits 0 within the grace period (1.5 s; 1 s more for a loaded machine).
+TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongPreparation) {
+    const fs::path data = VOLCAST_DATA_DIR;
+    if (!fs::exists(data / "MANIFEST.md")) GTEST_SKIP() << "no scans in " << data << " (tests/README.md)";
+    const fs::path portFile = tmp / "port";
+    const pid_t pid = startServer({"--port", "0", "--port-file", portFile.string(), "--default-volume",
+                                   "builtin:sphere", "--data", data.string(), "--shutdown-grace-ms", "1500",
+                                   "--log-level", "info"},
+                                  tmp / "log.txt");
+    ASSERT_GT(pid, 0);
+    const uint16_t port = waitForPort(portFile, 30s);
+    if (port == 0) ::kill(pid, SIGKILL);
+    ASSERT_NE(port, 0) << "the server did not start: " << readAll(tmp / "log.txt");
+    {
+        Client c("127.0.0.1", port);
+        c.sendText(json{{"type", "hello"}, {"id", 1}, {"protocol", 1}}.dump());
+        c.sendText(json{{"type", "viewport"}, {"id", 2}, {"image", {{"width", 256}, {"height", 256}}}}.dump());
+        c.sendText(json{{"type", "quality_policy"},
+                        {"id", 3},
+                        {"mode", "automatic"},
+                        {"quality", {{"interpolation", "cubic"}, {"shading", true}}}}
+                       .dump());
+        c.sendText(json{{"type", "open_volume"}, {"id", 4}, {"name", "iguana_microct.nhdr"}}.dump());
+        // The progress message for the coefficients comes when their preparation is queued.
+        bool preparing = false;
+        const auto until = std::chrono::steady_clock::now() + 60s;
+        while (!preparing && std::chrono::steady_clock::now() < until)
+            if (auto m = c.next(100ms); m && !m->isFrame)
+                preparing = m->text.find("bspline_coefficients") != std::string::npos &&
+                            m->text.find("\"fraction\":0") != std::string::npos;
+        if (!preparing) ::kill(pid, SIGKILL);
+        ASSERT_TRUE(preparing) << "no progress for the B-spline coefficients; log:\n" << readAll(tmp / "log.txt");
+        std::this_thread::sleep_for(300ms);   // inside the preparation (seconds long)
+        const auto start = std::chrono::steady_clock::now();
+        ASSERT_EQ(::kill(pid, SIGTERM), 0);
+        const int status = waitForExit(pid, 1500ms + 1s);
+        const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start);
+        if (status == -1) {
+            ::kill(pid, SIGKILL);
+            ::waitpid(pid, nullptr, 0);
+        }
+        ASSERT_NE(status, -1) << "still running 2.5 s after SIGTERM; log:\n" << readAll(tmp / "log.txt");
+        EXPECT_TRUE(WIFEXITED(status)) << status;
+        EXPECT_EQ(WEXITSTATUS(status), 0);
+        EXPECT_LT(took.count(), 2500) << readAll(tmp / "log.txt");
+        // Within the grace period either way; the log tells whether the preparation stopped
+        // at a cancellation point or the watchdog ended it (what still ran is named).
+        const std::string log = readAll(tmp / "log.txt");
+        const auto watchdog = log.find("still not stopped");
+        std::cout << "exited " << took.count() << " ms after SIGTERM, "
+                  << (watchdog == std::string::npos ? std::string("cleanly") : log.substr(watchdog, 200)) << std::endl;
+    }
+}
+
 } // namespace

@@ -246,7 +246,9 @@ session.on("loading", (l) => {
 });
 
 session.on("progress", (p) => {
-  if (p.id === null && session.volume && !session.loading) app.sceneProgress = p;
+  // Preparation for an open volume (B-spline coefficients, a kernel variant): shown until it is done,
+  // while the stand-in frames keep coming.
+  if (p.stage === "preprocessing" && session.volume && !session.loading) app.sceneProgress = p.fraction < 1 ? p : null;
   else app.progress = p;
   updateMessage();
 });
@@ -301,7 +303,7 @@ const frames = [];
 session.on("frame", async (f) => {
   frames.push(f.header);
   if (frames.length > MAX_FRAMES_KEPT) frames.shift();
-  app.sceneProgress = null;
+  if (f.header.final) app.sceneProgress = null;
   try {
     if (await view.show(f)) {
       app.frameSinceOpen = true;

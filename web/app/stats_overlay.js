@@ -33,7 +33,7 @@ export class StatsOverlay {
       this.$("stat-encode").textContent = fmtMs(h.encode_ms);
       const e = h.error;
       const err = this.$("stat-error");
-      err.textContent = e ? `${e.value.toExponential(1)} · ${psnrOf(e.value).toFixed(1)} dB` : "not estimated";
+      err.textContent = e ? `${e.value.toExponential(1)} · ${psnrOf(e.value).toFixed(1)} dB (${e.method.replace(/_/g, " ")})` : "not estimated";
       err.title = e ? `RMSE ${e.value} (${e.method})` : "";
       const image = this.$("stat-image");
       image.textContent = image.title = d.image;
