@@ -10,6 +10,7 @@ import { TF_PRESETS } from "../core/protocol.js";
 import { Session } from "../core/session.js";
 import { presetPoints, problems, resolvePoints, tidyPoints } from "../core/transfer_function.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
+import { SliceViews } from "./slice_views.js";
 import { StatsOverlay } from "./stats_overlay.js";
 import { ConnectionIndicator, ErrorList, ViewMessage } from "./status.js";
 import { TransferFunctionEditor } from "./tf_editor.js";
@@ -348,7 +349,8 @@ $("save-scene").addEventListener("click", saveScene);
 $("reset-view").addEventListener("click", resetView);
 
 // For the console and the browser tests: the session and the frame headers seen.
-window.volcast = { session, view, frames, shown: null, savePng, saveScene };
+const slices = new SliceViews(document, session, $("slices"), $("view"));
+window.volcast = { session, view, frames, shown: null, savePng, saveScene, slices };
 
 // Closing the tab says goodbye, so the server frees the session at once.
 window.addEventListener("pagehide", () => session.stop());
