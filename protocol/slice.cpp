@@ -1,7 +1,7 @@
 #include "protocol/slice.hpp"
 
 #include "protocol/frame.hpp"
-#include "protocol/json_reader.hpp"
+#include "protocol/read_error.hpp"
 #include "protocol/utf8.hpp"
 
 #include <algorithm>
@@ -140,6 +140,8 @@ DecodedSlice decodeSlice(std::span<const uint8_t> message) {
         imageBytes = detail::unsignedInteger(f.require("image_bytes"), "image_bytes");
     } catch (const detail::ReadError &e) {
         throw DecodeError(std::string("slice header: ") + e.what());
+    } catch (const detail::FieldError &e) {
+        throw DecodeError("slice header: " + detail::messageOf(e));
     }
     out.pixels = message.subspan(kFramePreambleBytes + length);
     const uint64_t expected = uint64_t(out.header.width) * uint64_t(out.header.height);
