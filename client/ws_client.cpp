@@ -67,6 +67,15 @@ struct Client::Impl {
             } catch (const std::exception &e) {
                 m.decodeError = e.what();
             }
+        } else if (protocol::isSliceMessage({bytes, data.size()})) {
+            m.isSlice = true;
+            try {
+                auto s = protocol::decodeSlice({bytes, data.size()});
+                m.sliceHeader = std::move(s.header);
+                m.slicePixels.assign(s.pixels.begin(), s.pixels.end());
+            } catch (const std::exception &e) {
+                m.decodeError = e.what();
+            }
         } else {
             m.isFrame = true;
             try {

@@ -32,6 +32,10 @@ struct Message {
     std::optional<protocol::ServerMessage> decoded;    // text: nullopt if it did not decode
     std::string decodeError;
     Frame frame;                                       // isFrame
+    // A slice message (VCS1, the answer to a `slice` request); isFrame stays false.
+    bool isSlice = false;
+    protocol::SliceHeader sliceHeader;
+    std::vector<uint8_t> slicePixels;                  // width x height bytes of 8-bit grey
 };
 
 struct CloseInfo {

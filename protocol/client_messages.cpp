@@ -122,6 +122,10 @@ ClientMessage readStill(const json &root, const RequestId &id, const Limits &) {
     return m;
 }
 
+ClientMessage readSlice(const json &root, const RequestId &id, const Limits &) {
+    return detail::readSliceRequest(root, id);
+}
+
 struct ReaderEntry {
     std::string_view type;
     Reader read;
@@ -141,6 +145,7 @@ constexpr std::array<ReaderEntry, std::variant_size_v<ClientMessage>> kReaders{{
     {StillRequest::kType, readStill},
     {GetStateRequest::kType, readBare<GetStateRequest>},
     {CloseRequest::kType, readBare<CloseRequest>},
+    {SliceRequest::kType, readSlice},
 }};
 
 std::string knownTypes() {
@@ -167,6 +172,7 @@ json fieldsOf(const StillRequest &m) {
     if (!m.image.is_null()) j["image"] = m.image;
     return j;
 }
+json fieldsOf(const SliceRequest &m) { return detail::sliceRequestFields(m); }
 // The requests with no fields of their own.
 template <class Request>
 json fieldsOf(const Request &) {

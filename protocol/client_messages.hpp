@@ -7,6 +7,7 @@
 // belong to renderer/scene.cpp's parseScene, which the server runs on the assembled scene.
 
 #include "protocol/errors.hpp"
+#include "protocol/slice.hpp"
 #include "protocol/volume_name.hpp"
 
 #include <nlohmann/json.hpp>
@@ -143,7 +144,7 @@ using ClientMessage =
     std::variant<HelloRequest, ListVolumesRequest, OpenVolumeRequest, CameraRequest,
                  InteractionStartRequest, InteractionEndRequest, ViewportRequest,
                  TransferFunctionRequest, QualityPolicyRequest, ClipPlanesRequest,
-                 StillRequest, GetStateRequest, CloseRequest>;
+                 StillRequest, GetStateRequest, CloseRequest, SliceRequest>;
 
 // The wire "type" of each request, e.g. "open_volume".
 std::string_view messageType(const ClientMessage &message);

@@ -27,12 +27,14 @@ SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
     registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, cl_, metrics_,
                                                  config_.loadTimeoutS);
     scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration, config_.defaultTargetFrameMs});
+    slices_ = std::make_unique<SliceService>(config_.maxStillPixels);
 }
 
 SharedState::~SharedState() { stopWorkers(); }
 
 void SharedState::stopWorkers() {
     if (scheduler_) scheduler_->stop();
+    if (slices_) slices_->stop();
     if (registry_) registry_->stop();
     std::thread warmUp;
     {

@@ -14,6 +14,7 @@
 #include "server/config.hpp"
 #include "server/metrics.hpp"
 #include "server/render_scheduler.hpp"
+#include "server/slice_service.hpp"
 #include "server/volume_registry.hpp"
 
 #include <atomic>
@@ -39,6 +40,7 @@ class SharedState {
     Metrics &metrics() { return metrics_; }
     VolumeRegistry &registry() { return *registry_; }
     RenderScheduler &scheduler() { return *scheduler_; }
+    SliceService &slices() { return *slices_; }
     const protocol::DeviceInfo &device() const { return device_; }
     protocol::ServerLimits limits() const;
     uint16_t port() const { return port_; }
@@ -83,6 +85,7 @@ class SharedState {
     protocol::DeviceInfo device_;
     std::unique_ptr<VolumeRegistry> registry_;
     std::unique_ptr<RenderScheduler> scheduler_;
+    std::unique_ptr<SliceService> slices_;
     std::atomic<uint16_t> port_{0};
 
     mutable std::mutex mutex_;

@@ -255,6 +255,9 @@ void WebsocketSession::handle(std::string_view text) {
                 [&](const protocol::CloseRequest &) {
                     closeWith(websocket::close_code::normal, "closed at the client's request");
                 },
+                [&](const protocol::SliceRequest &m) {
+                    if (needVolume()) onSlice(m);
+                },
             },
             message);
     } catch (const SceneError &e) {
@@ -440,6 +443,34 @@ void WebsocketSession::sendText(std::string text) {
     doWrite();
 }
 
+void WebsocketSession::onSlice(const protocol::SliceRequest &m) {
+    auto weak = weak_from_this();
+    auto executor = ws_.get_executor();
+    auto refusal = state_->slices().submit(slot_, volume_->volume, m, [weak, executor](SliceService::Answer answer) {
+        net::post(executor, [weak, a = std::make_shared<SliceService::Answer>(std::move(answer))] {
+            auto self = weak.lock();
+            if (!self) return;
+            self->guarded("slice", [&] {
+                if (auto *bytes = std::get_if<std::vector<uint8_t>>(a.get())) self->sendBinary(std::move(*bytes));
+                else self->sendError(std::get<ProtocolError>(std::move(*a)));
+            });
+        });
+    });
+    if (refusal) sendError(std::move(*refusal));
+}
+
+void WebsocketSession::sendBinary(std::vector<uint8_t> bytes) {
+    if (closing_) return;
+    const size_t limit = state_->config().maxUnsentBytes;
+    if (texts_.size() + binaries_.size() >= kMaxQueuedTexts || unsentBytes_ + bytes.size() > limit)
+        return dropConnection(fmt::format("a slice of {} bytes on top of {} unsent bytes is over the limit of {} "
+                                          "(--max-unsent-bytes)",
+                                          bytes.size(), unsentBytes_, limit));
+    unsentBytes_ += bytes.size();
+    binaries_.emplace_back(bytes.begin(), bytes.end());
+    doWrite();
+}
+
 void WebsocketSession::onFrame(RenderedFrame frame) {
     if (closing_) {
         state_->scheduler().frameDone(slot_);
@@ -470,6 +501,15 @@ void WebsocketSession::doWrite() {
         textInFlight_ = std::move(texts_.front());
         texts_.pop_front();
         ws_.text(true);
+        armWriteTimer();
+        ws_.async_write(net::buffer(textInFlight_),
+                        beast::bind_front_handler(&WebsocketSession::onWrite, shared_from_this()));
+    } else if (!binaries_.empty()) {
+        // A slice message travels like a text (textInFlight_ holds its bytes), only binary.
+        writing_ = true;
+        textInFlight_ = std::move(binaries_.front());
+        binaries_.pop_front();
+        ws_.binary(true);
         armWriteTimer();
         ws_.async_write(net::buffer(textInFlight_),
                         beast::bind_front_handler(&WebsocketSession::onWrite, shared_from_this()));

@@ -71,6 +71,9 @@ class WebsocketSession : public std::enable_shared_from_this<WebsocketSession> {
     void sendText(std::string text);
     void sendMessage(const protocol::ServerMessage &message);
     void sendError(protocol::ProtocolError error);
+    // A binary message other than a frame (a slice message): queued after the texts.
+    void sendBinary(std::vector<uint8_t> bytes);
+    void onSlice(const protocol::SliceRequest &m);   // server/slice_service.hpp answers it
     void onFrame(RenderedFrame frame);
     void doWrite();
     void onWrite(boost::beast::error_code ec, size_t bytes);
@@ -104,6 +107,7 @@ class WebsocketSession : public std::enable_shared_from_this<WebsocketSession> {
 
     // Outgoing.
     std::deque<std::string> texts_;
+    std::deque<std::string> binaries_;   // slice messages, written like texts but binary
     struct PendingFrame {
         std::vector<uint8_t> bytes;
         int level = 0;

@@ -71,7 +71,10 @@ std::vector<ClientMessage> everyRequest() {
             StillRequest{11, nullptr},
             StillRequest{12, {{"width", 2048}, {"height", 2048}}},
             GetStateRequest{-13},
-            CloseRequest{"bye"}};
+            CloseRequest{"bye"},
+            SliceRequest{14, "axial", std::nullopt, std::nullopt, 64, 32, std::nullopt, std::nullopt, std::nullopt},
+            SliceRequest{"s", "sagittal", std::array<double, 3>{1, 2, 3}, std::array<double, 3>{0, -1, 0.5},
+                         512, 512, 0.25, 2000.0, 400.0}};
 }
 
 TEST(ClientMessages, EveryRequestRoundTrips) {

@@ -13,6 +13,7 @@ import { windowLevelStep } from "../core/window_level.js";
 import { OrientationControls } from "./orientation_marker.js";
 import { PresetPicker } from "./preset_picker.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
+import { SliceViews } from "./slice_views.js";
 import { StatsOverlay } from "./stats_overlay.js";
 import { ConnectionIndicator, ErrorList, ViewMessage } from "./status.js";
 import { TransferFunctionEditor } from "./tf_editor.js";
@@ -497,7 +498,8 @@ $("save-scene").addEventListener("click", saveScene);
 $("reset-view").addEventListener("click", resetView);
 
 // For the console and the browser tests: the session and the frame headers seen.
-window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene, orientation };
+const slices = new SliceViews(document, session, $("slices"), $("view"));
+window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene, orientation, slices };
 
 // Closing the tab says goodbye, so the server frees the session at once.
 window.addEventListener("pagehide", () => session.stop());

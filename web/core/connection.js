@@ -14,7 +14,8 @@
 //   closed: close() was called; nothing reconnects.
 
 import {
-  FATAL_ERROR_CODES, MessageError, REPLY_TYPE, ServerError, decodeFrame, parseServerMessage, requests,
+  FATAL_ERROR_CODES, MessageError, REPLY_TYPE, ServerError, decodeFrame, decodeSlice, isSliceMessage,
+  parseServerMessage, requests,
 } from "./protocol.js";
 import { Emitter } from "./emitter.js";
 
@@ -233,6 +234,11 @@ export class Connection extends Emitter {
   }
 
   onMessage(data) {
+    if (typeof data !== "string" && isSliceMessage(data)) {
+      // The answer to a `slice` request (app/slice_views.js); never a 3D frame.
+      try { this.emit("slice", decodeSlice(data)); } catch (e) { this.emit("protocol_error", e); }
+      return;
+    }
     if (typeof data !== "string") {
       let frame;
       try {

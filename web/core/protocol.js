@@ -67,6 +67,17 @@ export const requests = {
   still: (image) => (image ? { type: "still", image } : { type: "still" }),
   getState: () => ({ type: "get_state" }),
   close: () => ({ type: "close" }),
+  // A plane of the open volume (protocol/README.md, `slice`): axis "axial" | "coronal" |
+  // "sagittal", size in pixels; optional point/center (world mm), pixel_spacing, window, level.
+  slice: (axis, width, height, { point, center, pixelSpacing, window, level } = {}) => {
+    const m = { type: "slice", axis, width, height };
+    if (point) m.point = point;
+    if (center) m.center = center;
+    if (pixelSpacing !== undefined) m.pixel_spacing = pixelSpacing;
+    if (window !== undefined) m.window = window;
+    if (level !== undefined) m.level = level;
+    return m;
+  },
 };
 
 // Requests whose effect shows in frames: a frame's `request` names the latest of them.
@@ -153,4 +164,52 @@ export const mimeTypeOf = (codec) => (codec === "png" ? "image/png" : "image/jpe
 // PSNR (dB) of an RMSE over [0, 1] values: 20·log10(1 / rmse); Infinity for 0.
 export function psnrOf(rmse) {
   return rmse > 0 ? -20 * Math.log10(rmse) : Infinity;
+}
+
+// ---------------------------------------------------------------------------------------
+// Slice messages: "VCS1", uint32 LE header length N, N bytes of JSON header, then
+// width × height bytes of 8-bit grey, row 0 at the top (protocol/README.md, "Slice messages").
+
+export const SLICE_MAGIC = "VCS1";
+
+const bytesOf = (data) => (data instanceof ArrayBuffer ? new Uint8Array(data)
+  : ArrayBuffer.isView(data) ? new Uint8Array(data.buffer, data.byteOffset, data.byteLength) : null);
+
+export function isSliceMessage(data) {
+  const b = bytesOf(data);
+  return !!b && b.length >= 4 && String.fromCharCode(b[0], b[1], b[2], b[3]) === SLICE_MAGIC;
+}
+
+// Decode one slice message: {header, pixels} with pixels a Uint8Array view of width × height
+// grey bytes. Throws FrameError naming the problem.
+export function decodeSlice(data) {
+  const bytes = bytesOf(data);
+  if (!bytes) throw new FrameError("slice: not binary data");
+  if (bytes.length < FRAME_PREAMBLE_BYTES) throw new FrameError("slice: shorter than the 8-byte preamble");
+  if (!isSliceMessage(bytes)) throw new FrameError("slice: bad magic");
+  const n = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength).getUint32(4, true);
+  if (n > MAX_FRAME_HEADER_BYTES || FRAME_PREAMBLE_BYTES + n > bytes.length) throw new FrameError("slice: truncated header");
+  let header;
+  try {
+    header = JSON.parse(utf8.decode(bytes.subarray(FRAME_PREAMBLE_BYTES, FRAME_PREAMBLE_BYTES + n)));
+  } catch (e) {
+    throw new FrameError(`slice header is not UTF-8 JSON (${e.message})`);
+  }
+  if (!isObject(header)) throw new FrameError("slice header is not a JSON object");
+  for (const key of ["width", "height"]) {
+    if (!Number.isInteger(header[key]) || header[key] < 1) throw new FrameError(`slice header.${key} is not a positive integer`);
+  }
+  if (header.format !== "gray8") throw new FrameError(`slice: unknown pixel format ${JSON.stringify(header.format)}`);
+  for (const key of ["origin", "column", "row", "point"]) {
+    if (!Array.isArray(header[key]) || header[key].length !== 3 || !header[key].every(Number.isFinite)) {
+      throw new FrameError(`slice header.${key} is not 3 numbers`);
+    }
+  }
+  if (!(header.pixel_spacing > 0)) throw new FrameError("slice header.pixel_spacing is not > 0");
+  const pixels = bytes.subarray(FRAME_PREAMBLE_BYTES + n);
+  if (pixels.length !== header.width * header.height) {
+    throw new FrameError(`slice: ${pixels.length} pixel bytes for ${header.width} × ${header.height}`);
+  }
+  header.request = header.request ?? null;
+  return { header, pixels };
 }

@@ -25,6 +25,8 @@ from .messages import (CLIENT_TYPES, ERROR_CODES, PROTOCOL_VERSION, SERVER_TYPES
                        interaction_end, interaction_start, list_volumes, open_volume, orbit_camera,
                        parse_server_message, preset, quality_automatic, quality_explicit, still,
                        transfer_function, viewport)
+from .slices import (SLICE_AXES, SLICE_MAGIC, Slice, decode_slice, encode_slice, is_slice_message,
+                     slice_request)
 
 __version__ = "0.1.0"  # the project's version (CMakeLists.txt) and pyproject.toml's
 
@@ -37,4 +39,6 @@ __all__ = [
     "interaction_end", "interaction_start", "list_volumes", "open_volume", "orbit_camera",
     "parse_server_message", "preset", "quality_automatic", "quality_explicit", "still",
     "transfer_function", "viewport",
+    "SLICE_AXES", "SLICE_MAGIC", "Slice", "decode_slice", "encode_slice", "is_slice_message",
+    "slice_request",
 ]

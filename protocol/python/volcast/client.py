@@ -9,6 +9,7 @@ from typing import Any, Callable, Deque, Dict, List, Optional, Protocol, Union
 
 from .frames import Frame, decode_frame
 from .messages import RequestId, ServerError, close, dumps, hello, parse_server_message
+from .slices import Slice, decode_slice, is_slice_message, slice_request
 
 Message = Dict[str, Any]
 
@@ -31,7 +32,7 @@ class Client:
         self._socket = socket
         self._next_id = 1
         # Messages read while waiting for another.
-        self._backlog: Deque[Union[Message, Frame]] = collections.deque()
+        self._backlog: Deque[Union[Message, Frame, Slice]] = collections.deque()
         self.server_hello: Optional[Message] = None
 
     @classmethod
@@ -74,8 +75,8 @@ class Client:
         await self._socket.send(dumps(message))
         return message["id"]
 
-    async def receive(self, timeout: Optional[float] = None) -> Union[Message, Frame, None]:
-        """The next message: a Frame for binary messages, else a dict (errors included).
+    async def receive(self, timeout: Optional[float] = None) -> Union[Message, Frame, Slice, None]:
+        """The next message: a Frame or a Slice for binary messages, else a dict (errors included).
         None when timeout (s) passes first."""
         if self._backlog:
             return self._backlog.popleft()
@@ -84,7 +85,9 @@ class Client:
             raw = await asyncio.wait_for(self._socket.recv(), timeout)
         except asyncio.TimeoutError:
             return None
-        return decode_frame(raw) if isinstance(raw, (bytes, bytearray)) else parse_server_message(raw)
+        if isinstance(raw, (bytes, bytearray)):
+            return decode_slice(raw) if is_slice_message(raw) else decode_frame(raw)
+        return parse_server_message(raw)
 
     async def request(self, message: Message, on_progress: Optional[Callable[[Message], None]] = None,
                       timeout: Optional[float] = None) -> Message:
@@ -92,7 +95,7 @@ class Client:
         and return that answer; raises ServerError for an error answering it. Progress
         messages for it go to on_progress; anything else read meanwhile is kept for receive()."""
         id = await self.send(message)
-        kept: List[Union[Message, Frame]] = []
+        kept: List[Union[Message, Frame, Slice]] = []
         try:
             while True:
                 reply = await self._read(timeout)
@@ -120,10 +123,33 @@ class Client:
                     return item
                 if on_frame:
                     on_frame(item)
-            elif item.get("type") == "error" and (request is None or item.get("id") == request):
+            elif isinstance(item, dict) and item.get("type") == "error" and (request is None or item.get("id") == request):
                 raise ServerError(item)
 
-    async def _read(self, timeout: Optional[float]) -> Union[Message, Frame]:
+    async def request_slice(self, axis: str, width: int, height: int, timeout: Optional[float] = None,
+                            **fields: Any) -> Slice:
+        """Ask for one slice (slice_request's fields: point, center, pixel_spacing, window,
+        level) and return the answer with its geometry; raises ServerError for an error
+        answering it. Anything else read meanwhile is kept for receive()."""
+        id = await self.send(slice_request(axis, width, height, **fields))
+        kept: List[Union[Message, Frame, Slice]] = []
+        try:
+            while True:
+                item = await self._read(timeout)
+                if isinstance(item, Slice) and item.request == id:
+                    return item
+                if isinstance(item, dict) and item.get("type") == "error" and item.get("id") == id:
+                    raise ServerError(item)
+                kept.append(item)
+        finally:
+            self._backlog.extend(kept)
+
+    async def slice(self, axis: str, width: int, height: int, timeout: Optional[float] = None,
+                    **fields: Any) -> "Any":
+        """request_slice's pixels as a height x width uint8 numpy array (needs numpy)."""
+        return (await self.request_slice(axis, width, height, timeout=timeout, **fields)).to_numpy()
+
+    async def _read(self, timeout: Optional[float]) -> Union[Message, Frame, Slice]:
         item = await self.receive(timeout)
         if item is None:
             raise asyncio.TimeoutError(f"no message from the server in {timeout} s")

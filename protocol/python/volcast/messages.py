@@ -18,7 +18,7 @@ ERROR_CODES = (
 CLIENT_TYPES = (
     "hello", "list_volumes", "open_volume", "camera", "interaction_start", "interaction_end",
     "viewport", "transfer_function", "quality_policy", "clip_planes", "still", "get_state",
-    "close",
+    "close", "slice",
 )
 SERVER_TYPES = ("hello", "volumes", "progress", "state", "error")
 

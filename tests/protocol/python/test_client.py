@@ -129,6 +129,7 @@ class MessageTests(unittest.TestCase):
             (vc.still(2048, 1024), {"type": "still", "image": {"width": 2048, "height": 1024}}),
             (vc.get_state(), {"type": "get_state"}),
             (vc.close(), {"type": "close"}),
+            (vc.slice_request("axial", 64, 32), {"type": "slice", "axis": "axial", "width": 64, "height": 32}),
         ]
         for built, expected in cases:
             self.assertEqual(built, expected)

@@ -1,0 +1,122 @@
+"""The `slice` request and its answer, the slice message (protocol/README.md, "slice" and
+"Slice messages"): magic b"VCS1", uint32 little-endian header length, a JSON header, then
+width x height bytes of 8-bit grey, row 0 at the top.
+
+Standard library only, except Slice.to_numpy, which imports numpy when called."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Dict, Optional, Sequence, Tuple, Union
+
+from .frames import FRAME_PREAMBLE_BYTES, MAX_FRAME_HEADER_BYTES, FrameError, _compact, _import_optional
+from .messages import RequestId, _message
+
+if TYPE_CHECKING:
+    import numpy
+
+SLICE_MAGIC = b"VCS1"
+SLICE_AXES = ("axial", "coronal", "sagittal")
+MAX_SLICE_SIDE = 16384
+
+
+def slice_request(axis: str, width: int, height: int, point: Optional[Sequence[float]] = None,
+                  center: Optional[Sequence[float]] = None, pixel_spacing: Optional[float] = None,
+                  window: Optional[float] = None, level: Optional[float] = None,
+                  id: RequestId = None) -> Dict[str, Any]:
+    """A `slice` request. point/center are world (patient) mm; window/level data units."""
+    if axis not in SLICE_AXES:
+        raise ValueError(f"slice: axis must be one of {SLICE_AXES}, got {axis!r}")
+    return _message("slice", id, axis=axis, width=width, height=height,
+                    point=list(point) if point is not None else None,
+                    center=list(center) if center is not None else None,
+                    pixel_spacing=pixel_spacing, window=window, level=level)
+
+
+@dataclass
+class Slice:
+    """One decoded slice message: its JSON header (keys as on the wire) and grey pixels."""
+
+    header: Dict[str, Any]
+    pixels: bytes
+
+    @property
+    def request(self) -> Union[int, str, None]:
+        return self.header.get("request")
+
+    @property
+    def width(self) -> int:
+        return self.header["width"]
+
+    @property
+    def height(self) -> int:
+        return self.header["height"]
+
+    def world_at(self, column: float, row: float) -> Tuple[float, float, float]:
+        """The world (patient) point shown at pixel (column, row)'s centre."""
+        s = self.header["pixel_spacing"]
+        o, c, r = self.header["origin"], self.header["column"], self.header["row"]
+        return tuple(o[i] + column * s * c[i] + row * s * r[i] for i in range(3))  # type: ignore[return-value]
+
+    def to_numpy(self) -> "numpy.ndarray":
+        """The pixels as a height x width uint8 array. Needs numpy (Debian: python3-numpy)."""
+        np = _import_optional("numpy", "python3-numpy", "numpy", "Slice.to_numpy")
+        return np.frombuffer(self.pixels, dtype=np.uint8).reshape(self.height, self.width).copy()
+
+
+def is_slice_message(data: Union[bytes, bytearray, memoryview]) -> bool:
+    return bytes(data[:4]) == SLICE_MAGIC
+
+
+def encode_slice(header: Dict[str, Any], pixels: bytes) -> bytes:
+    """The slice message for a header dict and pixels; image_bytes is filled in."""
+    text = _compact(dict(header, image_bytes=len(pixels)))
+    return SLICE_MAGIC + struct.pack("<I", len(text)) + text + bytes(pixels)
+
+
+def _number(header: Dict[str, Any], key: str) -> float:
+    value = header.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise FrameError(f"slice header: {key}: must be a finite number, got {value!r}")
+    return value
+
+
+def decode_slice(data: Union[bytes, bytearray, memoryview]) -> Slice:
+    """Decode one slice message; raises FrameError naming what is wrong."""
+    data = bytes(data)
+    if len(data) < FRAME_PREAMBLE_BYTES:
+        raise FrameError(f"slice: {len(data)} bytes, shorter than the 8-byte preamble")
+    if data[:4] != SLICE_MAGIC:
+        raise FrameError(f"slice: starts with {data[:4]!r}, not the magic b'VCS1'")
+    (length,) = struct.unpack_from("<I", data, 4)
+    if length > MAX_FRAME_HEADER_BYTES or length > len(data) - FRAME_PREAMBLE_BYTES:
+        raise FrameError(f"slice: header length {length} runs past the message's end or over the limit")
+    try:
+        header = json.loads(data[FRAME_PREAMBLE_BYTES:FRAME_PREAMBLE_BYTES + length].decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as e:
+        raise FrameError(f"slice header: malformed JSON: {e}") from None
+    if not isinstance(header, dict):
+        raise FrameError("slice header: must be a JSON object")
+    for key in ("width", "height"):
+        value = header.get(key)
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SLICE_SIDE:
+            raise FrameError(f"slice header: {key}: must be an integer in [1, {MAX_SLICE_SIDE}], got {value!r}")
+    if header.get("format") != "gray8":
+        raise FrameError(f"slice header: format: unknown pixel format {header.get('format')!r}")
+    for key in ("pixel_spacing", "window", "level", "render_ms"):
+        _number(header, key)
+    for key in ("origin", "column", "row", "point"):
+        value = header.get(key)
+        if not isinstance(value, list) or len(value) != 3:
+            raise FrameError(f"slice header: {key}: must be 3 numbers, got {value!r}")
+        for i in range(3):
+            _number({f"{key}[{i}]": value[i]}, f"{key}[{i}]")
+    pixels = data[FRAME_PREAMBLE_BYTES + length:]
+    expected = header["width"] * header["height"]
+    if header.get("image_bytes") != expected or len(pixels) != expected:
+        raise FrameError(f"slice: {len(pixels)} pixel bytes (header says {header.get('image_bytes')!r}) "
+                         f"for {header['width']} x {header['height']} gray8 pixels")
+    return Slice(header, pixels)

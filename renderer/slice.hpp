@@ -1,0 +1,87 @@
+#pragma once
+// Planar slices of a volume in the patient frame: the axial, coronal and sagittal planes of
+// the world (ITK's LPS) axes of docs/design.md. A volume without orientation has the identity
+// direction, so its slices are its own axes. Each slice is resampled with the trilinear field
+// of renderer/reconstruction.hpp (clamp-to-edge inside the cell box); a pixel whose centre
+// lies outside the volume's cell box [-1/2, n - 1/2] is background.
+//
+// Image layout, as radiologists read them (the patient's right on the image's left):
+//   axial     columns +x (towards patient left), rows +y (towards posterior): anterior on top
+//   coronal   columns +x (towards patient left), rows -z: superior on top
+//   sagittal  columns +y (towards posterior),    rows -z: anterior on the left, superior on top
+// Pixel (c, r) samples world = origin + c·s·column + r·s·row, row 0 at the top.
+
+#include "renderer/volume.hpp"
+
+#include <cstdint>
+#include <optional>
+#include <string_view>
+#include <vector>
+
+namespace volcast {
+
+enum class SliceAxis { Axial, Coronal, Sagittal };
+
+std::string_view sliceAxisName(SliceAxis axis);            // "axial", ...
+std::optional<SliceAxis> parseSliceAxis(std::string_view name);
+
+// The most pixels one slice may have; far above any screen, far below memory trouble.
+inline constexpr int64_t kMaxSlicePixels = int64_t(1) << 26;
+inline constexpr int kMaxSliceSide = 16384;
+
+struct SlicePlane {
+    SliceAxis axis = SliceAxis::Axial;
+    int width = 0;               // pixels
+    int height = 0;
+    double pixelSpacing = 1;     // world units (mm) between pixel centres
+    Vec3d origin;                // world position of pixel (0, 0)'s centre
+    Vec3d column;                // unit world direction of +column
+    Vec3d row;                   // unit world direction of +row (down the image)
+    Vec3d normal;                // column × row
+    // World position of the centre of pixel (c, r), fractional pixels allowed.
+    Vec3d worldAt(double c, double r) const {
+        return origin + column * (c * pixelSpacing) + row * (r * pixelSpacing);
+    }
+};
+
+// What a client asks for. `point` places the plane (its coordinate along the normal; the
+// crosshair point). `center` is the world point shown at the image's centre (default: the
+// volume's centre). `pixelSpacing` defaults to the largest that fits the volume's world
+// bounding box into width x height.
+struct SliceRequestGeometry {
+    SliceAxis axis = SliceAxis::Axial;
+    Vec3d point;
+    int width = 0;
+    int height = 0;
+    std::optional<double> pixelSpacing;
+    std::optional<Vec3d> center;
+};
+
+// Throws std::invalid_argument naming the field for a size outside [1, kMaxSliceSide] or over
+// kMaxSlicePixels, a non-finite point or centre, or a spacing not finite and > 0.
+SlicePlane slicePlane(const Volume &volume, const SliceRequestGeometry &geometry);
+
+// The volume's values on the plane; outside the cell box `inside` is 0 and the value is the
+// volume's minimum (never NaN: non-finite voxels were replaced by the loader).
+struct SliceImage {
+    int width = 0;
+    int height = 0;
+    std::vector<float> values;     // row-major, row 0 at the top
+    std::vector<uint8_t> inside;   // 1 where the pixel centre lies in the cell box
+};
+SliceImage sampleSlice(const Volume &volume, const SlicePlane &plane);
+
+// 8-bit grey of the values under window/level (data units): level - window/2 -> 0,
+// level + window/2 -> 255, linear between, rounded to nearest, clamped; background -> 0.
+// Throws std::invalid_argument for a window not finite and > 0 or a non-finite level.
+std::vector<uint8_t> windowToGray8(const SliceImage &image, double window, double level);
+uint8_t windowValue(double value, double window, double level);
+
+// The default window/level of a volume: its value range (window 1 for a constant volume).
+struct WindowLevel {
+    double window = 1;
+    double level = 0;
+};
+WindowLevel defaultWindowLevel(const Volume &volume);
+
+} // namespace volcast
