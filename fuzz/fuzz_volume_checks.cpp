@@ -14,7 +14,11 @@
 //   1 MetaImage (in.mhd)  scanMetaHeader, confinedDataFile on every data file, checkMetaData
 //   2 NIfTI (in.nii)      readNiftiHeader, checkNiftiData (single file, or with the n+1 magic off)
 //   3 NIfTI pair (in.hdr) readNiftiHeader, checkNiftiData against in.img beside it
-//   4 DICOM (in.dcm)      checkDicomSlice (GDCM reads up to the pixel data; our arithmetic after)
+//   4 DICOM (in.dcm)      checkDicomSlice (GDCM reads up to the pixel data; our arithmetic after),
+//                         only with VOLCAST_FUZZ_DICOM=1 in the environment: Debian's GDCM
+//                         aborts on an assertion for some damaged files (README, finding 7),
+//                         which the mutator finds within seconds; CI must not stop on that
+//                         known, open finding, so plain runs skip these inputs.
 //   5 a data file name    confinedDataFile on the rest as a name
 // The folder beside the header holds data.raw (4 KiB), data.raw.gz, in.img, a subfolder,
 // a FIFO, a link out of the folder, a link inside it and a dangling link; a file outside
@@ -98,6 +102,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     const uint64_t need = (uint64_t(data[1]) | uint64_t(data[2]) << 8 | uint64_t(data[3]) << 16 |
                            uint64_t(data[4]) << 24) % (uint64_t(1) << 20);
     const std::string_view rest(reinterpret_cast<const char *>(data + 5), size - 5);
+    static const bool dicom = [] {
+        const char *v = std::getenv("VOLCAST_FUZZ_DICOM");
+        return v && std::string_view(v) == "1";
+    }();
+    if (pick == 4 && !dicom) return 0;
     const fs::path header = f.folder / kNames[pick];
     if (pick != 5) {
         std::ofstream out(header, std::ios::binary | std::ios::trunc);
