@@ -139,6 +139,77 @@ def volume_headers():
     write("fuzz_volume_header", "mha_local.bin", b"\x04" + mha)
 
 
+def volume_checks():
+    # fuzz_volume_checks.cpp: byte 0 picks the check (0 NRRD .nhdr, 1 MetaImage .mhd,
+    # 2 NIfTI .nii, 3 NIfTI .hdr with in.img, 4 DICOM slice, 5 a data file name), bytes 1-4
+    # the byte count the header's sizes need (little-endian), then the file. The folder holds
+    # data.raw and in.img (4096 bytes each), data.raw.gz, sub/data.raw, fifo.raw, out.raw (a
+    # link out of the folder), in_link.raw (a link inside it) and dangling.raw.
+    def put(name, pick, need, body):
+        write("fuzz_volume_checks", name, bytes([pick]) + struct.pack("<I", need) + body)
+    put("nrrd_raw_exact.bin", 0, 4096, b"NRRD0004\ntype: uint8\nsizes: 16 16 16\nencoding: raw\ndata file: data.raw\n")
+    put("nrrd_gzip.bin", 0, 4096, b"NRRD0004\nencoding: gzip\ndatafile: data.raw.gz\n")
+    put("nrrd_line_and_byte_skip.bin", 0, 4000, b"NRRD0004\nencoding: raw\nline skip: 1\nbyte skip: -1\ndata file: ./sub/data.raw\n")
+    put("nrrd_attached.bin", 0, 8, b"NRRD0004\ntype: uint8\nencoding: raw\n\n" + bytes(range(8)))
+    put("nrrd_dotdot.bin", 0, 4096, b"NRRD0004\nencoding: raw\ndata file: ../secret.raw\n")
+    put("nrrd_link_out.bin", 0, 4096, b"NRRD0004\nencoding: raw\ndata file: out.raw\n")
+    put("nrrd_fifo.bin", 0, 4096, b"NRRD0004\nencoding: raw\ndata file: fifo.raw\n")
+    put("nrrd_list.bin", 0, 4096, b"NRRD0004\nencoding: raw\ndata file: LIST\ndata.raw\nin_link.raw\n")
+    put("nrrd_pattern.bin", 0, 4096, b"NRRD0004\nencoding: raw\ndata file: dat%01d.raw 0 3 1\n")
+    put("mhd_raw.bin", 1, 4096, b"ObjectType = Image\nNDims = 3\nHeaderSize = 0\nElementDataFile = data.raw\n")
+    put("mhd_compressed.bin", 1, 4096, b"CompressedData = True\nElementDataFile = data.raw.gz\n")
+    put("mha_local.bin", 1, 4, b"ObjectType = Image\nElementDataFile = LOCAL\n\x01\x02\x03\x04")
+    put("mhd_list.bin", 1, 4096, b"ElementDataFile = LIST\ndata.raw\ndangling.raw\n")
+    put("mhd_absolute.bin", 1, 4096, b"ElementDataFile = /etc/passwd\n")
+    # NIfTI-1 single file and pair (the same header as fuzz_volume_header's seed).
+    hdr = bytearray(348)
+    struct.pack_into("<i", hdr, 0, 348)
+    struct.pack_into("<8h", hdr, 40, 3, 2, 2, 2, 1, 1, 1, 1)
+    struct.pack_into("<hh", hdr, 70, 2, 8)
+    struct.pack_into("<8f", hdr, 76, 1, 1.5, 1.5, 2, 1, 1, 1, 1)
+    struct.pack_into("<f", hdr, 108, 352.0)
+    hdr[344:348] = b"n+1\x00"
+    put("nifti_single.bin", 2, 0, bytes(hdr) + b"\x00" * 4 + bytes(range(8)))
+    pair = bytearray(hdr)
+    struct.pack_into("<8h", pair, 40, 3, 16, 16, 16, 1, 1, 1, 1)
+    struct.pack_into("<f", pair, 108, 0.0)
+    pair[344:348] = b"ni1\x00"
+    put("nifti_pair.bin", 3, 0, bytes(pair))
+    swapped = bytearray(348)
+    struct.pack_into(">i", swapped, 0, 348)
+    struct.pack_into(">8h", swapped, 40, 3, 2, 2, 2, 1, 1, 1, 1)
+    struct.pack_into(">hh", swapped, 70, 4, 16)
+    struct.pack_into(">8f", swapped, 76, 1, 1, 1, 1, 1, 1, 1, 1)
+    struct.pack_into(">f", swapped, 108, 352.0)
+    swapped[344:348] = b"n+1\x00"
+    put("nifti_big_endian.bin", 2, 0, bytes(swapped) + b"\x00" * 4 + bytes(16))
+    # NIfTI-2: 540-byte header.
+    n2 = bytearray(540)
+    struct.pack_into("<i", n2, 0, 540)
+    n2[4:8] = b"n+2\x00"
+    struct.pack_into("<hh", n2, 12, 2, 8)
+    struct.pack_into("<8q", n2, 16, 3, 2, 2, 2, 1, 1, 1, 1)
+    struct.pack_into("<8d", n2, 104, 1, 1, 1, 1, 1, 1, 1, 1)
+    struct.pack_into("<q", n2, 168, 544)
+    put("nifti2_single.bin", 2, 0, bytes(n2) + b"\x00" * 4 + bytes(8))
+    # DICOM: preamble, DICM, a file meta group, rows/columns and 8 bytes of pixel data.
+    def element(group, elem, vr, value):
+        if vr in (b"OB", b"OW", b"UN", b"SQ", b"UT"):
+            return struct.pack("<HH", group, elem) + vr + b"\x00\x00" + struct.pack("<I", len(value)) + value
+        return struct.pack("<HH", group, elem) + vr + struct.pack("<H", len(value)) + value
+    ts = b"1.2.840.10008.1.2.1\x00"
+    meta_body = element(0x0002, 0x0010, b"UI", ts)
+    meta = element(0x0002, 0x0000, b"UL", struct.pack("<I", len(meta_body))) + meta_body
+    data = (element(0x0028, 0x0010, b"US", struct.pack("<H", 2)) + element(0x0028, 0x0011, b"US", struct.pack("<H", 2))
+            + element(0x0028, 0x0100, b"US", struct.pack("<H", 16)) + element(0x7FE0, 0x0010, b"OW", bytes(8)))
+    dicom = b"\x00" * 128 + b"DICM" + meta + data
+    put("dicom_explicit.bin", 4, 8, dicom)
+    put("dicom_truncated.bin", 4, 8, dicom[:-3])
+    for name in ["data.raw", "../secret.raw", "out.raw", "in_link.raw", "fifo.raw", "sub", "dangling.raw",
+                 "/etc/passwd", "sub/../data.raw", "sub/../../hdr/data.raw"]:
+        put("name_" + re.sub(r"[^a-z]+", "_", name).strip("_") + ".bin", 5, 0, name.encode())
+
+
 def http_requests():
     # The first byte is the read size minus one (fuzz_http_session.cpp); 0xff: 256-byte reads.
     def req(name, text, read=b"\xff"):
@@ -174,6 +245,7 @@ def main():
     static_paths()
     scenes()
     volume_headers()
+    volume_checks()
     http_requests()
 
 

@@ -955,7 +955,9 @@ void checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need) {
     const gdcm::Tag pixelData(0x7fe0, 0x0010);
     gdcm::Reader reader;
     reader.SetFileName(file.string().c_str());
-    if (!reader.ReadUpToTag(pixelData))
+    // The pixel data element as a tag to skip: its value is not read (a damaged header may
+    // declare 4 GiB of it, which GDCM would allocate and fill before this check could refuse).
+    if (!reader.ReadUpToTag(pixelData, {pixelData}))
         fail(dir, fmt::format("slice '{}' is not a readable DICOM file (its header is damaged or cut short)", name));
     // The pixel data element starts after the file meta header and every element before it.
     const gdcm::File &dicom = reader.GetFile();
