@@ -112,6 +112,8 @@ std::string CpuRenderer::featureNames(const Quality &q, bool hasClipPlanes) {
     if (q.preintegrated) o += " PREINTEGRATED";
     if (q.emptySpaceSkipping) o += " EMPTY_SPACE_SKIPPING";
     if (q.shading) o += " SHADING";
+    if (q.compositing == Compositing::Maximum) o += " COMPOSITING_MAX";
+    if (q.compositing == Compositing::Minimum) o += " COMPOSITING_MIN";
     return o.empty() ? o : o.substr(1);
 }
 
@@ -177,8 +179,9 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
 }
 
 Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
-                          const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
-    validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
+                          const Quality &requested, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
+    validateFrameRequest(*volume_, tf, camera, width, height, requested, clipPlanes, pyramid_.maxLevel());
+    const Quality quality = compositedQuality(requested);
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -244,6 +247,9 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
     p.features.shading = quality.shading;
     p.features.cubic = cubic;
     p.features.preintegrated = quality.preintegrated;
+    p.features.intensityProjection = quality.compositing == Compositing::Maximum   ? 1
+                                     : quality.compositing == Compositing::Minimum ? -1
+                                                                                   : 0;
     if (quality.preintegrated) {
         const PreintegrationTable &table = *preintegration_;
         p.preRgba = table.rgba.data();
@@ -271,6 +277,12 @@ Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int 
         p.clipPlanes[c][3] = float(-dot(nrm, clipPlanes[c].point));
     }
     p.clipPlaneCount = int(clipPlanes.size());
+    double boxLo[3], boxHi[3];
+    cropBoxInIndexSpace(*volume_, quality.crop, boxLo, boxHi);
+    for (int a = 0; a < 3; ++a) {
+        p.boxLo[a] = float(boxLo[a]);
+        p.boxHi[a] = float(boxHi[a]);
+    }
     for (int a = 0; a < 3; ++a) {
         p.dims[a] = int(volume_->dims[a]);
         p.levelDims[a] = int(data.dims[a]);
