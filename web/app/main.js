@@ -9,6 +9,7 @@ import { defaultServerUrl } from "../core/connection.js";
 import { TF_PRESETS } from "../core/protocol.js";
 import { Session } from "../core/session.js";
 import { presetPoints, problems, resolvePoints, tidyPoints } from "../core/transfer_function.js";
+import { CropPanel } from "./crop_panel.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
 import { StatsOverlay } from "./stats_overlay.js";
 import { ConnectionIndicator, ErrorList, ViewMessage } from "./status.js";
@@ -95,7 +96,8 @@ const tfEditor = new TransferFunctionEditor({
 }, (points, { interactive }) => onTfEdited(points, interactive));
 
 const quality = new QualityPanel(document, {
-  onPolicy: (policy) => session.setQualityPolicy(policy),
+  // The crop panel adds quality.compositing and quality.crop to the switches.
+  onPolicy: (policy) => session.setQualityPolicy(policy.quality ? { ...policy, quality: crop.decorate(policy.quality) } : policy),
   onResolution: (choice) => { app.resolution = choice; updateViewport(); },
   onClip: (planes, { interactive }) => {
     if (!session.volume) return;
@@ -103,6 +105,9 @@ const quality = new QualityPanel(document, {
     else { sendClip.now(planes); session.endInteraction(); }
   },
 });
+
+// Compositing and crop box travel with the quality switches: an edit sends the policy with them.
+const crop = new CropPanel($("crop-card"), () => { quality.touched = true; quality.schedule(); });
 
 for (const p of TF_PRESETS) $("tf-preset").append(new Option(p.label, p.name));
 
@@ -222,6 +227,7 @@ session.on("opened", ({ state, restored }) => {
   tfEditor.setVolume(volume);
   showTransferFunction(session.scene.transfer_function ?? state.scene?.transfer_function);
   quality.showState(state);
+  crop.showState(state.scene?.quality);
   quality.setVolume(volume, session.scene.clip_planes);
   $("volume-name").value = volume?.name ?? "";
   $("volume-info").textContent = $("volume-info").title = describeVolume(volume);
