@@ -1,6 +1,6 @@
 #include "protocol/client_messages.hpp"
 
-#include "protocol/json_reader.hpp"
+#include "protocol/read_error.hpp"
 #include "protocol/utf8.hpp"
 #include "protocol/version.hpp"
 
@@ -217,6 +217,8 @@ ParsedClientMessage parseClientMessage(std::string_view text, const Limits &limi
         // Each message above quotes client text through quotableText already; this is the
         // last check that the answer is valid UTF-8 whatever a future message quotes.
         return ProtocolError{e.code, quotableText(e.what()), id, type};
+    } catch (const detail::FieldError &e) {
+        return ProtocolError{detail::codeOf(e), quotableText(detail::messageOf(e)), id, type};
     } catch (const std::exception &e) {
         // Out of memory or a bug in this file; still an answer, never a dropped connection.
         return ProtocolError{ErrorCode::Internal, "reading the message failed: " + quotableText(e.what()), id, type};

@@ -163,11 +163,15 @@ std::string toJsonText(const ClientMessage &message);
 
 std::string_view qualityModeName(QualityMode mode);
 
-namespace detail {
+} // namespace volcast::protocol
+namespace volcast::json_fields {
 class Fields;
+}
+namespace volcast::protocol {
+namespace detail {
 // Reads "mode", "target_frame_ms" and "quality" from a quality_policy request or from a
-// state message's "quality_policy" object; throws ReadError.
-QualityPolicy readQualityPolicy(const Fields &fields);
+// state message's "quality_policy" object; throws ReadError or json_fields::FieldError.
+QualityPolicy readQualityPolicy(const json_fields::Fields &fields);
 } // namespace detail
 // The policy's JSON form {"mode", "target_frame_ms", "quality"}; used by the state message.
 nlohmann::json qualityPolicyToJson(const QualityPolicy &policy);

@@ -1,6 +1,6 @@
 #include "protocol/frame.hpp"
 
-#include "protocol/json_reader.hpp"
+#include "protocol/read_error.hpp"
 #include "protocol/version.hpp"
 
 #include <algorithm>
@@ -151,6 +151,8 @@ DecodedFrame decodeFrame(std::span<const uint8_t> message) {
         frame.header = readHeader(detail::parseText(text, 64).value, imageBytes);
     } catch (const detail::ReadError &e) {
         throw DecodeError(std::string("frame header: ") + e.what());
+    } catch (const detail::FieldError &e) {
+        throw DecodeError("frame header: " + detail::messageOf(e));
     }
     frame.image = message.subspan(kFramePreambleBytes + length);
     if (frame.image.size() != imageBytes)

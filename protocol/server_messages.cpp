@@ -1,6 +1,6 @@
 #include "protocol/server_messages.hpp"
 
-#include "protocol/json_reader.hpp"
+#include "protocol/read_error.hpp"
 
 #include <limits>
 #include <utility>
@@ -237,6 +237,8 @@ ServerMessage parseServerMessage(std::string_view text) {
         detail::fail(ErrorCode::UnknownType, "unknown message type " + json(type).dump());
     } catch (const detail::ReadError &e) {
         throw DecodeError(std::string("server message: ") + e.what());
+    } catch (const detail::FieldError &e) {
+        throw DecodeError("server message: " + detail::messageOf(e));
     }
 }
 

@@ -1,5 +1,7 @@
 #include "renderer/scene.hpp"
 
+#include "json_fields/json_fields.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include <array>
@@ -7,8 +9,6 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
-#include <memory>
-#include <set>
 #include <sstream>
 #include <utility>
 
@@ -45,63 +45,29 @@ void check(bool ok, const std::string &path, const std::string &message) {
     if (!ok) fail(path, message);
 }
 
-std::string member(const std::string &path, std::string_view key) {
-    return path.empty() ? std::string(key) : path + "." + std::string(key);
-}
+using json_fields::array;
+using json_fields::boolean;
+using json_fields::element;
+using json_fields::number;
+using json_fields::string;
 
-std::string element(const std::string &path, size_t i) {
-    return path + "[" + std::to_string(i) + "]";
-}
-
-std::string typeOf(const json &j) {
-    // "number" alone would not tell a user why 512.5 is refused where an integer is wanted.
-    if (j.is_number_float()) return "a fractional number";
-    if (j.is_number()) return "an integer";
-    return j.type_name();
-}
-
-// The validators of Camera and TransferFunction already name the key in their messages.
+// The validators of Camera and TransferFunction already name the key in their messages;
+// json_fields names the path of the field it refused.
 template <typename F>
-void asSceneError(F &&f) {
+auto asSceneError(F &&f) {
     try {
-        f();
+        return f();
     } catch (const SceneError &) {
         throw;
+    } catch (const json_fields::FieldError &e) {
+        fail(e.path, e.problem);
     } catch (const std::invalid_argument &e) {
         throw SceneError(e.what());
     }
 }
 
-double number(const json &j, const std::string &path) {
-    check(j.is_number(), path, "must be a number, got " + typeOf(j));
-    const double v = j.get<double>();
-    check(std::isfinite(v), path, "must be a finite number");
-    return v;
-}
-
-int64_t integer(const json &j, const std::string &path, int64_t lo, int64_t hi,
-                const std::string &what) {
-    check(j.is_number_integer(), path, "must be " + what + ", got " + typeOf(j));
-    // Unsigned values above int64's range are refused before they could wrap around.
-    const bool fits = !j.is_number_unsigned() || j.get<uint64_t>() <= uint64_t(hi);
-    const int64_t v = fits ? j.get<int64_t>() : hi;
-    check(fits && v >= lo && v <= hi, path, "must be " + what + ", got " + j.dump());
-    return v;
-}
-
-bool boolean(const json &j, const std::string &path) {
-    check(j.is_boolean(), path, "must be true or false, got " + typeOf(j));
-    return j.get<bool>();
-}
-
-std::string string(const json &j, const std::string &path) {
-    check(j.is_string(), path, "must be a string, got " + typeOf(j));
-    return j.get<std::string>();
-}
-
-const json &array(const json &j, const std::string &path, std::string_view what) {
-    check(j.is_array(), path, "must be " + std::string(what) + ", got " + typeOf(j));
-    return j;
+int64_t integer(const json &j, const std::string &path, int64_t lo, int64_t hi, const std::string &what) {
+    return json_fields::integer(j, path, lo, hi, what);
 }
 
 Vec3d vec3(const json &j, const std::string &path) {
@@ -130,43 +96,18 @@ std::string nameOf(E value, const std::array<std::pair<std::string_view, E>, N> 
     return "?";
 }
 
-// One JSON object: refuses keys it does not know (typos like "fov_deg" must not pass
-// silently) and reads members by name with their full path in every message.
-class Fields {
+// One JSON object of a scene file: refuses keys it does not know ("unknown key", as scene
+// files have always said) and reads optional members into their defaults' place.
+class Fields : public json_fields::Fields {
   public:
     Fields(const json &j, std::string path, std::initializer_list<std::string_view> known)
-        : j_(j), path_(std::move(path)) {
-        check(j.is_object(), path_, "must be a JSON object, got " + typeOf(j));
-        for (const auto &[key, value] : j.items()) {
-            bool ok = false;
-            for (std::string_view k : known) ok = ok || k == key;
-            if (ok) continue;
-            std::string list;
-            for (std::string_view k : known) list += (list.empty() ? "" : ", ") + std::string(k);
-            fail(member(path_, key), "unknown key (known here: " + list + ")");
-        }
-    }
+        : json_fields::Fields(j, std::move(path), known, Unknown::Refuse, "unknown key") {}
 
-    std::string pathOf(std::string_view key) const { return member(path_, key); }
-    const std::string &path() const { return path_; }
-    const json *find(std::string_view key) const {
-        auto it = j_.find(key);
-        return it == j_.end() ? nullptr : &*it;
-    }
-    const json &require(std::string_view key) const {
-        const json *v = find(key);
-        if (!v) fail(pathOf(key), "is required");
-        return *v;
-    }
     // Reads an optional member into out, leaving out's default when the key is absent.
     template <typename T, typename Read>
     void optional(std::string_view key, T &out, Read read) const {
         if (const json *v = find(key)) out = read(*v, pathOf(key));
     }
-
-  private:
-    const json &j_;
-    std::string path_;
 };
 
 std::vector<ControlPoint> parsePoints(const json &j, const std::string &path) {
@@ -280,11 +221,7 @@ Quality parseQuality(const json &j) {
     });
     f.optional("image_scale", q.imageScale, number);
     f.optional("shading", q.shading, boolean);
-    f.optional("seed", q.seed, [](const json &v, const std::string &p) {
-        check(v.is_number_unsigned(), p, "must be a non-negative integer, got " +
-                                             (v.is_number_integer() ? v.dump() : typeOf(v)));
-        return v.get<uint64_t>();
-    });
+    f.optional("seed", q.seed, json_fields::unsignedInteger);
 
     f.optional("compositing", q.compositing,
                [](const json &v, const std::string &p) { return choice(v, p, kCompositings); });
@@ -320,84 +257,11 @@ std::string parseVolume(const json &j, const std::filesystem::path &baseDir) {
     return volume;
 }
 
-// Follows where the parser is, so that errors the JSON library raises without a key (a
-// number that overflows a double, a syntax error) and duplicate keys, which it would
-// silently resolve to the last one, can still be reported by their JSON path.
-class PathTracker {
-  public:
-    bool operator()(int, json::parse_event_t event, json &parsed) {
-        using E = json::parse_event_t;
-        switch (event) {
-        case E::object_start:
-        case E::array_start: {
-            Frame frame;
-            frame.isArray = event == E::array_start;
-            frame.path = current();
-            stack_.push_back(std::move(frame));
-            break;
-        }
-        case E::object_end:
-        case E::array_end:
-            stack_.pop_back();
-            elementDone();
-            break;
-        case E::key: {
-            Frame &top = stack_.back();
-            top.key = parsed.get<std::string>();
-            if (!top.keys.insert(top.key).second) fail(member(top.path, top.key), "duplicate key");
-            break;
-        }
-        case E::value: elementDone(); break;
-        }
-        return true;
-    }
-
-    // The path of the value being read now (empty at the top level).
-    std::string current() const {
-        if (stack_.empty()) return {};
-        const Frame &top = stack_.back();
-        return top.isArray ? element(top.path, top.count) : member(top.path, top.key);
-    }
-
-  private:
-    struct Frame {
-        bool isArray = false;
-        std::string path;
-        size_t count = 0;
-        std::string key;
-        std::set<std::string> keys;
-    };
-    void elementDone() {
-        if (!stack_.empty() && stack_.back().isArray) ++stack_.back().count;
-    }
-    std::vector<Frame> stack_;
-};
-
 json parseJson(std::string_view text) {
-    // The JSON library stops at a NUL byte as at the end of the text: a file with one would be
-    // read only up to it. JSON text never holds a raw NUL.
-    if (const size_t nul = text.find('\0'); nul != std::string_view::npos)
-        fail("", "malformed JSON: a NUL byte at byte " + std::to_string(nul));
-    auto tracker = std::make_shared<PathTracker>();
-    try {
-        // parse() copies its callback, so the tracker is shared to be read afterwards.
-        return json::parse(text, [tracker](int depth, json::parse_event_t event, json &parsed) {
-            return (*tracker)(depth, event, parsed);
-        });
-    } catch (const json::exception &e) {
-        std::string message = e.what();
-        // Drop the library's "[json.exception.parse_error.101] " tag; keep line and column.
-        if (const auto close = message.find("] "); message.starts_with("[json.") && close != std::string::npos)
-            message.erase(0, close + 2);
-        // The parser's excerpt ("last read: ...") may end inside a UTF-8 sequence; a message
-        // must stay valid UTF-8 (errors are quoted inside JSON): U+FFFD for the bad bytes.
-        message = json::parse(json(message).dump(-1, ' ', false, json::error_handler_t::replace)).get<std::string>();
-        const std::string near = tracker->current();
-        // An overflowing number is a bad value of a known key; anything else is bad syntax,
-        // for which the key is only a hint next to the line and column.
-        if (e.id == 406) fail(near, "must be a finite number (" + message + ")");
-        fail("", "malformed JSON: " + message + (near.empty() ? "" : " (near " + near + ")"));
-    }
+    json_fields::ParsedText parsed = json_fields::parseText(text);
+    // The JSON library keeps the last of duplicate keys silently; which one was meant?
+    if (!parsed.duplicateKey.empty()) fail(parsed.duplicateKey, "duplicate key");
+    return std::move(parsed.value);
 }
 
 // Pretty output as people write scenes by hand: objects one key a line, but arrays of plain
@@ -428,23 +292,121 @@ void writePretty(const nlohmann::ordered_json &j, int indent, std::string &out) 
     }
 }
 
-nlohmann::ordered_json toJson(const Vec3d &v) { return {v.x, v.y, v.z}; }
+using ojson = nlohmann::ordered_json;
+
+ojson toJson(const Vec3d &v) { return {v.x, v.y, v.z}; }
+
+ojson transferFunctionJson(const Scene &scene) {
+    const TransferFunction &tf = scene.transferFunction;
+    ojson out = ojson::object();
+    if (!scene.transferFunctionPreset.empty()) {
+        out["preset"] = scene.transferFunctionPreset;
+    } else {
+        out["points"] = ojson::array();
+        for (const auto &p : tf.points) out["points"].push_back({p.value, p.r, p.g, p.b, p.a});
+    }
+    if (tf.opacityUnit) out["opacity_unit"] = *tf.opacityUnit;
+    return out;
+}
+
+ojson cameraJson(const Camera &cam) {
+    ojson out{{"eye", toJson(cam.eye)},
+              {"target", toJson(cam.target)},
+              {"up", toJson(cam.up)},
+              {"projection", nameOf(cam.projection, kProjections)}};
+    if (cam.projection == Projection::Perspective)
+        out["fov_y_deg"] = cam.fovYDeg;
+    else
+        out["height"] = cam.height;
+    return out;
+}
+
+ojson qualityJson(const Quality &q) {
+    ojson out{{"step", q.step},
+            {"jitter", q.jitter},
+            {"preintegrated", q.preintegrated},
+            {"interpolation", nameOf(q.interpolation, kInterpolations)},
+            {"boundary_segment", q.boundarySegment},
+            {"early_termination", q.earlyTermination},
+            {"empty_space_skipping", q.emptySpaceSkipping},
+            {"mip_level", q.mipLevel},
+            {"image_scale", q.imageScale},
+            {"shading", q.shading},
+            {"seed", q.seed}};
+    // Written only where they differ from the default, so that scenes and frame headers
+    // without them read as before.
+    if (q.compositing != Compositing::EmissionAbsorption) out["compositing"] = nameOf(q.compositing, kCompositings);
+    if (!q.crop.full()) out["crop"] = {{"min", toJson(q.crop.min)}, {"max", toJson(q.crop.max)}};
+    return out;
+}
+
+ojson clipPlanesJson(const std::vector<ClipPlane> &planes) {
+    ojson out = ojson::array();
+    for (const auto &p : planes) out.push_back({{"point", toJson(p.point)}, {"normal", toJson(p.normal)}});
+    return out;
+}
+
+ojson sceneJson(const Scene &scene) {
+    ojson root{
+        {"volume", scene.volume},
+        {"transfer_function", transferFunctionJson(scene)},
+        {"camera", cameraJson(scene.camera)},
+        {"image", {{"width", scene.width}, {"height", scene.height}}},
+        {"quality", qualityJson(scene.quality)},
+    };
+    if (!scene.clipPlanes.empty()) root["clip_planes"] = clipPlanesJson(scene.clipPlanes);
+    return root;
+}
 
 } // namespace
 
 Scene parseScene(std::string_view jsonText, const std::filesystem::path &baseDir) {
-    const json root = parseJson(jsonText);
-    const Fields f(root, "",
-                   {"volume", "transfer_function", "camera", "image", "quality", "clip_planes"});
-    Scene scene;
-    scene.volume = parseVolume(f.require("volume"), baseDir);
-    parseTransferFunction(f.require("transfer_function"), scene);
-    scene.camera = parseCamera(f.require("camera"));
-    parseImage(f.require("image"), scene);
-    if (const json *q = f.find("quality")) scene.quality = parseQuality(*q);
-    if (const json *c = f.find("clip_planes")) scene.clipPlanes = parseClipPlanes(*c);
-    return scene;
+    return asSceneError([&] {
+        const json root = parseJson(jsonText);
+        const Fields f(root, "",
+                       {"volume", "transfer_function", "camera", "image", "quality", "clip_planes"});
+        Scene scene;
+        scene.volume = parseVolume(f.require("volume"), baseDir);
+        parseTransferFunction(f.require("transfer_function"), scene);
+        scene.camera = parseCamera(f.require("camera"));
+        parseImage(f.require("image"), scene);
+        if (const json *q = f.find("quality")) scene.quality = parseQuality(*q);
+        if (const json *c = f.find("clip_planes")) scene.clipPlanes = parseClipPlanes(*c);
+        return scene;
+    });
 }
+
+Camera readCamera(const nlohmann::json &camera) {
+    return asSceneError([&] { return parseCamera(camera); });
+}
+
+void readTransferFunction(const nlohmann::json &tf, Scene &scene) {
+    Scene read;
+    asSceneError([&] { parseTransferFunction(tf, read); });
+    scene.transferFunction = read.transferFunction;
+    scene.transferFunctionPreset = read.transferFunctionPreset;
+}
+
+void readImage(const nlohmann::json &image, Scene &scene) {
+    Scene read;
+    asSceneError([&] { parseImage(image, read); });
+    scene.width = read.width;
+    scene.height = read.height;
+}
+
+Quality readQuality(const nlohmann::json &quality) {
+    return asSceneError([&] { return parseQuality(quality); });
+}
+
+std::vector<ClipPlane> readClipPlanes(const nlohmann::json &planes) {
+    return asSceneError([&] { return parseClipPlanes(planes); });
+}
+
+nlohmann::json transferFunctionToJson(const Scene &scene) { return nlohmann::json(transferFunctionJson(scene)); }
+nlohmann::json cameraToJson(const Camera &camera) { return nlohmann::json(cameraJson(camera)); }
+nlohmann::json qualityToJson(const Quality &quality) { return nlohmann::json(qualityJson(quality)); }
+nlohmann::json clipPlanesToJson(const std::vector<ClipPlane> &planes) { return nlohmann::json(clipPlanesJson(planes)); }
+nlohmann::json sceneToJsonValue(const Scene &scene) { return nlohmann::json(sceneJson(scene)); }
 
 Scene loadSceneFile(const std::filesystem::path &file) {
     std::ifstream in(file, std::ios::binary);
@@ -467,59 +429,8 @@ TransferFunction resolvedTransferFunction(const Scene &scene, const ValueRange &
 }
 
 std::string sceneToJson(const Scene &scene) {
-    using ojson = nlohmann::ordered_json;
-    const TransferFunction &tf = scene.transferFunction;
-    ojson tfJson = ojson::object();
-    if (!scene.transferFunctionPreset.empty()) {
-        tfJson["preset"] = scene.transferFunctionPreset;
-    } else {
-        tfJson["points"] = ojson::array();
-        for (const auto &p : tf.points) tfJson["points"].push_back({p.value, p.r, p.g, p.b, p.a});
-    }
-    if (tf.opacityUnit) tfJson["opacity_unit"] = *tf.opacityUnit;
-
-    const Camera &cam = scene.camera;
-    ojson camJson{{"eye", toJson(cam.eye)},
-                  {"target", toJson(cam.target)},
-                  {"up", toJson(cam.up)},
-                  {"projection", nameOf(cam.projection, kProjections)}};
-    if (cam.projection == Projection::Perspective)
-        camJson["fov_y_deg"] = cam.fovYDeg;
-    else
-        camJson["height"] = cam.height;
-
-    const Quality &q = scene.quality;
-    ojson root{
-        {"volume", scene.volume},
-        {"transfer_function", tfJson},
-        {"camera", camJson},
-        {"image", {{"width", scene.width}, {"height", scene.height}}},
-        {"quality",
-         {{"step", q.step},
-          {"jitter", q.jitter},
-          {"preintegrated", q.preintegrated},
-          {"interpolation", nameOf(q.interpolation, kInterpolations)},
-          {"boundary_segment", q.boundarySegment},
-          {"early_termination", q.earlyTermination},
-          {"empty_space_skipping", q.emptySpaceSkipping},
-          {"mip_level", q.mipLevel},
-          {"image_scale", q.imageScale},
-          {"shading", q.shading},
-          {"seed", q.seed}}},
-    };
-    // Written only where they differ from the default, so that scenes and frame headers
-    // without them read as before.
-    if (q.compositing != Compositing::EmissionAbsorption)
-        root["quality"]["compositing"] = nameOf(q.compositing, kCompositings);
-    if (!q.crop.full()) root["quality"]["crop"] = {{"min", toJson(q.crop.min)}, {"max", toJson(q.crop.max)}};
-    if (!scene.clipPlanes.empty()) {
-        ojson planes = ojson::array();
-        for (const auto &p : scene.clipPlanes)
-            planes.push_back({{"point", toJson(p.point)}, {"normal", toJson(p.normal)}});
-        root["clip_planes"] = planes;
-    }
     std::string out;
-    writePretty(root, 0, out);
+    writePretty(sceneJson(scene), 0, out);
     return out + "\n";
 }
 

@@ -5,6 +5,8 @@
 #include "renderer/camera.hpp"
 #include "renderer/transfer_function.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <cstdint>
 #include <filesystem>
 #include <stdexcept>
@@ -84,6 +86,24 @@ inline constexpr int64_t kMaxImagePixels = int64_t(8192) * 8192;
 Scene parseScene(std::string_view jsonText, const std::filesystem::path &baseDir = {});
 Scene loadSceneFile(const std::filesystem::path &file);
 std::string sceneToJson(const Scene &scene);
+
+// Scene pieces one at a time, in their scene-file JSON form under the scene file's key
+// ("camera", "transfer_function", "image", "quality", "clip_planes"). The server keeps a
+// session's scene as typed values and reads each change with these, the same code that
+// parseScene runs, so it refuses exactly what volcast-render would. Each reader throws
+// SceneError naming the key ("camera.up: has zero length") and changes nothing then.
+Camera readCamera(const nlohmann::json &camera);
+void readTransferFunction(const nlohmann::json &tf, Scene &scene);   // points or preset
+void readImage(const nlohmann::json &image, Scene &scene);           // width and height
+Quality readQuality(const nlohmann::json &quality);
+std::vector<ClipPlane> readClipPlanes(const nlohmann::json &planes);
+
+// The writers: what sceneToJson writes for each piece (every quality switch spelled out).
+nlohmann::json cameraToJson(const Camera &camera);
+nlohmann::json transferFunctionToJson(const Scene &scene);
+nlohmann::json qualityToJson(const Quality &quality);
+nlohmann::json clipPlanesToJson(const std::vector<ClipPlane> &planes);
+nlohmann::json sceneToJsonValue(const Scene &scene);   // sceneToJson as a value
 
 // The scene's transfer function, with a range-relative preset placed on the loaded
 // volume's value range (range is ignored when the scene has points).

@@ -13,24 +13,15 @@ namespace volcast::server {
 namespace {
 using Ms = std::chrono::duration<double, std::milli>;
 
-nlohmann::json qualityToJson(const Quality &q) {
-    Scene s;
-    s.volume = "-";
-    s.quality = q;
-    return nlohmann::json::parse(sceneToJson(s)).at("quality");
-}
-
 // Everything a level's error depends on besides the camera: volume, transfer function,
 // clip planes, the ladder and the frame size. The volume by its registry id, which is never
 // reused (an address would be, by the next volume loaded after an eviction).
 std::string calibrationKey(const ViewJob &job) {
     std::ostringstream key;
     key << job.volumeId << '|' << job.width << 'x' << job.height << '|';
-    Scene s;
-    s.volume = "-";
-    s.transferFunction = job.transferFunction;
-    s.clipPlanes = job.clipPlanes;
-    key << sceneToJson(s);
+    Scene tf;
+    tf.transferFunction = job.transferFunction;
+    key << transferFunctionToJson(tf).dump() << '|' << clipPlanesToJson(job.clipPlanes).dump();
     for (const Level &l : job.ladder) key << '|' << qualityToJson(l.quality).dump() << 'x' << l.passes;
     return key.str();
 }
@@ -56,9 +47,8 @@ std::string preparationKey(uint64_t volumeId, const TransferFunction &tf, const 
     if (q.preintegrated) {
         // The table depends on the transfer function and the step.
         Scene s;
-        s.volume = "-";
         s.transferFunction = tf;
-        key << " preintegrated step " << q.step << ' ' << nlohmann::json::parse(sceneToJson(s)).at("transfer_function").dump();
+        key << " preintegrated step " << q.step << ' ' << transferFunctionToJson(s).dump();
     }
     return key.str();
 }

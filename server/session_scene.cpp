@@ -8,15 +8,6 @@ namespace volcast::server {
 
 using nlohmann::json;
 
-namespace {
-json vec(const Vec3d &v) { return json::array({v.x, v.y, v.z}); }
-
-// Pieces a check needs before the client has set them; never sent or rendered.
-const json kPlaceholderTf = {{"points", json::array({json::array({0, 0, 0, 0, 0}), json::array({1, 0, 0, 0, 0})})}};
-const json kPlaceholderCamera = {{"eye", {0, 0, 1}}, {"target", {0, 0, 0}}, {"up", {0, 1, 0}},
-                                 {"projection", "perspective"}, {"fov_y_deg", 30}};
-} // namespace
-
 json defaultTransferFunction(const VolumeEntry &entry) {
     if (entry.name == "builtin:demo")
         // scenes/demo.json's: soft tissue faint, the skull-like shell white, vessels red.
@@ -37,7 +28,7 @@ json defaultTransferFunction(const VolumeEntry &entry) {
     return {{"preset", "micro_ct"}};
 }
 
-json defaultCamera(const Volume &v, bool builtin) {
+Camera defaultCamera(const Volume &v, bool builtin) {
     const Vec3d c = v.center();
     const Vec3d e = v.extent();
     const double radius = 0.5 * std::sqrt(e.x * e.x + e.y * e.y + e.z * e.z);
@@ -46,84 +37,54 @@ json defaultCamera(const Volume &v, bool builtin) {
     // viewer looks from the front (-y, anterior) with the head (+z) up.
     Vec3d dir = builtin ? Vec3d{196.5, 266.5, 236.5} : Vec3d{0.35, -1.0, 0.3};
     dir = dir * (1.0 / std::sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z));
-    const Vec3d up = builtin ? Vec3d{0, 1, 0} : Vec3d{0, 0, 1};
-    return {{"eye", vec(c + dir * distance)}, {"target", vec(c)}, {"up", vec(up)},
-            {"projection", "perspective"}, {"fov_y_deg", 30}};
+    Camera camera;
+    camera.eye = c + dir * distance;
+    camera.target = c;
+    camera.up = builtin ? Vec3d{0, 1, 0} : Vec3d{0, 0, 1};
+    camera.projection = Projection::Perspective;
+    camera.fovYDeg = 30;
+    return camera;
 }
 
-SessionScene::SessionScene() : image_({{"width", 512}, {"height", 512}}), clipPlanes_(json::array()) {}
-
-json SessionScene::assemble() const {
-    json root = {{"volume", volume_.empty() ? "-" : volume_},
-                 {"transfer_function", transferFunction_.is_null() ? kPlaceholderTf : transferFunction_},
-                 {"camera", camera_.is_null() ? kPlaceholderCamera : camera_},
-                 {"image", image_},
-                 {"clip_planes", clipPlanes_}};
-    if (!policy_.quality.is_null()) root["quality"] = policy_.quality;
-    return root;
+SessionScene::SessionScene() {
+    scene_.width = 512;
+    scene_.height = 512;
 }
-
-void SessionScene::check(const json &candidate) const { parseScene(candidate.dump()); }
 
 void SessionScene::openVolume(const VolumeEntry &entry) {
-    volume_ = entry.name;
-    transferFunction_ = defaultTransferFunction(entry);
-    camera_ = defaultCamera(*entry.volume, entry.name.starts_with(kBuiltinPrefix));
-    clipPlanes_ = json::array();
+    Scene opened = scene_;
+    opened.volume = entry.name;
+    readTransferFunction(defaultTransferFunction(entry), opened);
+    opened.camera = defaultCamera(*entry.volume, entry.name.starts_with(kBuiltinPrefix));
+    opened.clipPlanes.clear();
+    scene_ = std::move(opened);
 }
 
-void SessionScene::setCamera(const json &camera) {
-    json c = assemble();
-    c["camera"] = camera;
-    check(c);
-    camera_ = camera;
-}
+void SessionScene::setCamera(const json &camera) { scene_.camera = readCamera(camera); }
 
-void SessionScene::setTransferFunction(const json &tf) {
-    json c = assemble();
-    c["transfer_function"] = tf;
-    check(c);
-    transferFunction_ = tf;
-}
+void SessionScene::setTransferFunction(const json &tf) { readTransferFunction(tf, scene_); }
 
-void SessionScene::setClipPlanes(const json &planes) {
-    json c = assemble();
-    c["clip_planes"] = planes;
-    check(c);
-    clipPlanes_ = planes;
-}
+void SessionScene::setClipPlanes(const json &planes) { scene_.clipPlanes = readClipPlanes(planes); }
 
-void SessionScene::setViewport(const json &image) {
-    checkImage(image);
-    image_ = image;
-}
+void SessionScene::setViewport(const json &image) { readImage(image, scene_); }
 
-void SessionScene::checkImage(const json &image) const {
-    json c = assemble();
-    c["image"] = image;
-    check(c);
+ImageSize SessionScene::readImageSize(const json &image) const {
+    Scene read;
+    readImage(image, read);
+    return {read.width, read.height};
 }
 
 void SessionScene::setPolicy(const protocol::QualityPolicy &policy) {
-    json c = assemble();
-    c.erase("quality");
-    if (!policy.quality.is_null()) c["quality"] = policy.quality;
-    check(c);
+    // An automatic policy without switches means the server's own final level: the defaults.
+    scene_.quality = policy.quality.is_null() ? Quality{} : readQuality(policy.quality);
     policy_ = policy;
     policySent_ = true;
 }
 
-Scene SessionScene::scene() const { return parseScene(assemble().dump()); }
-
 json SessionScene::sceneJson() const {
-    json s = json::object();
-    if (!volume_.empty()) {
-        s = json::parse(sceneToJson(scene()));
-        if (clipPlanes_.empty()) s.erase("clip_planes");
-    } else {
-        s["image"] = image_;
-        if (!policy_.quality.is_null()) s["quality"] = json::parse(sceneToJson(scene())).at("quality");
-    }
+    if (hasVolume()) return sceneToJsonValue(scene_);
+    json s = {{"image", {{"width", scene_.width}, {"height", scene_.height}}}};
+    if (!policy_.quality.is_null()) s["quality"] = qualityToJson(scene_.quality);
     return s;
 }
 

@@ -1,9 +1,9 @@
 #pragma once
 // A session's scene as the client built it: docs/design.md's scene-file pieces (camera, transfer
-// function, image, quality, clip planes) kept in their JSON form, plus the quality policy.
-// Every change is checked by assembling the whole scene and running the scene-file parser,
-// so the server refuses exactly what volcast-render would; a refused change (SceneError,
-// whose message names the key) leaves the scene as it was.
+// function, image, quality, clip planes) kept as typed values, plus the quality policy. Each
+// change arrives in scene-file JSON form and is read once, by the scene-file parser's own
+// piece readers (renderer/scene.hpp), so the server refuses exactly what volcast-render
+// would; a refused change (SceneError, whose message names the key) leaves the scene as it was.
 
 #include "protocol/client_messages.hpp"
 #include "renderer/scene.hpp"
@@ -13,6 +13,11 @@
 
 namespace volcast::server {
 
+struct ImageSize {
+    int width = 0;
+    int height = 0;
+};
+
 class SessionScene {
   public:
     SessionScene();
@@ -20,7 +25,7 @@ class SessionScene {
     // A starting scene for the volume: a camera framing it, a transfer function suited to
     // it, no clip planes; the viewport and the policy are kept.
     void openVolume(const VolumeEntry &entry);
-    bool hasVolume() const { return !volume_.empty(); }
+    bool hasVolume() const { return !scene_.volume.empty(); }
 
     // Each throws SceneError (the parser's message) and then changes nothing.
     void setCamera(const nlohmann::json &camera);
@@ -28,21 +33,19 @@ class SessionScene {
     void setClipPlanes(const nlohmann::json &planes);
     void setViewport(const nlohmann::json &image);
     void setPolicy(const protocol::QualityPolicy &policy);
-    // Checks a still's own image size without keeping it.
-    void checkImage(const nlohmann::json &image) const;
+    // A still's own image size, checked like a viewport but not kept.
+    ImageSize readImageSize(const nlohmann::json &image) const;
+    ImageSize imageSize() const { return {scene_.width, scene_.height}; }
 
-    Scene scene() const;                  // parsed; requires a volume
+    // The scene; its volume is empty until one is open, and its quality is the policy's
+    // (the default switches when the policy gives none).
+    const Scene &scene() const { return scene_; }
     nlohmann::json sceneJson() const;     // scene-file form for the state message
-    const nlohmann::json &cameraJson() const { return camera_; }
     const protocol::QualityPolicy &policy() const { return policy_; }
     bool policySent() const { return policySent_; }
 
   private:
-    nlohmann::json assemble() const;      // with placeholders for pieces not set yet
-    void check(const nlohmann::json &candidate) const;
-
-    std::string volume_;
-    nlohmann::json transferFunction_, camera_, image_, clipPlanes_;
+    Scene scene_;
     protocol::QualityPolicy policy_;
     bool policySent_ = false;
 };
@@ -50,6 +53,6 @@ class SessionScene {
 // The transfer function a volume starts with: the demo's own, else a preset fitting its values.
 nlohmann::json defaultTransferFunction(const VolumeEntry &entry);
 // A perspective camera (30°) framing the volume's bounding sphere.
-nlohmann::json defaultCamera(const Volume &volume, bool builtin);
+Camera defaultCamera(const Volume &volume, bool builtin);
 
 } // namespace volcast::server

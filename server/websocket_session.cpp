@@ -226,8 +226,7 @@ void WebsocketSession::handle(std::string_view text) {
                 [&](const protocol::ViewportRequest &m) {
                     SessionScene candidate = scene_;
                     candidate.setViewport(m.image);
-                    const Scene s = candidate.scene();
-                    admit(candidate, s.width, s.height, false);
+                    admit(candidate, candidate.imageSize(), false);
                     scene_ = std::move(candidate);
                     if (volume_) submitView(id);
                 },
@@ -239,8 +238,7 @@ void WebsocketSession::handle(std::string_view text) {
                 [&](const protocol::QualityPolicyRequest &m) {
                     SessionScene candidate = scene_;
                     candidate.setPolicy(m.policy);
-                    const Scene s = candidate.scene();
-                    admit(candidate, s.width, s.height, false);
+                    admit(candidate, candidate.imageSize(), false);
                     scene_ = std::move(candidate);
                     if (volume_) submitView(id);
                 },
@@ -251,8 +249,7 @@ void WebsocketSession::handle(std::string_view text) {
                 },
                 [&](const protocol::StillRequest &m) {
                     if (!needVolume()) return;
-                    if (!m.image.is_null()) scene_.checkImage(m.image);
-                    submitView(id, m.image.is_null() ? nlohmann::json(nlohmann::json::object()) : m.image);
+                    submitView(id, m.image.is_null() ? scene_.imageSize() : scene_.readImageSize(m.image));
                 },
                 [&](const protocol::GetStateRequest &) { sendMessage(stateMessage(id)); },
                 [&](const protocol::CloseRequest &) {
@@ -348,9 +345,10 @@ void WebsocketSession::onOpened(nlohmann::json id, VolumeRegistry::Result result
     }
 }
 
-void WebsocketSession::admit(const SessionScene &candidate, int width, int height, bool still) const {
+void WebsocketSession::admit(const SessionScene &candidate, ImageSize size, bool still) const {
     const ServerConfig &config = state_->config();
-    const Scene scene = candidate.scene();
+    const Scene &scene = candidate.scene();
+    const int width = size.width, height = size.height;
     const int passes = config.jitterPasses;
     const std::vector<Level> ladder = candidate.policy().mode == protocol::QualityMode::Explicit
                                           ? explicitLadder(scene.quality, passes)
@@ -387,26 +385,21 @@ void WebsocketSession::admit(const SessionScene &candidate, int width, int heigh
     }
 }
 
-void WebsocketSession::submitView(const nlohmann::json &requestId, const nlohmann::json &stillImage) {
-    const Scene scene = scene_.scene();
+void WebsocketSession::submitView(const nlohmann::json &requestId, std::optional<ImageSize> still) {
+    const Scene &scene = scene_.scene();
     auto job = std::make_shared<ViewJob>();
     job->renderer = rendererOf(volume_);
     job->volumeId = volume_->id;
     job->volumeName = volume_->name;
     job->transferFunction = resolvedTransferFunction(scene, volume_->volume->range);
     job->camera = scene.camera;
-    job->cameraJson = nlohmann::json::parse(sceneToJson(scene)).at("camera");
-    job->width = scene.width;
-    job->height = scene.height;
-    if (!stillImage.is_null()) {
-        job->stillOnly = true;
-        if (stillImage.contains("width")) {
-            job->width = stillImage.at("width").get<int>();
-            job->height = stillImage.at("height").get<int>();
-        }
-    }
+    job->cameraJson = cameraToJson(scene.camera);
+    const ImageSize size = still.value_or(scene_.imageSize());
+    job->width = size.width;
+    job->height = size.height;
+    job->stillOnly = still.has_value();
     // Checked before anything is handed to the renderer; the view in the scheduler stays.
-    admit(scene_, job->width, job->height, job->stillOnly);
+    admit(scene_, size, job->stillOnly);
     job->clipPlanes = scene.clipPlanes;
     const auto &policy = scene_.policy();
     const int passes = state_->config().jitterPasses;

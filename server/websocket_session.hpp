@@ -88,8 +88,9 @@ class WebsocketSession : public std::enable_shared_from_this<WebsocketSession> {
     // Throws AdmissionError (too_large, naming the limit and its flag) when a view of
     // `candidate` at width x height (a still: its final level only) would go over a limit.
     // Without an open volume only the limits that do not depend on it are checked.
-    void admit(const SessionScene &candidate, int width, int height, bool still) const;
-    void submitView(const nlohmann::json &requestId, const nlohmann::json &stillImage = nullptr);
+    void admit(const SessionScene &candidate, ImageSize size, bool still) const;
+    // still: render only the final level, at this size.
+    void submitView(const nlohmann::json &requestId, std::optional<ImageSize> still = std::nullopt);
     protocol::StateMessage stateMessage(const nlohmann::json &id) const;
 
     boost::beast::websocket::stream<boost::beast::tcp_stream> ws_;

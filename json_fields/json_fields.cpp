@@ -1,21 +1,21 @@
-#include "protocol/json_reader.hpp"
+#include "json_fields/json_fields.hpp"
 
-#include "protocol/utf8.hpp"
+#include "json_fields/utf8.hpp"
 
 #include <cmath>
-#include <limits>
 #include <memory>
 #include <set>
 #include <utility>
 #include <vector>
 
-namespace volcast::protocol::detail {
+namespace volcast::json_fields {
 
-void fail(ErrorCode code, const std::string &message) { throw ReadError(code, message); }
+FieldError::FieldError(Kind k, std::string fieldPath, std::string what)
+    : std::runtime_error(fieldPath.empty() ? what : fieldPath + ": " + what),
+      kind(k), path(std::move(fieldPath)), problem(std::move(what)) {}
 
-void badField(const std::string &path, const std::string &message) {
-    // A path is made of the client's keys: a 60 KiB key is quoted by its start only.
-    fail(ErrorCode::BadField, path.empty() ? message : quotableText(path, kMaxQuotedBytes) + ": " + message);
+void badField(const std::string &path, const std::string &problem) {
+    throw FieldError(FieldError::Kind::BadField, path, problem);
 }
 
 std::string member(const std::string &path, std::string_view key) {
@@ -27,6 +27,10 @@ std::string element(const std::string &path, size_t i) {
 }
 
 namespace {
+
+[[noreturn]] void malformed(const std::string &problem) {
+    throw FieldError(FieldError::Kind::Malformed, "", problem);
+}
 
 // Follows where the parser is, so that an overflowing number and a duplicate key can be
 // reported by their path, and so that nesting is bounded before a deep value is built.
@@ -40,8 +44,9 @@ class PathTracker {
         case E::object_start:
         case E::array_start: {
             if (int(stack_.size()) >= maxDepth_)
-                fail(ErrorCode::TooLarge, "nested deeper than " + std::to_string(maxDepth_) +
-                                              " levels (at " + shown(current()) + ")");
+                throw FieldError(FieldError::Kind::TooDeep, "",
+                                 "nested deeper than " + std::to_string(maxDepth_) + " levels (at " +
+                                     quotableText(shown(current()), kMaxQuotedBytes) + ")");
             Frame frame;
             frame.isArray = event == E::array_start;
             frame.path = current();
@@ -95,11 +100,11 @@ class PathTracker {
 
 ParsedText parseText(std::string_view text, int maxDepth) {
     // The JSON library stops at a NUL byte as at the end of the text, so `{...}\0anything` would
-    // be taken as the message before it with no word about the rest. JSON text never holds a
+    // be taken as the text before it with no word about the rest. JSON text never holds a
     // raw NUL (inside a string it is written \u0000).
     if (const size_t nul = text.find('\0'); nul != std::string_view::npos)
-        fail(ErrorCode::MalformedJson,
-             "malformed JSON: a NUL byte at byte " + std::to_string(nul) + " (write it as \\u0000 inside a string)");
+        malformed("malformed JSON: a NUL byte at byte " + std::to_string(nul) +
+                  " (write it as \\u0000 inside a string)");
     auto tracker = std::make_shared<PathTracker>(maxDepth);
     ParsedText out;
     try {
@@ -118,9 +123,8 @@ ParsedText parseText(std::string_view text, int maxDepth) {
         // A number beyond a double is a bad value of a known field; anything else is bad
         // syntax, for which the field is only a hint next to the line and column.
         if (e.id == 406) badField(near, "must be a finite number (" + message + ")");
-        fail(ErrorCode::MalformedJson,
-             "malformed JSON: " + message +
-                 (near.empty() ? "" : " (near " + quotableText(near, kMaxQuotedBytes) + ")"));
+        malformed("malformed JSON: " + message +
+                  (near.empty() ? "" : " (near " + quotableText(near, kMaxQuotedBytes) + ")"));
     }
     out.duplicateKey = tracker->duplicateKey();
     return out;
@@ -139,7 +143,7 @@ std::string kindOf(const json &j) {
 }
 
 Fields::Fields(const json &obj, std::string path, std::initializer_list<std::string_view> known,
-               Unknown unknown)
+               Unknown unknown, std::string_view unknownProblem)
     : object_(object(obj, path)), path_(std::move(path)) {
     if (unknown == Unknown::Ignore) return;
     for (const auto &[key, value] : object_.items()) {
@@ -148,7 +152,7 @@ Fields::Fields(const json &obj, std::string path, std::initializer_list<std::str
         if (isKnown) continue;
         std::string list;
         for (std::string_view k : known) list += (list.empty() ? "" : ", ") + std::string(k);
-        badField(pathOf(key), "unknown field (known here: " + list + ")");
+        badField(pathOf(key), std::string(unknownProblem) + " (known here: " + list + ")");
     }
 }
 
@@ -168,8 +172,8 @@ const json &object(const json &j, const std::string &path) {
     return j;
 }
 
-const json &array(const json &j, const std::string &path) {
-    if (!j.is_array()) badField(path, "must be an array, got " + kindOf(j));
+const json &array(const json &j, const std::string &path, std::string_view what) {
+    if (!j.is_array()) badField(path, "must be " + std::string(what) + ", got " + kindOf(j));
     return j;
 }
 
@@ -194,14 +198,15 @@ double number(const json &j, const std::string &path) {
     return v;
 }
 
-int64_t integer(const json &j, const std::string &path, int64_t lo, int64_t hi) {
-    const std::string what = "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
-    if (!j.is_number_integer()) badField(path, "must be " + what + ", got " + kindOf(j));
+int64_t integer(const json &j, const std::string &path, int64_t lo, int64_t hi, std::string_view what) {
+    const std::string expected = what.empty() ? "an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]"
+                                              : std::string(what);
+    if (!j.is_number_integer()) badField(path, "must be " + expected + ", got " + kindOf(j));
     // An unsigned value above the int64 range is out of range, not a wrapped negative.
     const bool fits = !j.is_number_unsigned() ||
                       j.get<uint64_t>() <= uint64_t(std::numeric_limits<int64_t>::max());
     const int64_t v = fits ? j.get<int64_t>() : 0;
-    if (!fits || v < lo || v > hi) badField(path, "must be " + what + ", got " + j.dump());
+    if (!fits || v < lo || v > hi) badField(path, "must be " + expected + ", got " + j.dump());
     return v;
 }
 
@@ -212,13 +217,4 @@ uint64_t unsignedInteger(const json &j, const std::string &path) {
     return j.get<uint64_t>();
 }
 
-json requestId(const json &j, const std::string &path, size_t maxBytes) {
-    if (j.is_null() || j.is_number_integer()) return j;
-    if (j.is_string()) {
-        string(j, path, maxBytes);
-        return j;
-    }
-    badField(path, "must be an integer or a string, got " + kindOf(j));
-}
-
-} // namespace volcast::protocol::detail
+} // namespace volcast::json_fields

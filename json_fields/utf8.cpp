@@ -1,6 +1,6 @@
-#include "protocol/utf8.hpp"
+#include "json_fields/utf8.hpp"
 
-namespace volcast::protocol {
+namespace volcast::json_fields {
 namespace {
 
 constexpr std::string_view kReplacement = "\xEF\xBF\xBD";   // U+FFFD
@@ -65,4 +65,4 @@ std::string quotableText(std::string_view text, size_t maxBytes) {
     return out;
 }
 
-} // namespace volcast::protocol
+} // namespace volcast::json_fields
