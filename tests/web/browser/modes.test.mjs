@@ -35,19 +35,25 @@ const serverQuality = () => page.evaluate(async () => {
   return s.scene?.quality ?? null;
 });
 
-// Wait for a final frame rendered after the last quality_policy the page sent.
-async function finalAfterPolicy(seqBefore) {
-  const final = await waitForFinal(page, { afterSeq: seqBefore });
-  return final;
+// Wait until the view shows a final frame newer than afterSeq whose quality has exactly this
+// compositing and crop (null: the key is absent, the default). Returns its header.
+async function finalWith(afterSeq, { compositing = null, crop = null }) {
+  const handle = await page.waitForFunction(({ afterSeq, compositing, crop }) => {
+    const h = window.volcast.shown;
+    if (!h || !h.final || h.seq <= afterSeq) return null;
+    const same = (h.quality?.compositing ?? null) === compositing &&
+      JSON.stringify(h.quality?.crop ?? null) === JSON.stringify(crop);
+    return same ? h : null;
+  }, { afterSeq, compositing, crop }, { timeout: 90000, polling: 100 });
+  return handle.jsonValue();
 }
 
 test("the compositing selector switches to MIP and back; the frame says so", async () => {
   const emission = await canvasSummary(page);
   const seq = await shownSeq(page);
   await page.selectOption("#compositing", "mip");
-  await page.waitForFunction(() => window.volcast.frames.some((h) => h.final && h.quality?.compositing === "mip"), null, { timeout: 90000 });
-  const final = await finalAfterPolicy(seq);
-  assert.equal(final.quality.compositing, "mip");
+  const final = await finalWith(seq, { compositing: "mip" });
+  assert.equal(final.codec, "png");
   const q = await serverQuality();
   assert.equal(q.compositing, "mip");
   // A MIP of the phantom is a different picture from its emission–absorption rendering.
@@ -64,8 +70,7 @@ test("crop box sliders reach the server and remove what lies outside", async () 
   // Keep x from 0.3 to 0.7: the crop box's faces, normalised box coordinates.
   await page.$eval("#crop-min-x", (el) => { el.value = "0.3"; el.dispatchEvent(new Event("change")); });
   await page.$eval("#crop-max-x", (el) => { el.value = "0.7"; el.dispatchEvent(new Event("change")); });
-  await page.waitForFunction(() => window.volcast.frames.some((h) => h.final && h.quality?.crop?.min?.[0] === 0.3 && h.quality?.crop?.max?.[0] === 0.7), null, { timeout: 90000 });
-  await waitForFinal(page, { afterSeq: seq });
+  await finalWith(seq, { compositing: "mip", crop: { min: [0.3, 0, 0], max: [0.7, 1, 1] } });
   const q = await serverQuality();
   assert.deepEqual(q.crop, { min: [0.3, 0, 0], max: [0.7, 1, 1] });
   const cropped = await canvasSummary(page);
@@ -76,18 +81,21 @@ test("crop box sliders reach the server and remove what lies outside", async () 
 });
 
 test("a face cannot pass its opposite", async () => {
-  await page.$eval("#crop-min-y", (el) => { el.value = "1"; el.dispatchEvent(new Event("input")); });
+  const seq = await shownSeq(page);
+  await page.$eval("#crop-min-y", (el) => { el.value = "1"; el.dispatchEvent(new Event("change")); });
   const [lo, hi] = await page.evaluate(() => [Number(document.getElementById("crop-min-y").value), Number(document.getElementById("crop-max-y").value)]);
   assert.ok(lo < hi, `min ${lo} < max ${hi}`);
+  await finalWith(seq, { compositing: "mip", crop: { min: [0.3, lo, 0], max: [0.7, 1, 1] } });
   await page.click("#crop-reset");
 });
 
 test("emission–absorption with a crop box; whole volume restores the image", async () => {
   let seq = await shownSeq(page);
   await page.selectOption("#compositing", "emission_absorption");
+  await finalWith(seq, {});
+  seq = await shownSeq(page);
   await page.$eval("#crop-max-z", (el) => { el.value = "0.55"; el.dispatchEvent(new Event("change")); });
-  await page.waitForFunction(() => window.volcast.frames.some((h) => h.final && !h.quality?.compositing && h.quality?.crop?.max?.[2] === 0.55), null, { timeout: 90000 });
-  await waitForFinal(page, { afterSeq: seq });
+  await finalWith(seq, { crop: { min: [0, 0, 0], max: [1, 1, 0.55] } });
   await screenshot(page, "modes-crop.png");
   const q = await serverQuality();
   assert.equal(q.compositing, undefined, "the default is not written");
@@ -95,8 +103,7 @@ test("emission–absorption with a crop box; whole volume restores the image", a
 
   seq = await shownSeq(page);
   await page.click("#crop-reset");
-  await page.waitForFunction(() => window.volcast.frames.some((h) => h.final && !h.quality?.crop && !h.quality?.compositing), null, { timeout: 90000 });
-  await waitForFinal(page, { afterSeq: seq });
+  await finalWith(seq, {});
   assert.equal((await serverQuality()).crop, undefined);
   assert.deepEqual(problems, []);
 });
