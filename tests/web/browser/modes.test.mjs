@@ -41,8 +41,11 @@ async function finalWith(afterSeq, { compositing = null, crop = null }) {
   const handle = await page.waitForFunction(({ afterSeq, compositing, crop }) => {
     const h = window.volcast.shown;
     if (!h || !h.final || h.seq <= afterSeq) return null;
-    const same = (h.quality?.compositing ?? null) === compositing &&
-      JSON.stringify(h.quality?.crop ?? null) === JSON.stringify(crop);
+    // Key order is the server's (nlohmann sorts "max" before "min"): compare face by face.
+    const c = h.quality?.crop ?? null;
+    const sameCrop = c === null || crop === null ? c === crop
+      : JSON.stringify(c.min) === JSON.stringify(crop.min) && JSON.stringify(c.max) === JSON.stringify(crop.max);
+    const same = (h.quality?.compositing ?? null) === compositing && sameCrop;
     return same ? h : null;
   }, { afterSeq, compositing, crop }, { timeout: 90000, polling: 100 });
   return handle.jsonValue();
