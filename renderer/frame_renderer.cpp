@@ -25,6 +25,29 @@ void validateFrameRequest(const Volume &volume, const TransferFunction &tf, cons
                                     std::to_string(maxMipLevel) + " for volume " + volume.name);
     if (!(quality.imageScale > 0 && quality.imageScale <= 1))
         throw std::invalid_argument("quality.image_scale: must be in (0, 1]");
+    for (int a = 0; a < 3; ++a)
+        if (!(quality.crop.min[a] >= 0 && quality.crop.min[a] < quality.crop.max[a] && quality.crop.max[a] <= 1))
+            throw std::invalid_argument("quality.crop: axis " + std::to_string(a) +
+                                        " must have 0 <= min < max <= 1 (normalised box coordinates)");
+}
+
+Quality compositedQuality(const Quality &quality) {
+    Quality q = quality;
+    if (q.compositing != Compositing::EmissionAbsorption) {
+        q.preintegrated = false;
+        q.shading = false;
+        q.earlyTermination = 1;
+        q.emptySpaceSkipping = false;
+    }
+    return q;
+}
+
+void cropBoxInIndexSpace(const Volume &volume, const CropBox &crop, double lo[3], double hi[3]) {
+    for (int a = 0; a < 3; ++a) {
+        const double n = double(volume.dims[a]);
+        lo[a] = -0.5 + crop.min[a] * n;
+        hi[a] = -0.5 + crop.max[a] * n;
+    }
 }
 
 double frameStep(const Volume &volume, const Quality &quality, RenderStats &stats) {

@@ -87,10 +87,19 @@ class FrameRenderer {
 };
 
 // The checks every back end makes before it allocates anything: camera, transfer function,
-// image size, clip planes, mip level (levels 0 … maxMipLevel), image scale.
+// image size, clip planes, mip level (levels 0 … maxMipLevel), image scale, crop box.
 void validateFrameRequest(const Volume &volume, const TransferFunction &tf, const Camera &camera, int width,
                           int height, const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
                           int maxMipLevel);
+
+// The switches a frame really uses: an intensity projection (MIP, MinIP) takes no
+// pre-integration, shading, early termination or empty-space skipping (a projection has no
+// opacity to terminate on, and a brick the transfer function makes transparent can still hold
+// the ray's maximum), so they are turned off here, in one place for both back ends.
+Quality compositedQuality(const Quality &quality);
+
+// The crop box in level-0 index space: [−1/2 + min·n, −1/2 + max·n] per axis (scene.hpp).
+void cropBoxInIndexSpace(const Volume &volume, const CropBox &crop, double lo[3], double hi[3]);
 
 // The step in world units for quality.step (in smallest spacings): raised, with a warning,
 // when a ray across the whole volume would take more than kMaxSamplesPerRay segments, so

@@ -61,6 +61,18 @@ class ReferenceRenderer {
 
     // Gradient Phong shading (quality.shading), off by default.
     void setShading(bool on) { shading_ = on; }
+    // Maximum or minimum intensity projection instead of emission–absorption: the exact
+    // extreme of the continuous field along the ray (see integrate), mapped through the
+    // transfer function as (a·rgb, a). Default: emission–absorption.
+    void setCompositing(Compositing compositing) { compositing_ = compositing; }
+    // The crop box (quality.crop), normalised box coordinates; default the whole volume.
+    void setCrop(const CropBox &crop) { crop_ = crop; }
+    // Both from a scene's quality; shading too.
+    void setQuality(const Quality &quality) {
+        setShading(quality.shading);
+        setCompositing(quality.compositing);
+        setCrop(quality.crop);
+    }
 
     double preprocessSeconds() const { return preprocessSeconds_; }
     // The ray's parameter interval inside the volume and all clip half-spaces; false if empty.
@@ -68,6 +80,7 @@ class ReferenceRenderer {
 
   private:
     double valueAtIndex(const Vec3d &indexPos) const;
+    RayIntegral project(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats) const;
 
     const Volume &volume_;
     TransferFunction tf_;
@@ -77,6 +90,8 @@ class ReferenceRenderer {
     std::function<double(const Vec3d &)> analytic_;
     double preprocessSeconds_ = 0;
     bool shading_ = false;
+    Compositing compositing_ = Compositing::EmissionAbsorption;
+    CropBox crop_;
 };
 
 } // namespace volcast

@@ -27,6 +27,11 @@ constexpr std::array<std::pair<std::string_view, Interpolation>, 2> kInterpolati
     {"linear", Interpolation::Linear},
     {"cubic", Interpolation::Cubic},
 }};
+constexpr std::array<std::pair<std::string_view, Compositing>, 3> kCompositings{{
+    {"emission_absorption", Compositing::EmissionAbsorption},
+    {"mip", Compositing::Maximum},
+    {"minip", Compositing::Minimum},
+}};
 
 // Below this a ray through a 4096-voxel volume would take billions of steps; it is a typo,
 // not a quality setting.
@@ -181,11 +186,27 @@ void parseImage(const json &j, Scene &scene) {
               " pixels is more than the limit of " + std::to_string(kMaxImagePixels));
 }
 
+CropBox parseCrop(const json &j, const std::string &path) {
+    const Fields f(j, path, {"min", "max"});
+    CropBox c;
+    if (const json *v = f.find("min")) c.min = vec3(*v, f.pathOf("min"));
+    if (const json *v = f.find("max")) c.max = vec3(*v, f.pathOf("max"));
+    for (int a = 0; a < 3; ++a) {
+        check(c.min[a] >= 0 && c.min[a] <= 1, element(f.pathOf("min"), size_t(a)),
+              "must be in [0, 1] (normalised box coordinates)");
+        check(c.max[a] >= 0 && c.max[a] <= 1, element(f.pathOf("max"), size_t(a)),
+              "must be in [0, 1] (normalised box coordinates)");
+        check(c.min[a] < c.max[a], element(f.pathOf("max"), size_t(a)),
+              "must be greater than min[" + std::to_string(a) + "]");
+    }
+    return c;
+}
+
 Quality parseQuality(const json &j) {
     const Fields f(j, "quality",
                    {"step", "jitter", "preintegrated", "interpolation", "boundary_segment",
                     "early_termination", "empty_space_skipping", "mip_level", "image_scale",
-                    "shading", "seed"});
+                    "shading", "seed", "compositing", "crop"});
     Quality q;
     f.optional("step", q.step, number);
     f.optional("jitter", q.jitter, boolean);
@@ -201,6 +222,10 @@ Quality parseQuality(const json &j) {
     f.optional("image_scale", q.imageScale, number);
     f.optional("shading", q.shading, boolean);
     f.optional("seed", q.seed, json_fields::unsignedInteger);
+
+    f.optional("compositing", q.compositing,
+               [](const json &v, const std::string &p) { return choice(v, p, kCompositings); });
+    f.optional("crop", q.crop, parseCrop);
 
     check(q.step >= kMinStep, f.pathOf("step"), "must be a positive number of at least 1e-6");
     check(q.earlyTermination > 0 && q.earlyTermination <= 1, f.pathOf("early_termination"),
@@ -297,7 +322,7 @@ ojson cameraJson(const Camera &cam) {
 }
 
 ojson qualityJson(const Quality &q) {
-    return {{"step", q.step},
+    ojson out{{"step", q.step},
             {"jitter", q.jitter},
             {"preintegrated", q.preintegrated},
             {"interpolation", nameOf(q.interpolation, kInterpolations)},
@@ -308,6 +333,11 @@ ojson qualityJson(const Quality &q) {
             {"image_scale", q.imageScale},
             {"shading", q.shading},
             {"seed", q.seed}};
+    // Written only where they differ from the default, so that scenes and frame headers
+    // without them read as before.
+    if (q.compositing != Compositing::EmissionAbsorption) out["compositing"] = nameOf(q.compositing, kCompositings);
+    if (!q.crop.full()) out["crop"] = {{"min", toJson(q.crop.min)}, {"max", toJson(q.crop.max)}};
+    return out;
 }
 
 ojson clipPlanesJson(const std::vector<ClipPlane> &planes) {

@@ -18,6 +18,20 @@ namespace volcast {
 
 enum class Interpolation { Linear, Cubic };
 
+// How samples along a ray make a pixel: the emission–absorption integral, or the maximum /
+// minimum of the field along the ray mapped through the transfer function (MIP / MinIP).
+enum class Compositing { EmissionAbsorption, Maximum, Minimum };
+
+// Six axis-aligned planes in the volume's own axes, in normalised box coordinates: 0 and 1
+// are the outer faces of the outermost voxels' cells, so index = −1/2 + f·n on an axis of n
+// samples (docs/design.md). The full box by default.
+struct CropBox {
+    Vec3d min{0, 0, 0};
+    Vec3d max{1, 1, 1};
+    bool full() const { return min == Vec3d{0, 0, 0} && max == Vec3d{1, 1, 1}; }
+    bool operator==(const CropBox &) const = default;
+};
+
 // The quality switches of docs/design.md's table, each measurable alone.
 struct Quality {
     double step = 0.5;                 // segment length in units of the smallest spacing
@@ -31,6 +45,10 @@ struct Quality {
     double imageScale = 1.0;
     bool shading = false;
     uint64_t seed = 0;
+    // Not remedies, but part of every frame the ladder derives from the final quality, and
+    // set by the protocol's quality_policy: the compositing mode and the crop box.
+    Compositing compositing = Compositing::EmissionAbsorption;
+    CropBox crop;
     bool operator==(const Quality &) const = default;
 };
 

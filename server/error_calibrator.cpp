@@ -94,7 +94,7 @@ void ErrorCalibrator::calibrateFinal(const CalibrationView &view, const std::ato
     const bool cubic = fq.interpolation == Interpolation::Cubic;
     if (!cubic || volume.voxelCount() <= kMaxCubicReferenceVoxels) {
         ReferenceRenderer exact(volume, view.transferFunction, cubic ? Reconstruction::Cubic : Reconstruction::Linear);
-        exact.setShading(fq.shading);
+        exact.setQuality(fq); // shading, compositing (MIP), crop
         const RayGenerator rays(view.camera, w, h);
         Image image(w, h);
         bool inTime = true;

@@ -140,7 +140,7 @@ int main(int argc, char **argv) {
             volcast::ReferenceRenderer renderer =
                 analytic ? volcast::ReferenceRenderer(loaded.volume, tf, loaded.analyticField)
                          : volcast::ReferenceRenderer(loaded.volume, tf, reconstruction);
-            renderer.setShading(scene.quality.shading);
+            renderer.setQuality(scene.quality); // shading, compositing, crop
             const double preprocessMs = msSince(t);
             volcast::ReferenceStats stats;
             volcast::ReferenceOptions options;

@@ -70,7 +70,7 @@ bool setUpRay(const FrameParams &P, int x, int y, Ray &r) {
     }
     float t0 = 0.0f, t1 = kInf;
     for (int a = 0; a < 3; ++a) {
-        const float lo = -0.5f, hi = float(P.dims[a]) - 0.5f;
+        const float lo = P.boxLo[a], hi = P.boxHi[a]; // the volume's box or the crop box
         if (dq[a] == 0.0f) {
             if (p0[a] < lo || p0[a] > hi) t1 = -kInf;
             continue;
@@ -346,6 +346,54 @@ void phong(const FrameParams &P, const VF q[3], const VF dir[3], VF &diffuse, VF
     specular = hn::IfThenElseZero(lit, hn::Mul(hn::Set(df, 0.2f), hn::Mul(n16, n4)));
 }
 
+// Intensity projection of one packet (raycast.cl's COMPOSITING_MAX / _MIN): the extreme of the
+// values at the segments' centres, the same segments emission–absorption samples, mapped
+// through the transfer function as premultiplied colour and its opacity a(v). No skipping
+// or early termination: compositedQuality turns them off.
+void projectPacket(const FrameParams &P, VF t0, VF t1, VF j, const VF q0[3], const VF dq[3], MF alive,
+                   float out[4][kMaxLanes], int32_t samplesOut[kMaxLanes], uint64_t &truncatedTotal) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step);
+    const bool maximum = P.features.intensityProjection > 0;
+    VF k = hn::IfThenElse(hn::Gt(j, zero), zero, one);
+    VF segStart = t0;
+    VF extreme = zero;
+    MF found = hn::FirstN(df, 0);
+    VI samples = hn::Zero(di);
+    while (!hn::AllFalse(df, alive)) {
+        const VF boundary = hn::MulAdd(hn::Add(k, j), d, t0);
+        const VF segEnd = hn::Min(boundary, t1);
+        const VF len = hn::Sub(segEnd, segStart);
+        MF take = hn::And(alive, hn::Gt(len, zero));
+        if (!P.features.boundarySegment) take = hn::AndNot(hn::Or(hn::Gt(boundary, t1), hn::Eq(k, zero)), take);
+        if (!hn::AllFalse(df, take)) {
+            const MF truncated = hn::AndNot(hn::RebindMask(df, hn::Lt(samples, hn::Set(di, P.maxSamples))), take);
+            if (!hn::AllFalse(df, truncated)) {
+                truncatedTotal += hn::CountTrue(df, truncated);
+                alive = hn::AndNot(truncated, alive);
+                take = hn::AndNot(truncated, take);
+            }
+            samples = hn::Add(samples, hn::IfThenElseZero(hn::RebindMask(di, take), hn::Set(di, 1)));
+            const VF tMid = hn::MulAdd(hn::Set(df, 0.5f), len, segStart);
+            const VF v = sampleVolume(P, hn::MulAdd(tMid, dq[0], q0[0]), hn::MulAdd(tMid, dq[1], q0[1]),
+                                      hn::MulAdd(tMid, dq[2], q0[2]));
+            const VF better = maximum ? hn::Max(extreme, v) : hn::Min(extreme, v);
+            extreme = hn::IfThenElse(take, hn::IfThenElse(found, better, v), extreme);
+            found = hn::Or(found, take);
+        }
+        alive = hn::AndNot(hn::Ge(boundary, t1), alive);
+        segStart = hn::IfThenElse(alive, segEnd, segStart);
+        k = hn::IfThenElse(alive, hn::Add(k, one), k);
+    }
+    VF c[4];
+    classify(P, extreme, c);
+    const VF a = hn::IfThenElseZero(found, opacityFromDepth(c[3])); // the table holds sigma = −ln(1 − a)
+    for (int ch = 0; ch < 3; ++ch) hn::Store(hn::Mul(a, c[ch]), df, out[ch]);
+    hn::Store(a, df, out[3]);
+    hn::Store(samples, di, samplesOut);
+}
+
 void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba, Counters &counters) {
     const DF df;
     const DI di;
@@ -395,6 +443,16 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                 for (int a = 0; a < 3; ++a) dir[a] = hn::Load(df, dira[a]);
             MF alive = hn::RebindMask(df, hn::Ne(hn::Load(di, hita), hn::Zero(di)));
 
+            if (F.intensityProjection != 0) {
+                projectPacket(P, t0, t1, j, q0, dq, alive, outa, samplesa, truncatedTotal);
+                for (int l = 0; l < lanes; ++l) {
+                    if (!hita[l]) continue;
+                    samplesTotal += uint64_t(samplesa[l]);
+                    float *pixel = rgba + (size_t(py[l]) * size_t(P.width) + size_t(px[l])) * 4;
+                    for (int c = 0; c < 4; ++c) pixel[c] = outa[c][l];
+                }
+                continue;
+            }
             VF k = hn::IfThenElse(hn::Gt(j, zero), zero, one); // the first boundary past t0
             VF segStart = t0;
             BrickWalk walk;

@@ -19,6 +19,7 @@ struct Features {
     bool shading = false;
     bool cubic = false; // prefiltered tricubic B-spline from padded coefficients
     bool preintegrated = false;
+    int intensityProjection = 0; // +1 maximum (MIP), −1 minimum (MinIP), 0 emission–absorption
 };
 
 struct FrameParams {
@@ -29,7 +30,9 @@ struct FrameParams {
     float indexFromWorld[3][4];     // rows: linear part, translation (level-0 index space)
     float clipPlanes[6][4];         // (n, w): keeps dot(n, x) + w >= 0, world
     int clipPlaneCount = 0;
-    int dims[3];                    // level-0 samples per axis: the box rays are clipped to
+    int dims[3];                    // level-0 samples per axis
+    float boxLo[3], boxHi[3];       // the box rays are clipped to, level-0 index space: the
+                                    // volume's [−1/2, n − 1/2] or the crop box inside it
     int width = 0, height = 0;      // rays of the whole grid (after image_scale)
     // The window of the grid that rgba holds: rays [outX, outX + outWidth) × [outY, …); the
     // whole grid is 0, 0, width. Rays keep their grid coordinates (camera, jitter).

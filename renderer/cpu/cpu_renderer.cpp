@@ -115,6 +115,8 @@ std::string CpuRenderer::featureNames(const Quality &q, bool hasClipPlanes) {
     if (q.preintegrated) o += " PREINTEGRATED";
     if (q.emptySpaceSkipping) o += " EMPTY_SPACE_SKIPPING";
     if (q.shading) o += " SHADING";
+    if (q.compositing == Compositing::Maximum) o += " COMPOSITING_MAX";
+    if (q.compositing == Compositing::Minimum) o += " COMPOSITING_MIN";
     return o.empty() ? o : o.substr(1);
 }
 
@@ -211,10 +213,11 @@ Image CpuRenderer::renderWindow(const TransferFunction &tf, const Camera &camera
 }
 
 Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
-                            const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
+                            const Quality &requested, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
                             RenderStats *stats) {
-    validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
-    if (window) validateRayWindow(*window, width, height, quality);
+    validateFrameRequest(*volume_, tf, camera, width, height, requested, clipPlanes, pyramid_.maxLevel());
+    if (window) validateRayWindow(*window, width, height, requested);
+    const Quality quality = compositedQuality(requested);
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
@@ -280,6 +283,9 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
     p.features.shading = quality.shading;
     p.features.cubic = cubic;
     p.features.preintegrated = quality.preintegrated;
+    p.features.intensityProjection = quality.compositing == Compositing::Maximum   ? 1
+                                     : quality.compositing == Compositing::Minimum ? -1
+                                                                                   : 0;
     if (quality.preintegrated) {
         const PreintegrationTable &table = *preintegration_;
         p.preRgba = table.rgba.data();
@@ -307,6 +313,12 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
         p.clipPlanes[c][3] = float(-dot(nrm, clipPlanes[c].point));
     }
     p.clipPlaneCount = int(clipPlanes.size());
+    double boxLo[3], boxHi[3];
+    cropBoxInIndexSpace(*volume_, quality.crop, boxLo, boxHi);
+    for (int a = 0; a < 3; ++a) {
+        p.boxLo[a] = float(boxLo[a]);
+        p.boxHi[a] = float(boxHi[a]);
+    }
     for (int a = 0; a < 3; ++a) {
         p.dims[a] = int(volume_->dims[a]);
         p.levelDims[a] = int(data.dims[a]);

@@ -15,7 +15,7 @@
 
 namespace volcast {
 
-static_assert(sizeof(RayCastParams) == 352, "RayCastParams must match the kernel's layout");
+static_assert(sizeof(RayCastParams) == 384, "RayCastParams must match the kernel's layout");
 static_assert(VC_MAX_CLIP_PLANES == FrameRenderer::kMaxClipPlanes);
 
 namespace {
@@ -92,6 +92,8 @@ std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) c
     if (q.preintegrated) o += " -DPREINTEGRATED";
     if (q.emptySpaceSkipping) o += " -DEMPTY_SPACE_SKIPPING";
     if (q.shading) o += " -DSHADING";
+    if (q.compositing == Compositing::Maximum) o += " -DCOMPOSITING_MAX";
+    if (q.compositing == Compositing::Minimum) o += " -DCOMPOSITING_MIN";
     return o.empty() ? o : o.substr(1);
 }
 
@@ -215,9 +217,10 @@ Image OpenClRenderer::renderWindow(const TransferFunction &tf, const Camera &cam
 }
 
 Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
-                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
+                           const Quality &requested, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
                            RenderStats *stats) {
-    validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, pyramid_.maxLevel());
+    validateFrameRequest(*volume_, tf, camera, width, height, requested, clipPlanes, pyramid_.maxLevel());
+    const Quality quality = compositedQuality(requested);
     if (window) validateRayWindow(*window, width, height, quality);
 
     std::lock_guard frameLock(mutex_);
@@ -309,6 +312,10 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
         p.clipPlanes[c] = f4(nrm, -dot(nrm, clipPlanes[c].point));
     }
     p.clipPlaneCount = int(clipPlanes.size());
+    double boxLo[3], boxHi[3];
+    cropBoxInIndexSpace(*volume_, quality.crop, boxLo, boxHi);
+    p.boxLo = {{float(boxLo[0]), float(boxLo[1]), float(boxLo[2]), 0.0f}};
+    p.boxHi = {{float(boxHi[0]), float(boxHi[1]), float(boxHi[2]), 0.0f}};
     for (int a = 0; a < 3; ++a) {
         p.dims[a] = int(volume_->dims[a]);
         p.levelDims[a] = int(data.dims[a]);

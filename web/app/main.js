@@ -12,6 +12,7 @@ import { presetPoints, problems, resolvePoints, tidyPoints } from "../core/trans
 import { windowLevelStep } from "../core/window_level.js";
 import { OrientationControls } from "./orientation_marker.js";
 import { PresetPicker } from "./preset_picker.js";
+import { CropPanel } from "./crop_panel.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
 import { SliceViews } from "./slice_views.js";
 import { StatsOverlay } from "./stats_overlay.js";
@@ -101,7 +102,8 @@ const tfEditor = new TransferFunctionEditor({
 }, (points, { interactive }) => onTfEdited(points, interactive));
 
 const quality = new QualityPanel(document, {
-  onPolicy: (policy) => session.setQualityPolicy(policy),
+  // The crop panel adds quality.compositing and quality.crop to the switches.
+  onPolicy: (policy) => session.setQualityPolicy(policy.quality ? { ...policy, quality: crop.decorate(policy.quality) } : policy),
   onResolution: (choice) => { app.resolution = choice; updateViewport(); },
   onClip: (planes, { interactive }) => {
     if (!session.volume) return;
@@ -130,6 +132,9 @@ const orientation = new OrientationControls(document, session, {
   getCamera: () => app.camera,
   getTarget: () => app.startCamera?.target ?? null,
 });
+
+// Compositing and crop box travel with the quality switches: an edit sends the policy with them.
+const crop = new CropPanel($("crop-card"), () => { quality.touched = true; quality.schedule(); });
 
 // --- transfer function ----------------------------------------------------------------
 
@@ -272,6 +277,7 @@ session.on("opened", ({ state, restored }) => {
   applyPendingLink(volume);
   showTransferFunction(session.scene.transfer_function ?? state.scene?.transfer_function);
   quality.showState(state);
+  crop.showState(state.scene?.quality);
   quality.setVolume(volume, session.scene.clip_planes);
   showOpenVolume();
   // After the quality panel shows the state: a preset's shading then overrides it.

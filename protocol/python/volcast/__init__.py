@@ -20,11 +20,11 @@ Client.connect needs websockets, and only Frame.to_numpy needs numpy and Pillow.
 from .client import Client, Socket
 from .frames import (CODECS, FRAME_MAGIC, FRAME_PREAMBLE_BYTES, MAX_FRAME_HEADER_BYTES, Frame,
                      FrameError, MissingDependencyError, decode_frame, encode_frame)
-from .messages import (CLIENT_TYPES, ERROR_CODES, PROTOCOL_VERSION, SERVER_TYPES, MessageError,
+from .messages import (CLIENT_TYPES, COMPOSITING_MODES, ERROR_CODES, PROTOCOL_VERSION, SERVER_TYPES, MessageError,
                        RequestId, ServerError, camera, clip_planes, close, dumps, get_state, hello,
                        interaction_end, interaction_start, list_volumes, open_volume, orbit_camera,
                        parse_server_message, preset, quality_automatic, quality_explicit, still,
-                       transfer_function, viewport)
+                       transfer_function, viewport, crop_box, with_compositing)
 from .slices import (SLICE_AXES, SLICE_MAGIC, Slice, decode_slice, encode_slice, is_slice_message,
                      slice_request)
 
@@ -38,7 +38,7 @@ __all__ = [
     "RequestId", "ServerError", "camera", "clip_planes", "close", "dumps", "get_state", "hello",
     "interaction_end", "interaction_start", "list_volumes", "open_volume", "orbit_camera",
     "parse_server_message", "preset", "quality_automatic", "quality_explicit", "still",
-    "transfer_function", "viewport",
+    "transfer_function", "viewport", "COMPOSITING_MODES", "crop_box", "with_compositing",
     "SLICE_AXES", "SLICE_MAGIC", "Slice", "decode_slice", "encode_slice", "is_slice_message",
     "slice_request",
 ]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Sequence, Union
 
 PROTOCOL_VERSION = 1
 
@@ -95,6 +95,35 @@ def quality_automatic(target_frame_ms: float = 40, quality: Optional[Dict[str, A
 def quality_explicit(quality: Dict[str, Any], id: RequestId = None) -> Dict[str, Any]:
     """Every frame rendered with exactly these docs/design.md switches."""
     return _message("quality_policy", id, mode="explicit", quality=quality)
+
+
+COMPOSITING_MODES = ("emission_absorption", "mip", "minip")
+
+
+def crop_box(min: Sequence[float] = (0, 0, 0), max: Sequence[float] = (1, 1, 1)) -> Dict[str, Any]:
+    """quality.crop: six axis-aligned faces in the volume's own axes, normalised box
+    coordinates (0 and 1 are the outer faces of the outermost voxels), 0 <= min < max <= 1."""
+    lo, hi = [float(v) for v in min], [float(v) for v in max]
+    if len(lo) != 3 or len(hi) != 3:
+        raise ValueError("crop_box: min and max need 3 numbers each")
+    for a in range(3):
+        if not 0 <= lo[a] < hi[a] <= 1:
+            raise ValueError(f"crop_box: axis {a} needs 0 <= min < max <= 1, got {lo[a]}, {hi[a]}")
+    return {"min": lo, "max": hi}
+
+
+def with_compositing(quality: Optional[Dict[str, Any]] = None, compositing: Optional[str] = None,
+                     crop: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+    """A copy of the quality switches with quality.compositing ("emission_absorption", "mip"
+    or "minip") and quality.crop (from crop_box) set, for quality_explicit/_automatic."""
+    q = dict(quality or {})
+    if compositing is not None:
+        if compositing not in COMPOSITING_MODES:
+            raise ValueError(f"compositing must be one of {', '.join(COMPOSITING_MODES)}, got {compositing!r}")
+        q["compositing"] = compositing
+    if crop is not None:
+        q["crop"] = crop
+    return q
 
 
 def clip_planes(planes: List[Dict[str, Any]], id: RequestId = None) -> Dict[str, Any]:

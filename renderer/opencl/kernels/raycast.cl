@@ -11,6 +11,9 @@
  *   EMPTY_SPACE_SKIPPING skip the segments whose sample lies in a brick the transfer function makes
  *                        transparent (pre-integrated: that lie wholly in one), found by a brick walk
  *   SHADING              gradient Phong lighting with a headlight
+ *   COMPOSITING_MAX      maximum intensity projection instead of emission–absorption
+ *   COMPOSITING_MIN      minimum intensity projection (the host builds neither skipping,
+ *                        early termination, pre-integration nor shading with these two)
  */
 #ifndef VOLCAST_EMBEDDED
 #include "../../phong_constants.h"
@@ -297,7 +300,9 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
     for (int a = 0; a < 3; ++a) {
         const float pa = a == 0 ? p0.x : (a == 1 ? p0.y : p0.z);
         const float da = a == 0 ? dq.x : (a == 1 ? dq.y : dq.z);
-        const float lo = -0.5f, hi = (float)P->dims[a] - 0.5f;
+        /* The volume's box [-1/2, n - 1/2], or the crop box inside it. */
+        const float lo = a == 0 ? P->boxLo.x : (a == 1 ? P->boxLo.y : P->boxLo.z);
+        const float hi = a == 0 ? P->boxHi.x : (a == 1 ? P->boxHi.y : P->boxHi.z);
         if (da == 0.0f) {
             if (pa < lo || pa > hi) t1 = -INFINITY;
             continue;
@@ -334,6 +339,53 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
     const float j = random01((uint)x, (uint)y, P->seed, P->pass);
 #else
     const float j = 0.0f;
+#endif
+#if defined(COMPOSITING_MAX) || defined(COMPOSITING_MIN)
+    {
+        /* Intensity projection: the extreme of the values sampled at the segments' centres
+         * (the same segments, partial ones included, as emission–absorption samples), mapped
+         * through the transfer function: premultiplied colour and its opacity a(v). */
+        uint samples = 0;
+        bool found = false;
+        float extreme = 0.0f;
+        float segStart = t0;
+        for (int k = (j > 0.0f ? 0 : 1);; ++k) {
+            const float boundary = t0 + ((float)k + j) * d;
+            const float segEnd = fmin(boundary, t1);
+            const float len = segEnd - segStart;
+#ifdef BOUNDARY_SEGMENT
+            const bool take = len > 0.0f;
+#else
+            const bool take = len > 0.0f && !(boundary > t1 || k == 0);
+#endif
+            if (take) {
+                if ((int)samples >= P->maxSamples) {
+                    atomic_inc(&stats[VC_STAT_TRUNCATED]);
+                    break;
+                }
+                ++samples;
+                const float v = sampleVolume(VOLUME, n, q0 + (segStart + 0.5f * len) * dqL);
+#ifdef COMPOSITING_MAX
+                extreme = found ? fmax(extreme, v) : v;
+#else
+                extreme = found ? fmin(extreme, v) : v;
+#endif
+                found = true;
+            }
+            if (boundary >= t1) break;
+            segStart = segEnd;
+        }
+        float4 pixel = (float4)(0.0f);
+        if (found) {
+            const float4 rgbs = classify(tfTable, P, extreme);
+            const float a = opacityFromDepth(rgbs.w); /* the table holds sigma = −ln(1 − a) */
+            pixel = (float4)(a * rgbs.xyz, a);
+        }
+        image[y * P->width + x] = pixel;
+        if (atomic_add(&stats[VC_STAT_SAMPLES], samples) > UINT_MAX - samples) atomic_inc(&stats[VC_STAT_SAMPLES_HIGH]);
+        atomic_inc(&stats[VC_STAT_RAYS_HIT]);
+        return;
+    }
 #endif
     float opticalDepth = 0.0f, depthCarry = 0.0f; /* accumulated, so faint media keep their precision */
     float T = 1.0f;            /* transmittance in front of the current segment */

@@ -52,6 +52,8 @@ typedef struct {
     vc_float preLocatorMin;
     vc_float preLocatorScale;       /* locator buckets per data unit */
     vc_int pad1, pad2, pad3, pad4;
+    /* The box rays are clipped to, level-0 index space: [-1/2, n - 1/2] per axis, or the crop box. */
+    vc_float4 boxLo, boxHi;
 } RayCastParams;
 
 /* stats[]: counters the kernel accumulates, read back by the host. */

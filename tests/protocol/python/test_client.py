@@ -141,6 +141,19 @@ class MessageTests(unittest.TestCase):
         with self.assertRaises(TypeError):
             vc.open_volume(5)
 
+    def test_compositing_and_crop_box_in_the_quality(self):
+        q = vc.with_compositing({"step": 0.5}, "mip", vc.crop_box([0, 0.2, 0], [1, 0.8, 0.5]))
+        self.assertEqual(q, {"step": 0.5, "compositing": "mip",
+                             "crop": {"min": [0.0, 0.2, 0.0], "max": [1.0, 0.8, 0.5]}})
+        self.assertEqual(vc.quality_explicit(q)["quality"]["compositing"], "mip")
+        self.assertEqual(vc.with_compositing(None, "minip"), {"compositing": "minip"})
+        with self.assertRaisesRegex(ValueError, "compositing must be one of"):
+            vc.with_compositing({}, "max")
+        with self.assertRaisesRegex(ValueError, "axis 1 needs 0 <= min < max <= 1"):
+            vc.crop_box([0, 0.5, 0], [1, 0.5, 1])
+        with self.assertRaisesRegex(ValueError, "3 numbers"):
+            vc.crop_box([0, 0], [1, 1, 1])
+
     def test_dumps_is_compact_and_refuses_nan(self):
         self.assertEqual(vc.dumps(vc.open_volume("b", id=1)), '{"type":"open_volume","id":1,"name":"b"}')
         with self.assertRaises(ValueError):

@@ -1,0 +1,124 @@
+// The compositing mode (emission–absorption, maximum or minimum intensity projection) and
+// the crop box: six sliders, one per face, in the volume's own axes. Both travel in the
+// quality object of the protocol's quality_policy (docs/design.md's scene file:
+// quality.compositing, quality.crop in normalised box coordinates, 0 and 1 the outer faces
+// of the outermost voxels), so every level the server renders keeps them.
+
+export const COMPOSITING_MODES = [
+  { value: "emission_absorption", label: "Emission–absorption" },
+  { value: "mip", label: "Maximum intensity (MIP)" },
+  { value: "minip", label: "Minimum intensity (MinIP)" },
+];
+
+const AXES = ["x", "y", "z"];
+const MIN_GAP = 0.01;   // the smallest box the sliders allow, of the volume's extent per axis
+
+// The crop and compositing keys added to a quality object; the defaults are left out, as the
+// server writes them.
+export function withCompositingAndCrop(quality, compositing, crop) {
+  const q = { ...quality };
+  if (compositing && compositing !== "emission_absorption") q.compositing = compositing;
+  else delete q.compositing;
+  const full = crop.min.every((v) => v === 0) && crop.max.every((v) => v === 1);
+  if (full) delete q.crop; else q.crop = { min: [...crop.min], max: [...crop.max] };
+  return q;
+}
+
+export class CropPanel {
+  // card: an empty <details> to fill; onChange({ interactive }) after every edit.
+  constructor(card, onChange) {
+    this.card = card;
+    this.onChange = onChange;
+    this.build();
+  }
+
+  build() {
+    const card = this.card;
+    card.classList.add("card");
+    card.innerHTML = "";
+    const summary = document.createElement("summary");
+    summary.textContent = "Compositing and crop box";
+    card.append(summary);
+
+    const modeRow = document.createElement("div");
+    modeRow.className = "row";
+    const modeLabel = document.createElement("label");
+    modeLabel.htmlFor = "compositing";
+    modeLabel.textContent = "Compositing";
+    this.mode = document.createElement("select");
+    this.mode.id = "compositing";
+    for (const m of COMPOSITING_MODES) this.mode.append(new Option(m.label, m.value));
+    this.mode.addEventListener("change", () => this.onChange({ interactive: false }));
+    modeRow.append(modeLabel, this.mode);
+    card.append(modeRow);
+
+    this.sliders = { min: [], max: [] };
+    this.outputs = { min: [], max: [] };
+    for (let a = 0; a < 3; ++a) {
+      for (const side of ["min", "max"]) {
+        const row = document.createElement("div");
+        row.className = "row";
+        const id = `crop-${side}-${AXES[a]}`;
+        const label = document.createElement("label");
+        label.htmlFor = id;
+        label.textContent = `${AXES[a]} ${side === "min" ? "from" : "to"}`;
+        const input = document.createElement("input");
+        Object.assign(input, { id, type: "range", min: "0", max: "1", step: "0.005", value: side === "min" ? "0" : "1" });
+        const out = document.createElement("output");
+        out.htmlFor = id;
+        input.addEventListener("input", () => { this.keepOrder(a, side); this.show(); this.onChange({ interactive: true }); });
+        input.addEventListener("change", () => { this.keepOrder(a, side); this.show(); this.onChange({ interactive: false }); });
+        row.append(label, input, out);
+        card.append(row);
+        this.sliders[side][a] = input;
+        this.outputs[side][a] = out;
+      }
+    }
+    const reset = document.createElement("button");
+    reset.type = "button";
+    reset.id = "crop-reset";
+    reset.textContent = "Whole volume";
+    reset.addEventListener("click", () => { this.set({ min: [0, 0, 0], max: [1, 1, 1] }); this.onChange({ interactive: false }); });
+    card.append(reset);
+    this.show();
+  }
+
+  // A face dragged past its opposite pushes nothing: it stops MIN_GAP short of it.
+  keepOrder(a, side) {
+    const lo = this.sliders.min[a], hi = this.sliders.max[a];
+    if (Number(hi.value) - Number(lo.value) >= MIN_GAP) return;
+    if (side === "min") lo.value = String(Math.max(0, Number(hi.value) - MIN_GAP));
+    else hi.value = String(Math.min(1, Number(lo.value) + MIN_GAP));
+  }
+
+  get compositing() { return this.mode.value; }
+
+  get crop() {
+    return {
+      min: this.sliders.min.map((s) => Number(s.value)),
+      max: this.sliders.max.map((s) => Number(s.value)),
+    };
+  }
+
+  set(crop) {
+    for (let a = 0; a < 3; ++a) {
+      this.sliders.min[a].value = String(crop.min[a]);
+      this.sliders.max[a].value = String(crop.max[a]);
+    }
+    this.show();
+  }
+
+  // What the server reports (a state's scene.quality).
+  showState(quality) {
+    if (!quality) return;
+    this.mode.value = quality.compositing ?? "emission_absorption";
+    this.set(quality.crop ?? { min: [0, 0, 0], max: [1, 1, 1] });
+  }
+
+  show() {
+    for (const side of ["min", "max"])
+      for (let a = 0; a < 3; ++a) this.outputs[side][a].value = Number(this.sliders[side][a].value).toFixed(3);
+  }
+
+  decorate(quality) { return withCompositingAndCrop(quality, this.compositing, this.crop); }
+}
