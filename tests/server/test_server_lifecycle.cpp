@@ -192,7 +192,9 @@ TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongRender) {
         ASSERT_NE(status, -1) << "still running 2.5 s after SIGTERM; log:\n" << readAll(tmp / "log.txt");
         EXPECT_TRUE(WIFEXITED(status)) << status;
         EXPECT_EQ(WEXITSTATUS(status), 0);
-        EXPECT_LT(took.count(), 2500);
+        // The grace period itself: the watchdog fires at 90 % of it (server/main.cpp), and
+        // the remaining 150 ms cover the flush, the exit and this loop's 10 ms polling.
+        EXPECT_LE(took.count(), 1500) << readAll(tmp / "log.txt");
         // Either the render stopped at a unit boundary and the server stopped cleanly, or the
         // watchdog ended it and the log says what was still running. (Since the scheduler runs
         // bounded units, the first is what happens; the watchdog stays for what units do not
@@ -207,7 +209,7 @@ TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongRender) {
 
 // SIGTERM while a session's long preparation runs on the background worker (the B-spline
 // coefficients of iguana_microct, 9.6 M voxels: seconds here) and the error calibration may
-// be queued: the process exits 0 within the grace period (1.5 s; 1 s more for a loaded machine).
+// be queued: the process exits 0 within the grace period (1.5 s).
 TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongPreparation) {
     const fs::path data = VOLCAST_DATA_DIR;
     if (!fs::exists(data / "MANIFEST.md")) GTEST_SKIP() << "no scans in " << data << " (tests/README.md)";
@@ -251,7 +253,8 @@ TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongPreparation) 
         ASSERT_NE(status, -1) << "still running 2.5 s after SIGTERM; log:\n" << readAll(tmp / "log.txt");
         EXPECT_TRUE(WIFEXITED(status)) << status;
         EXPECT_EQ(WEXITSTATUS(status), 0);
-        EXPECT_LT(took.count(), 2500) << readAll(tmp / "log.txt");
+        // The grace period itself (the watchdog fires at 90 % of it, server/main.cpp).
+        EXPECT_LE(took.count(), 1500) << readAll(tmp / "log.txt");
         // Within the grace period either way; the log tells whether the preparation stopped
         // at a cancellation point or the watchdog ended it (what still ran is named).
         const std::string log = readAll(tmp / "log.txt");
