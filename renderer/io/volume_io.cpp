@@ -51,6 +51,14 @@
 
 extern char **environ;
 
+#if defined(__SANITIZE_ADDRESS__)
+#define VOLCAST_ADDRESS_SANITIZER 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define VOLCAST_ADDRESS_SANITIZER 1
+#endif
+#endif
+
 namespace volcast {
 namespace {
 
@@ -1492,7 +1500,9 @@ int runDicomCheck(int argc, char **argv) {
         return kCheckUsage;
     }
     setLimit(RLIMIT_CORE, 0);  // an assertion in GDCM is expected here; no core file for it
-    setLimit(RLIMIT_AS, checkerMemoryLimit(options));
+#ifndef VOLCAST_ADDRESS_SANITIZER
+    setLimit(RLIMIT_AS, checkerMemoryLimit(options));  // (AddressSanitizer reserves terabytes of it: not there)
+#endif
     setLimit(RLIMIT_CPU, checkerCpuLimit(options));
     try {
         loadVolumeHere(argv[1], options, false);
