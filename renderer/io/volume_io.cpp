@@ -1499,6 +1499,9 @@ int runDicomCheck(int argc, char **argv) {
         std::fprintf(stderr, "%s: bad limits '%s' '%s' '%s'\n", kCheckerName, argv[2], argv[3], argv[4]);
         return kCheckUsage;
     }
+    // Whatever the caller left open without close-on-exec (a server's sockets) is not the
+    // business of a process that parses hostile files.
+    ::close_range(3, ~0U, 0);
     setLimit(RLIMIT_CORE, 0);  // an assertion in GDCM is expected here; no core file for it
 #ifndef VOLCAST_ADDRESS_SANITIZER
     setLimit(RLIMIT_AS, checkerMemoryLimit(options));  // (AddressSanitizer reserves terabytes of it: not there)
