@@ -1,4 +1,5 @@
 #include "renderer/io/volume_io.hpp"
+#include "renderer/io/dicom_check.hpp"
 
 #include <itkCommand.h>
 #include <itkGDCMImageIO.h>
@@ -9,8 +10,11 @@
 #include <itkImageIOFactory.h>
 #include <itkImageSeriesReader.h>
 #include <itkMetaDataObject.h>
+#include <itkMetaImageIO.h>
 #include <itkMetaImageIOFactory.h>
+#include <itkNiftiImageIO.h>
 #include <itkNiftiImageIOFactory.h>
+#include <itkNrrdImageIO.h>
 #include <itkNrrdImageIOFactory.h>
 #include <itkProcessObject.h>
 #include <spdlog/fmt/fmt.h>
@@ -19,6 +23,14 @@
 #include <gdcmImplicitDataElement.h>
 #include <gdcmReader.h>
 #include <zlib.h>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -36,6 +48,16 @@
 #include <string>
 #include <type_traits>
 #include <vector>
+
+extern char **environ;
+
+#if defined(__SANITIZE_ADDRESS__)
+#define VOLCAST_ADDRESS_SANITIZER 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define VOLCAST_ADDRESS_SANITIZER 1
+#endif
+#endif
 
 namespace volcast {
 namespace {
@@ -1232,9 +1254,187 @@ void readPatientSpace(const itk::ImageIOBase &io, Volume &v) {
     }
 }
 
-} // namespace
+// A load that ran out of memory (std::bad_alloc): the DICOM checker tells it apart from
+// every other refusal, since its memory limit, not the file's header, may be the cause.
+struct LoadOutOfMemory : VolumeLoadError {
+    using VolumeLoadError::VolumeLoadError;
+};
 
-Volume loadVolume(const fs::path &path, const LoadOptions &options) {
+// ---------------------------------------------------------------------------------------
+// DICOM in a child process
+//
+// GDCM (Debian's build keeps its assertions) aborts the whole process on some damaged files,
+// from inside ITK's CanReadFile, before any check of ours can look at the bytes (fuzz/README.md,
+// finding 7); the next such assertion or crash would do the same. So every load that will reach
+// GDCM runs first, whole, in a child process with its own memory and CPU limits; a child that
+// dies by a signal or runs out of memory means the file is refused, and only a file the child
+// loaded (or refused with an ordinary VolumeLoadError) is loaded here.
+
+// The DICOM checker's exit statuses.
+constexpr int kCheckLoaded = 0;
+constexpr int kCheckRefused = 1;      // a VolumeLoadError: the load here repeats it, same words, same type
+constexpr int kCheckUsage = 2;
+constexpr int kCheckOutOfMemory = 3;  // past its RLIMIT_AS
+constexpr int kCheckFailed = 4;       // anything else thrown
+
+constexpr const char *kCheckerName = "volcast-dicom-check";
+
+// The child's limits. Memory: the float32 volume (at most maxBytes), ITK's image of it during
+// the read, and GDCM's buffer of the stored pixels, plus 2 GiB for the libraries themselves.
+uint64_t checkerMemoryLimit(const LoadOptions &options) {
+    return 3 * std::min(options.maxBytes, uint64_t(1) << 40) + (uint64_t(2) << 30);
+}
+// CPU seconds: the load's own time limit (kept, by wall clock, by the caller too) plus a
+// margin, or 10 minutes where the caller sets none (volcast-render).
+uint64_t checkerCpuLimit(const LoadOptions &options) {
+    return options.timeLimitSeconds > 0 ? uint64_t(std::ceil(options.timeLimitSeconds)) + 5 : 600;
+}
+
+std::optional<fs::path> dicomCheckerPath() {
+    const auto runnable = [](const fs::path &p) {
+        std::error_code ec;
+        return fs::is_regular_file(p, ec) && ::access(p.c_str(), X_OK) == 0;
+    };
+    if (const char *given = std::getenv("VOLCAST_DICOM_CHECK"); given && *given)
+        return runnable(given) ? std::optional<fs::path>(given) : std::nullopt;  // set, so meant: no guessing
+    std::error_code ec;
+    const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+    if (!ec && runnable(self.parent_path() / kCheckerName)) return self.parent_path() / kCheckerName;  // installed
+#ifdef VOLCAST_DICOM_CHECK_BUILD_PATH
+    if (runnable(VOLCAST_DICOM_CHECK_BUILD_PATH)) return fs::path(VOLCAST_DICOM_CHECK_BUILD_PATH);  // the build tree
+#endif
+    return std::nullopt;
+}
+
+// Whether ITK's factory would ask GDCM about this file: only if none of the readers registered
+// before it (registerItkFactories' order) claims it.
+bool reachesGdcm(const fs::path &path) {
+    const std::string name = path.string();
+    return !itk::NrrdImageIO::New()->CanReadFile(name.c_str()) && !itk::MetaImageIO::New()->CanReadFile(name.c_str()) &&
+           !itk::NiftiImageIO::New()->CanReadFile(name.c_str());
+}
+
+std::string signalName(int sig) {
+    switch (sig) {
+    case SIGABRT: return "SIGABRT, an assertion or abort";
+    case SIGSEGV: return "SIGSEGV, a crash";
+    case SIGBUS: return "SIGBUS, a crash";
+    case SIGFPE: return "SIGFPE, an arithmetic fault";
+    case SIGILL: return "SIGILL, a crash";
+    case SIGXCPU: return "SIGXCPU, its CPU time limit";
+    case SIGKILL: return "SIGKILL";
+    default: return fmt::format("signal {}", sig);
+    }
+}
+
+// The child, killed and reaped however the wait for it ends (a time limit, a stop request).
+struct Child {
+    pid_t pid = -1;
+    int output = -1;  // the read end of its stdout and stderr
+    Child() = default;
+    Child(const Child &) = delete;
+    Child &operator=(const Child &) = delete;
+    ~Child() {
+        if (pid > 0) {
+            ::kill(pid, SIGKILL);
+            while (::waitpid(pid, nullptr, 0) < 0 && errno == EINTR) {}
+        }
+        if (output >= 0) ::close(output);
+    }
+};
+
+void checkDicomInChild(const fs::path &path, const LoadOptions &options, LoadProgress &progress) {
+    const auto checker = dicomCheckerPath();
+    if (!checker)
+        fail(path, fmt::format("may be DICOM, which is first parsed in a separate process, but the DICOM checker '{}' "
+                               "was not found (next to this program, in the build tree, or as $VOLCAST_DICOM_CHECK); "
+                               "it is not loaded",
+                               kCheckerName));
+    int fds[2];
+    if (::pipe2(fds, O_CLOEXEC) != 0) fail(path, fmt::format("cannot start the DICOM checker: {}", std::strerror(errno)));
+    Child child;
+    child.output = fds[0];
+
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], 1);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], 2);
+    // Default dispositions and no blocked signals, whatever the calling thread had.
+    posix_spawnattr_t attr;
+    posix_spawnattr_init(&attr);
+    sigset_t none, all;
+    sigemptyset(&none);
+    sigfillset(&all);
+    posix_spawnattr_setsigmask(&attr, &none);
+    posix_spawnattr_setsigdefault(&attr, &all);
+    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+    std::vector<std::string> args = {checker->string(), path.string(), std::to_string(options.maxBytes),
+                                     std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds)};
+    std::vector<char *> argv;
+    for (auto &a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    const int spawned = ::posix_spawn(&child.pid, argv[0], &actions, &attr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    posix_spawnattr_destroy(&attr);
+    ::close(fds[1]);
+    if (spawned != 0) {
+        child.pid = -1;
+        fail(path, fmt::format("cannot start the DICOM checker: {}", std::strerror(spawned)));
+    }
+
+    // Wait, reading what it writes (GDCM's assertion, say) for the log; the progress call is
+    // where the load's time limit and a stop request end the wait, and the child with it.
+    std::string said;
+    int status = 0;
+    for (;;) {
+        progress(0, "checking DICOM in a separate process");
+        if (child.output >= 0) {
+            pollfd p{child.output, POLLIN, 0};
+            if (::poll(&p, 1, 100) > 0) {
+                char buffer[4096];
+                const ssize_t n = ::read(child.output, buffer, sizeof buffer);
+                if (n > 0) {
+                    said.append(buffer, size_t(n));
+                    if (said.size() > 4096) said.erase(0, said.size() - 4096);
+                } else if (n == 0) {
+                    ::close(child.output);
+                    child.output = -1;
+                }
+            }
+        } else {
+            ::poll(nullptr, 0, 50);
+        }
+        const pid_t done = ::waitpid(child.pid, &status, WNOHANG);
+        if (done == child.pid) {
+            child.pid = -1;
+            break;
+        }
+        if (done < 0 && errno != EINTR) {
+            child.pid = -1;
+            fail(path, fmt::format("lost the DICOM checker: {}", std::strerror(errno)));
+        }
+    }
+    if (WIFEXITED(status) && (WEXITSTATUS(status) == kCheckLoaded || WEXITSTATUS(status) == kCheckRefused)) return;
+    while (!said.empty() && std::isspace(static_cast<unsigned char>(said.back()))) said.pop_back();
+    spdlog::warn("{}: the DICOM checker ({}) {}; it said: {}", path.string(), checker->string(),
+                 WIFSIGNALED(status) ? "ended with " + signalName(WTERMSIG(status))
+                                     : fmt::format("exited with status {}", WEXITSTATUS(status)),
+                 said.empty() ? "nothing" : said);
+    if (WIFSIGNALED(status))
+        fail(path, fmt::format("was rejected by the DICOM parser (GDCM): parsing it in a separate process ended with "
+                               "{}; the file is damaged or not DICOM, and it is not loaded",
+                               signalName(WTERMSIG(status))));
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckOutOfMemory)
+        fail(path, fmt::format("was rejected by the DICOM parser (GDCM): parsing it in a separate process needed more "
+                               "than its limit of {} MiB; it is not loaded",
+                               checkerMemoryLimit(options) >> 20));
+    fail(path, fmt::format("was rejected by the DICOM parser (GDCM): parsing it in a separate process failed (exit "
+                           "status {}); it is not loaded",
+                           WIFEXITED(status) ? WEXITSTATUS(status) : -1));
+}
+
+Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dicomInChild) {
     registerItkFactories();
     std::error_code ec;
     const auto status = fs::status(path, ec);
@@ -1245,6 +1445,8 @@ Volume loadVolume(const fs::path &path, const LoadOptions &options) {
     try {
         LoadProgress progress(options, path);
         progress(0, "reading header");
+        if (dicomInChild && (fs::is_directory(status) || (fileSize(path).value_or(0) > 0 && reachesGdcm(path))))
+            checkDicomInChild(path, options, progress);
         Volume v = fs::is_directory(status) ? loadDicomFolder(path, options, progress)
                                             : loadImageFile(path, options, progress);
         v.name = displayName(path);
@@ -1261,9 +1463,62 @@ Volume loadVolume(const fs::path &path, const LoadOptions &options) {
     } catch (const itk::ExceptionObject &e) {
         fail(path, "cannot be read: " + cleanItkMessage(e));
     } catch (const std::bad_alloc &) {
-        fail(path, "not enough memory to load the volume");
+        throw LoadOutOfMemory(path.string() + ": not enough memory to load the volume");
     } catch (const std::exception &e) {
         fail(path, std::string("cannot be read: ") + e.what());
+    }
+}
+
+void setLimit(int resource, uint64_t value) {
+    rlimit limit{};
+    limit.rlim_cur = limit.rlim_max = rlim_t(value);
+    if (::setrlimit(resource, &limit) != 0)
+        std::fprintf(stderr, "%s: cannot set resource limit %d: %s\n", kCheckerName, resource, std::strerror(errno));
+}
+
+} // namespace
+
+Volume loadVolume(const fs::path &path, const LoadOptions &options) {
+    return loadVolumeHere(path, options, true);
+}
+
+int runDicomCheck(int argc, char **argv) {
+    if (argc != 5) {
+        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S\n"
+                             "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
+                             "DICOM away from the server); exit status 0 loaded, 1 refused, 3 out of memory.\n",
+                     kCheckerName);
+        return kCheckUsage;
+    }
+    LoadOptions options;
+    try {
+        options.maxBytes = std::stoull(argv[2]);
+        options.maxDimension = std::stoll(argv[3]);
+        options.timeLimitSeconds = std::stod(argv[4]);
+    } catch (const std::exception &) {
+        std::fprintf(stderr, "%s: bad limits '%s' '%s' '%s'\n", kCheckerName, argv[2], argv[3], argv[4]);
+        return kCheckUsage;
+    }
+    // Whatever the caller left open without close-on-exec (a server's sockets) is not the
+    // business of a process that parses hostile files.
+    ::close_range(3, ~0U, 0);
+    setLimit(RLIMIT_CORE, 0);  // an assertion in GDCM is expected here; no core file for it
+#ifndef VOLCAST_ADDRESS_SANITIZER
+    setLimit(RLIMIT_AS, checkerMemoryLimit(options));  // (AddressSanitizer reserves terabytes of it: not there)
+#endif
+    setLimit(RLIMIT_CPU, checkerCpuLimit(options));
+    try {
+        loadVolumeHere(argv[1], options, false);
+        return kCheckLoaded;
+    } catch (const LoadOutOfMemory &e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return kCheckOutOfMemory;
+    } catch (const VolumeLoadError &e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return kCheckRefused;
+    } catch (const std::exception &e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return kCheckFailed;
     }
 }
 
