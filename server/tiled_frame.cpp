@@ -48,9 +48,8 @@ Image TiledFrame::finish() {
 
 int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight) {
     if (!(msPerRay > 0) || gridWidth <= 0) return std::max(1, gridHeight);
-    double rows = std::floor(budgetMs / (msPerRay * gridWidth));
-    if (rows >= 8) rows = std::floor(rows / 8) * 8;
-    return int(std::clamp(rows, 1.0, double(std::max(1, gridHeight))));
+    const double rows = std::max(double(kBandRows), std::floor(budgetMs / (msPerRay * gridWidth) / kBandRows) * kBandRows);
+    return int(std::min(rows, double(std::max(1, gridHeight))));
 }
 
 } // namespace volcast::server
