@@ -46,9 +46,10 @@ Image TiledFrame::finish() {
     return resizeBilinear(sum_, width_, height_);
 }
 
-int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight) {
+int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight, int bandRows) {
     if (!(msPerRay > 0) || gridWidth <= 0) return std::max(1, gridHeight);
-    const double rows = std::max(double(kBandRows), std::floor(budgetMs / (msPerRay * gridWidth) / kBandRows) * kBandRows);
+    const double band = std::max(1, bandRows);
+    const double rows = std::max(band, std::floor(budgetMs / (msPerRay * gridWidth) / band) * band);
     return int(std::min(rows, double(std::max(1, gridHeight))));
 }
 

@@ -45,15 +45,13 @@ class TiledFrame {
     Image sum_, current_;
 };
 
-// The thinnest band worth rendering: the OpenCL renderer's work-groups are 8 rows high and
-// the CPU renderer's ray packets 4, so a band of fewer rows costs about as much as 8 rows.
-// Thinner bands would also measure a cost per ray several times too high, and the next band,
-// sized by that cost, would be thinner still: under load a frame then crawled one row per
-// unit, at 4 to 8 times its real cost (docs/service.md, "Scheduling and fairness").
-constexpr int kBandRows = 8;
-
-// Rows of a w-ray-wide grid that fit budgetMs at msPerRay: a multiple of kBandRows, at least
-// kBandRows (even where that overruns the budget), at most gridHeight.
-int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight);
+// Rows of a w-ray-wide grid that fit budgetMs at msPerRay: a multiple of bandRows (the
+// renderer's FrameRenderer::bandRows()), at least bandRows even where that overruns the
+// budget, at most gridHeight. A thinner band costs as much as bandRows rows (the OpenCL
+// renderer's work-groups are 8 rows high, the CPU renderer's ray packets 4) and would measure
+// a cost per ray several times too high, sizing the next band thinner still: under load a
+// frame then crawled one row per unit at 4 to 8 times its real cost (docs/service.md,
+// "Scheduling and fairness").
+int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight, int bandRows);
 
 } // namespace volcast::server

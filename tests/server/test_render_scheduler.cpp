@@ -279,7 +279,7 @@ TEST(RenderScheduler, PreparationRunsInTheBackgroundWithProgressAndOtherSessions
         ASSERT_TRUE(b.waitFor(from, [id](const protocol::FrameHeader &h) { return h.request == id; }, 10000));
         latency.push_back(Ms(Clock::now() - moved).count());
     }
-    // B's first frames measure its levels (the first unit of an unmeasured level is one 8-row band).
+    // B's first frames measure its levels (the first unit of an unmeasured level is one row).
     latency.erase(latency.begin(), latency.begin() + 3);
     EXPECT_LT(percentile(latency, 0.95), 40 + 40 + 60) << "B waited for A's preparation";
     const auto final = a.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 20000);
@@ -320,6 +320,7 @@ class WorkGroupRenderer : public FrameRenderer {
         return band;
     }
     bool rendersWindowsCheaply() const override { return true; }
+    int bandRows() const override { return 8; }
     std::string description() const override { return "slow test renderer, 8-row work-groups"; }
     PreprocessCounts preprocessCounts() const override { return slow_.preprocessCounts(); }
     const Volume &volume() const override { return slow_.volume(); }
