@@ -75,6 +75,10 @@ class FrameRenderer {
                                const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
                                const RayWindow &window, RenderStats *stats = nullptr);
     virtual bool rendersWindowsCheaply() const { return false; }
+    // The rows a window's cost is rounded up to: a window of fewer rows costs about as much
+    // (OpenCL work-groups, SIMD packets of rays several rows high). The server's scheduler
+    // renders frames in bands of a multiple of it.
+    virtual int bandRows() const { return 1; }
     // Which back end and device draws, for logs and reports: "cpu: …", "opencl: …".
     virtual std::string description() const = 0;
     virtual PreprocessCounts preprocessCounts() const = 0;

@@ -306,9 +306,10 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     work.quality = frame.quality();
     work.frame = s.refining;
     // As many rows as fit the unit at the cost measured by this frame's own units, else by
-    // this level's earlier frames; a level never measured starts with one row (a guess of
-    // the cost could be off a hundredfold, and a unit must not overrun). A renderer that
-    // cannot render part of a frame cheaply renders it whole.
+    // this level's earlier frames, in whole bands of the renderer's bandRows() (a thinner
+    // band costs as much, and measures its cost per ray too high); a level never measured
+    // starts with one band (a guess of the cost could be off a hundredfold, and a unit must
+    // not overrun). A renderer that cannot render part of a frame cheaply renders it whole.
     const double rays = double(frame.gridWidth()) * frame.gridHeight();
     double msPerRay = frame.msPerRay();
     if (msPerRay == 0 && s.timer.measured(size_t(work.level)) && !work.substitute)
@@ -316,9 +317,10 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     if (!job.renderer->rendersWindowsCheaply())
         work.rows = frame.gridHeight();
     else if (msPerRay == 0)
-        work.rows = 1;
+        work.rows = std::min(std::max(1, job.renderer->bandRows()), frame.gridHeight());
     else
-        work.rows = rowsForBudget(options_.unitMs, msPerRay, frame.gridWidth(), frame.gridHeight());
+        work.rows = rowsForBudget(options_.unitMs, msPerRay, frame.gridWidth(), frame.gridHeight(),
+                                  job.renderer->bandRows());
     return true;
 }
 

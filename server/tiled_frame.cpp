@@ -46,11 +46,11 @@ Image TiledFrame::finish() {
     return resizeBilinear(sum_, width_, height_);
 }
 
-int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight) {
+int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight, int bandRows) {
     if (!(msPerRay > 0) || gridWidth <= 0) return std::max(1, gridHeight);
-    double rows = std::floor(budgetMs / (msPerRay * gridWidth));
-    if (rows >= 8) rows = std::floor(rows / 8) * 8;
-    return int(std::clamp(rows, 1.0, double(std::max(1, gridHeight))));
+    const double band = std::max(1, bandRows);
+    const double rows = std::max(band, std::floor(budgetMs / (msPerRay * gridWidth) / band) * band);
+    return int(std::min(rows, double(std::max(1, gridHeight))));
 }
 
 } // namespace volcast::server

@@ -45,8 +45,13 @@ class TiledFrame {
     Image sum_, current_;
 };
 
-// Rows of a w-ray-wide grid that fit budgetMs at msPerRay; at least 1, at most gridHeight,
-// a multiple of 8 from 8 up (the OpenCL renderer's work-groups are 8 rows high).
-int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight);
+// Rows of a w-ray-wide grid that fit budgetMs at msPerRay: a multiple of bandRows (the
+// renderer's FrameRenderer::bandRows()), at least bandRows even where that overruns the
+// budget, at most gridHeight. A thinner band costs as much as bandRows rows (the OpenCL
+// renderer's work-groups are 8 rows high, the CPU renderer's ray packets 4) and would measure
+// a cost per ray several times too high, sizing the next band thinner still: under load a
+// frame then crawled one row per unit at 4 to 8 times its real cost (docs/service.md,
+// "Scheduling and fairness").
+int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight, int bandRows);
 
 } // namespace volcast::server

@@ -99,6 +99,12 @@ CpuRenderer::CpuRenderer(const Volume &volume, CpuRendererOptions options)
 
 std::string CpuRenderer::description() const { return describe(options_); }
 
+// As cpu_march.cpp lays packets out: up to 4 rays wide, the rest of the lanes in rows below.
+int CpuRenderer::bandRows() const {
+    const int lanes = std::max(1, cpu::raysPerPacket());
+    return std::max(1, lanes / std::min(lanes, 4));
+}
+
 std::string CpuRenderer::describe(const CpuRendererOptions &options) {
     const int threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
     return "cpu: " + cpu::marchTarget() + ", " + std::to_string(cpu::raysPerPacket()) + " rays per packet, " +

@@ -39,6 +39,7 @@ class CpuRenderer : public FrameRenderer {
                        const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
                        RenderStats *stats = nullptr) override;
     bool rendersWindowsCheaply() const override { return true; }
+    int bandRows() const override;   // the ray packet's height
     std::string description() const override;
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }

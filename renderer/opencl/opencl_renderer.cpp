@@ -99,6 +99,8 @@ std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) c
 
 std::string OpenClRenderer::description() const { return "opencl: " + cl_.deviceName(); }
 
+int OpenClRenderer::bandRows() const { return int(kGroupEdge); }
+
 PreprocessCounts OpenClRenderer::preprocessCounts() const {
     std::lock_guard lock(countsMutex_);
     return counts_;

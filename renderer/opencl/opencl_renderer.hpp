@@ -46,6 +46,7 @@ class OpenClRenderer : public FrameRenderer {
                        const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
                        RenderStats *stats = nullptr) override;
     bool rendersWindowsCheaply() const override { return true; }
+    int bandRows() const override;   // the work-group's height
     std::string description() const override;
 
     // The -D options a scene's program is built with: only the features it uses.

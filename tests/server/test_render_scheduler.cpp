@@ -300,4 +300,87 @@ TEST(RenderScheduler, PreparationRunsInTheBackgroundWithProgressAndOtherSessions
     EXPECT_GT(Ms(final->at - started).count(), 1500) << "the final frame cannot come before its preparation";
 }
 
+// SlowRenderer with a device's granularity: a band of fewer than 8 rows costs as much as 8
+// rows, as on the OpenCL renderer (work-groups 8 rows high) and the CPU renderer (packets of
+// 4x4 rays, lanes off the band idle).
+class WorkGroupRenderer : public FrameRenderer {
+  public:
+    WorkGroupRenderer(std::shared_ptr<const Volume> volume, double msPerRay)
+        : slow_(std::move(volume), msPerRay), msPerRay_(msPerRay) {}
+    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
+                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override {
+        return slow_.render(tf, camera, width, height, quality, clipPlanes, stats);
+    }
+    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
+                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
+                       RenderStats *stats = nullptr) override {
+        Image band = slow_.renderWindow(tf, camera, width, height, quality, clipPlanes, window, stats);
+        const int idleRows = (8 - window.height % 8) % 8;
+        std::this_thread::sleep_for(Ms(msPerRay_ * window.width * idleRows));
+        return band;
+    }
+    bool rendersWindowsCheaply() const override { return true; }
+    int bandRows() const override { return 8; }
+    std::string description() const override { return "slow test renderer, 8-row work-groups"; }
+    PreprocessCounts preprocessCounts() const override { return slow_.preprocessCounts(); }
+    const Volume &volume() const override { return slow_.volume(); }
+
+  private:
+    SlowRenderer slow_;
+    double msPerRay_;
+};
+
+// The browser's wheel then two-finger pinch (tests/web/browser/client.test.mjs), on a device
+// where one 8-row band of the full-size levels costs more than a unit (here 8 x 128 rays at
+// 0.05 ms = 51 ms against 20 ms; in the browser test, the zoomed-in demo on a loaded machine).
+// Units used to shrink to one row there, each costing as much as 8, and each measuring a cost
+// per ray 8 times too high that kept the next one at one row: the final frame took 8 times
+// its rays' time, and the browser test gave up waiting after 90 s.
+TEST(RenderScheduler, BandsThinnerThanAWorkGroupDoNotSlowRefinementToOneRowPerUnit) {
+    Metrics metrics;
+    RenderScheduler scheduler(metrics, options(20));
+    const double msPerRay = 0.05;
+    auto renderer = std::make_shared<WorkGroupRenderer>(smallVolume(), msPerRay);
+    Session s(scheduler, renderer, 1);
+    const int size = 128;
+    int id = 0;
+    const auto interaction = [&](int cameras, int everyMs) {
+        scheduler.setInteracting(s.slot, true);
+        for (int i = 0; i < cameras; ++i) {
+            ++id;
+            scheduler.submit(s.slot, s.view(id, 0.05 * id, size, ladderFor(1)));
+            std::this_thread::sleep_for(std::chrono::milliseconds(everyMs));
+        }
+        scheduler.setInteracting(s.slot, false);
+    };
+    interaction(5, 20);   // the wheel
+    interaction(8, 30);   // the pinch, at once after it
+    const auto released = Clock::now();
+    const int last = id;
+    // Every level of the ladder once, in bands of 8 rows: the rays' time plus the padding of
+    // bands at a grid's edge. Twice that, and a second for a loaded machine; one row per unit
+    // takes 8 times the rays' time (about 17 s).
+    double raysMs = 0;
+    for (const Level &l : ladderFor(1)) {
+        const int grid = raysForScale(size, l.quality.imageScale);
+        raysMs += msPerRay * grid * ((grid + 7) / 8 * 8) * l.passes;
+    }
+    const double boundMs = 2 * raysMs + 1000;
+    const auto final =
+        s.waitFor(0, [last](const protocol::FrameHeader &h) { return h.final && h.request >= last; }, 4 * boundMs);
+    const auto frames = [&] {
+        std::ostringstream out;
+        std::lock_guard lock(s.mutex);
+        for (const auto &g : s.frames)
+            out << g.header.request.dump() << ':' << g.header.level << (g.header.final ? "F" : "") << '@'
+                << std::lround(Ms(g.at - released).count()) << "ms ";
+        return out.str();
+    };
+    ASSERT_TRUE(final) << "no final frame of the newest view within " << 4 * boundMs << " ms; frames (request:level@ms): "
+                       << frames();
+    EXPECT_LT(Ms(final->at - released).count(), boundMs)
+        << "the final frame took longer than its rays in 8-row bands allow (" << raysMs
+        << " ms); frames (request:level@ms after the release): " << frames();
+}
+
 } // namespace
