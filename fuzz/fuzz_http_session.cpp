@@ -4,7 +4,8 @@
 // One SharedState (on the native CPU back end: no OpenCL device is opened) and one
 // io_context for the process, with a small web root and a file beside it that must never
 // be served. The server's log lines go to a null sink: they are still formatted (that code
-// runs), but a refusal per input written to stderr cost more than the session itself.
+// runs, the debug lines included) but not written: at the default level a refused
+// WebSocket origin alone wrote a warning to stderr.
 // Invariants: the session ends by itself once the input is consumed (a hang is a libFuzzer
 // timeout); whatever it writes is HTTP/1.x responses, never a 500; the file outside the
 // web root never appears in the output.
