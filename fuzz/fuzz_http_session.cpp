@@ -1,8 +1,11 @@
 // HTTP requests into the server's HttpSession, over beast::test::stream (no socket): the
 // input is what a client sends on one connection, then it closes its end. The first byte
 // sets how many bytes each read returns (1..256), so requests also arrive in pieces.
-// One SharedState for the process (it opens the OpenCL device), with a small web root and a
-// file beside it that must never be served.
+// One SharedState (on the native CPU back end: no OpenCL device is opened) and one
+// io_context for the process, with a small web root and a file beside it that must never
+// be served. The server's log lines go to a null sink: they are still formatted (that code
+// runs, the debug lines included) but not written: at the default level a refused
+// WebSocket origin alone wrote a warning to stderr.
 // Invariants: the session ends by itself once the input is consumed (a hang is a libFuzzer
 // timeout); whatever it writes is HTTP/1.x responses, never a 500; the file outside the
 // web root never appears in the output.
@@ -14,6 +17,8 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/write.hpp>
 #include <boost/beast/_experimental/test/stream.hpp>
+#include <spdlog/sinks/null_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <cstddef>
 #include <cstdint>
@@ -36,8 +41,11 @@ struct Fixture {
     fs::path top;
     std::shared_ptr<server::SharedState> state;
     std::shared_ptr<const server::HttpEndpoint> endpoint;
+    net::io_context ioc;   // reused: restart() before each input
 
     Fixture() {
+        spdlog::set_default_logger(spdlog::null_logger_mt("fuzz-null"));
+        spdlog::set_level(spdlog::level::debug);   // the session's debug lines are formatted too
         char pattern[] = "/tmp/volcast-fuzz-http-XXXXXX";
         if (!mkdtemp(pattern)) fuzz::fail("cannot create the temporary web root");
         top = fs::canonical(pattern);
@@ -71,7 +79,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     Fixture &f = fixture();
     const std::string_view input(reinterpret_cast<const char *>(data + 1), size - 1);
 
-    net::io_context ioc;
+    net::io_context &ioc = f.ioc;
+    ioc.restart();
     beast::test::stream client(ioc);
     beast::test::stream serverSide(ioc);
     client.connect(serverSide);
