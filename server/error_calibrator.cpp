@@ -3,6 +3,8 @@
 #include "renderer/camera.hpp"
 #include "renderer/reference_renderer.hpp"
 
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -23,6 +25,22 @@ Rgb8 toRgb8(const Image &image) {
     for (size_t p = 0, n = size_t(image.width) * size_t(image.height); p < n; ++p)
         for (size_t c = 0; c < 3; ++c)
             out.rgb[p * 3 + c] = uint8_t(std::lround(std::clamp(image.rgba[p * 4 + c], 0.0f, 1.0f) * 255.0f));
+    return out;
+}
+
+Rgb8 decodeJpegRgb8(const std::vector<uint8_t> &jpeg) {
+    // In memory through an IOProxy, as frame_encoder.cpp writes them (docs/platform.md).
+    OIIO::Filesystem::IOMemReader reader(jpeg.data(), jpeg.size());
+    OIIO::ImageSpec config;
+    OIIO::Filesystem::IOProxy *proxy = &reader;
+    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
+    auto in = OIIO::ImageInput::open("frame.jpg", &config, &reader);
+    if (!in) throw std::runtime_error("decoding a frame: " + OIIO::geterror());
+    const OIIO::ImageSpec &spec = in->spec();
+    if (spec.nchannels != 3) throw std::runtime_error("decoding a frame: not RGB");
+    Rgb8 out{spec.width, spec.height, std::vector<uint8_t>(size_t(spec.width) * size_t(spec.height) * 3)};
+    if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, out.rgb.data()))
+        throw std::runtime_error("decoding a frame: " + in->geterror());
     return out;
 }
 
@@ -61,17 +79,23 @@ void ErrorCalibrator::record(const std::string &key, int level, double rmse, siz
 }
 
 void ErrorCalibrator::finalRendered(std::shared_ptr<const CalibrationView> view,
-                                    std::vector<std::pair<int, Rgb8>> levels, Rgb8 final, uint64_t viewSerial) {
+                                    std::vector<std::pair<int, std::vector<uint8_t>>> levels, Rgb8 final,
+                                    uint64_t viewSerial) {
     if (!enabled_) return;
     const size_t ladderSize = view->ladder.size();
     if (!levels.empty()) {
-        auto shared = std::make_shared<std::pair<std::vector<std::pair<int, Rgb8>>, Rgb8>>(std::move(levels),
-                                                                                          std::move(final));
+        using Levels = std::vector<std::pair<int, std::vector<uint8_t>>>;
+        auto shared = std::make_shared<std::pair<Levels, Rgb8>>(std::move(levels), std::move(final));
         worker_.request("levels " + std::to_string(viewSerial), PreprocessWorker::Priority::Calibration,
                         [this, key = view->key, shared, ladderSize](const std::atomic<bool> &) {
-                            for (const auto &[level, image] : shared->first)
-                                if (size_t(level) + 1 < ladderSize)
-                                    record(key, level, rmseRgb8(image, shared->second), ladderSize);
+                            for (const auto &[level, jpeg] : shared->first) {
+                                if (size_t(level) + 1 >= ladderSize) continue;
+                                try {
+                                    record(key, level, rmseRgb8(decodeJpegRgb8(jpeg), shared->second), ladderSize);
+                                } catch (const std::exception &e) {
+                                    spdlog::warn("error calibration: level {} not measured: {}", level, e.what());
+                                }
+                            }
                         });
     }
     worker_.request("final " + view->key, PreprocessWorker::Priority::Calibration,

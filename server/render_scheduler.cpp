@@ -457,7 +457,7 @@ void RenderScheduler::runUnit(Work &work) {
 
     Deliver deliver;
     std::shared_ptr<const CalibrationView> calibration;
-    std::vector<std::pair<int, Rgb8>> levelImages;
+    std::vector<std::pair<int, std::vector<uint8_t>>> levelImages;
     uint64_t serial = 0;
     {
         std::lock_guard lock(mutex_);
@@ -478,7 +478,7 @@ void RenderScheduler::runUnit(Work &work) {
                     s.levelImages.clear();
                     serial = ++viewSerial_;
                 } else {
-                    s.levelImages.emplace_back(work.level, toRgb8(image));
+                    s.levelImages.emplace_back(work.level, out.image);   // as the client sees it
                 }
             }
         }

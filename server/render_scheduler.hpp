@@ -130,7 +130,7 @@ class RenderScheduler {
         int refiningLevel = -1;
         bool refiningFinal = false;
         bool refiningSubstitute = false;       // rendered without its pending preparation
-        std::vector<std::pair<int, Rgb8>> levelImages;   // this generation's, for calibration
+        std::vector<std::pair<int, std::vector<uint8_t>>> levelImages;   // this generation's JPEGs, for calibration
         std::map<std::string, std::string> announced;   // preparations this slot was told of: key, task
     };
     enum class Kind { Interactive, Refine };
