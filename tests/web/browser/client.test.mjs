@@ -370,7 +370,9 @@ test("on a high-density screen the canvas has device pixels and the resolution c
     const viewport = await p2.evaluate(() => window.volcast.session.viewport);
     // Half of the CSS size, rounded from the fractional layout size: within a pixel.
     assert.ok(Math.abs(viewport.height - css[1] / 2) <= 1, `${viewport.height} vs ${css[1]} / 2`);
-    const final = await waitForFinal(p2, { timeout: 120000 });
+    // The final frame of the half-resolution request, not a late final of an earlier size.
+    const halfId = await p2.evaluate(() => window.sentLog.filter((m) => m.type === "viewport").at(-1).id);
+    const final = await waitForFinal(p2, { minRequest: halfId, timeout: 120000 });
     assert.deepEqual({ width: final.width, height: final.height }, viewport);
     await screenshot(p2, "09-high-density-half-resolution.png");
     assert.deepEqual(p2problems, []);
