@@ -617,6 +617,9 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
     std::array<double, 8> pixdim{};
     int64_t rawOffset = 0;
     uint64_t headerBytes = 352;
+    int qformCode = 0, sformCode = 0;
+    std::array<double, 6> quatern{};  // quatern_b, _c, _d, qoffset_x, _y, _z
+    std::array<double, 12> srow{};    // srow_x, srow_y, srow_z
     if (hdrSize == 348) {
         for (size_t i = 0; i < 8; ++i) n.dim[i] = readScalar<int16_t>(h.data() + 40 + 2 * i, swap);
         datatype = readScalar<int16_t>(h.data() + 70, swap);
@@ -625,6 +628,10 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
         const float off = readScalar<float>(h.data() + 108, swap);
         rawOffset = std::isfinite(off) && off > 0 && off < 9e18f ? int64_t(off) : -1;
         n.singleFile = std::memcmp(h.data() + 344, "n+1", 4) == 0;
+        qformCode = readScalar<int16_t>(h.data() + 252, swap);
+        sformCode = readScalar<int16_t>(h.data() + 254, swap);
+        for (size_t i = 0; i < 6; ++i) quatern[i] = readScalar<float>(h.data() + 256 + 4 * i, swap);
+        for (size_t i = 0; i < 12; ++i) srow[i] = readScalar<float>(h.data() + 280 + 4 * i, swap);
     } else {
         for (size_t i = 0; i < 8; ++i) n.dim[i] = readScalar<int64_t>(h.data() + 16 + 8 * i, swap);
         datatype = readScalar<int16_t>(h.data() + 12, swap);
@@ -633,6 +640,10 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
         rawOffset = readScalar<int64_t>(h.data() + 168, swap);
         n.singleFile = std::memcmp(h.data() + 4, "n+2", 4) == 0;
         headerBytes = 544;
+        qformCode = readScalar<int32_t>(h.data() + 344, swap);
+        sformCode = readScalar<int32_t>(h.data() + 348, swap);
+        for (size_t i = 0; i < 6; ++i) quatern[i] = readScalar<double>(h.data() + 352 + 8 * i, swap);
+        for (size_t i = 0; i < 12; ++i) srow[i] = readScalar<double>(h.data() + 400 + 8 * i, swap);
     }
     if (n.dim[0] < 1 || n.dim[0] > 7)
         fail(path, fmt::format("NIfTI header's dim[0] (the number of dimensions) is {}; the specification allows "
@@ -655,6 +666,24 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
             fail(path, fmt::format("NIfTI header's pixdim[{}] (spacing of axis {}) is {}; it must be finite and "
                                    "greater than 0",
                                    i, i - 1, pixdim[size_t(i)]));
+    // niftilib builds the orientation from the quaternion (qform_code > 0) or the affine rows
+    // (sform_code > 0), and ITK takes an SVD of it: on a NaN or an infinity that SVD never
+    // ends (fuzz finding 8: the one loader spun for good). The codes are the specification's
+    // NIFTI_XFORM_* values, 0 to 5.
+    for (const auto &[name, code] : {std::pair{"qform_code", qformCode}, std::pair{"sform_code", sformCode}})
+        if (code < 0 || code > 5)
+            fail(path, fmt::format("NIfTI header's {} is {}; the specification's codes are 0 to 5", name, code));
+    const auto checkFinite = [&](const std::string &field, double v) {
+        if (!std::isfinite(v)) fail(path, fmt::format("NIfTI header's {} is {}; it must be finite", field, v));
+    };
+    if (qformCode > 0) {
+        static constexpr const char *kNames[] = {"quatern_b", "quatern_c", "quatern_d",
+                                                 "qoffset_x", "qoffset_y", "qoffset_z"};
+        for (size_t i = 0; i < 6; ++i) checkFinite(kNames[i], quatern[i]);
+    }
+    if (sformCode > 0)
+        for (size_t i = 0; i < 12; ++i)
+            checkFinite(fmt::format("srow_{}[{}]", "xyz"[i / 4], i % 4), srow[i]);
     if (n.singleFile && (rawOffset < 0 || uint64_t(rawOffset) < headerBytes))
         fail(path, fmt::format("NIfTI header's vox_offset is {}; in a single-file NIfTI the voxels start after "
                                "the {}-byte header",

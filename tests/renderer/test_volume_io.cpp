@@ -947,6 +947,26 @@ TEST_F(VolumeIoNiftiHeader, NegativePixdim) {
 TEST_F(VolumeIoNiftiHeader, NanPixdim) {
     expectLoadError(writeWith("nan_spacing.nii", 88, std::numeric_limits<float>::quiet_NaN()), {"pixdim[3]"});
 }
+// ITK's orientation SVD never ended on a NaN in the affine rows (fuzz finding 8): the load
+// must fail at once, naming the field, not spin the loader (ctest's timeout caught it before).
+TEST_F(VolumeIoNiftiHeader, NanInTheSformRowsIsRefusedBeforeItkLoopsOnIt) {
+    expectLoadError(writeWith("nan_srow.nii", 280 + 16 * 1 + 4 * 2, std::numeric_limits<float>::quiet_NaN()),
+                    {"srow_y[2]", "finite"});
+    expectLoadError(writeWith("inf_srow.nii", 280, std::numeric_limits<float>::infinity()), {"srow_x[0]"});
+}
+TEST_F(VolumeIoNiftiHeader, NanInTheQuaternionIsRefused) {
+    const std::string good =
+        niftiHeader(kDims, 4, 16, kSform) + encode(VoxelType::Int16, testValues(VoxelType::Int16, kCount), false);
+    std::string bad = patched(good, 252, int16_t(1));  // qform_code: scanner
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    bad.replace(260, sizeof nan, reinterpret_cast<const char *>(&nan), sizeof nan);  // quatern_c
+    writeFile(dir / "nan_quatern.nii", bad);
+    expectLoadError(dir / "nan_quatern.nii", {"quatern_c", "finite"});
+}
+TEST_F(VolumeIoNiftiHeader, TransformCodesOutsideTheSpecificationAreRefused) {
+    expectLoadError(writeWith("sform_code.nii", 254, int16_t(18789)), {"sform_code", "18789"});
+    expectLoadError(writeWith("qform_code.nii", 252, int16_t(-1)), {"qform_code", "-1"});
+}
 
 // ---------------------------------------------------------------------------------------
 // 3c. Damaged DICOM series
