@@ -506,12 +506,20 @@ struct MetaLayout {
     uint64_t localStart = 0;
 };
 
+constexpr size_t kMetaIoLongestFieldName = 254;   // MET_FieldRecordType::name is char[255]
+
 std::optional<MetaLayout> scanMetaHeader(const fs::path &path) {
     std::ifstream in(path, std::ios::binary);
     std::string line;
     MetaLayout layout;
     for (int count = 0; count < 10000 && std::getline(in, line); ++count) {
         const auto eq = line.find('=');
+        // MetaIO copies each line's field name (up to the '=' or the line's end) into a
+        // 255-byte buffer unchecked: a longer one overflowed it and aborted the process
+        // (fortified strcpy; fuzz finding 9).
+        if (const size_t name = trim(line.substr(0, eq)).size(); name > kMetaIoLongestFieldName)
+            fail(path, fmt::format("MetaImage header line {} has a field name of {} bytes; at most {} are allowed",
+                                   count + 1, name, kMetaIoLongestFieldName));
         if (eq == std::string::npos) continue;
         const std::string key = lower(trim(line.substr(0, eq)));
         const std::string value = trim(line.substr(eq + 1));

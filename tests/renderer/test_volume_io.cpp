@@ -858,6 +858,21 @@ TEST_F(VolumeIoTest, ZeroOrNegativeSpacing) {
     expectLoadError(negative, {"spacing"});
 }
 
+// MetaIO copies a field name into a 255-byte buffer without a check: a name of 255 bytes or
+// more aborted the process in MetaIO's fortified strcpy (fuzz finding 9), with or without
+// an '=' on its line. 254 is the longest it takes.
+TEST_F(VolumeIoTest, MetaImageFieldNameLongerThanMetaIoTakesIsRefusedNotACrash) {
+    const std::string tail = "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n" +
+                             std::string(8, '\1');
+    writeFile(dir / "long_name.mha", "ObjectType = Image\n" + std::string(255, 'K') + " = 1\n" + tail);
+    expectLoadError(dir / "long_name.mha", {"line 2", "255 bytes", "at most 254"});
+    writeFile(dir / "long_line.mha", std::string(300, 'K') + "\n" + tail);
+    expectLoadError(dir / "long_line.mha", {"line 1", "300 bytes"});
+    // The longest name MetaIO takes loads as before (an unknown field, ignored).
+    writeFile(dir / "ok_name.mha", "ObjectType = Image\n" + std::string(254, 'K') + " = 1\n" + tail);
+    EXPECT_EQ(loadVolume(dir / "ok_name.mha").dims, Vec3i(2, 2, 2));
+}
+
 TEST_F(VolumeIoTest, TruncatedMetaImage) {
     // MetaIO prints "data not read completely" and ITK returns garbage; the loader refuses.
     writeFile(dir / "short.mha", "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n"
