@@ -448,7 +448,7 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                 for (int l = 0; l < lanes; ++l) {
                     if (!hita[l]) continue;
                     samplesTotal += uint64_t(samplesa[l]);
-                    float *pixel = rgba + (size_t(py[l]) * size_t(P.width) + size_t(px[l])) * 4;
+                    float *pixel = rgba + (size_t(py[l] - P.outY) * size_t(P.outWidth) + size_t(px[l] - P.outX)) * 4;
                     for (int c = 0; c < 4; ++c) pixel[c] = outa[c][l];
                 }
                 continue;
