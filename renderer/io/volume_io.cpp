@@ -507,6 +507,7 @@ struct MetaLayout {
 };
 
 constexpr size_t kMetaIoLongestFieldName = 254;   // MET_FieldRecordType::name is char[255]
+constexpr int64_t kMetaIoMostDimensions = 10;      // MetaImage's per-axis arrays hold 10
 
 std::optional<MetaLayout> scanMetaHeader(const fs::path &path) {
     std::ifstream in(path, std::ios::binary);
@@ -523,6 +524,16 @@ std::optional<MetaLayout> scanMetaHeader(const fs::path &path) {
         if (eq == std::string::npos) continue;
         const std::string key = lower(trim(line.substr(0, eq)));
         const std::string value = trim(line.substr(eq + 1));
+        // MetaIO reads NDims values into arrays of 10 and loops NDims times over the stream
+        // for DimSize and the rest: a huge NDims kept the loader reading for good (fuzz
+        // finding 10).
+        if (key == "ndims") {
+            const auto n = parseInt(value);
+            if (!n || *n < 1 || *n > kMetaIoMostDimensions)
+                fail(path, fmt::format("MetaImage header's NDims is '{}'; it must be a whole number from 1 to {}",
+                                       value.size() > 24 ? value.substr(0, 24) + "..." : value,
+                                       kMetaIoMostDimensions));
+        }
         if (key == "compresseddata") layout.compressed = lower(value) == "true";
         else if (key == "binarydata") layout.binary = lower(value) != "false";
         else if (key == "headersize") layout.headerSize = parseInt(value).value_or(0);

@@ -873,6 +873,18 @@ TEST_F(VolumeIoTest, MetaImageFieldNameLongerThanMetaIoTakesIsRefusedNotACrash) 
     EXPECT_EQ(loadVolume(dir / "ok_name.mha").dims, Vec3i(2, 2, 2));
 }
 
+// MetaIO loops NDims times reading the header's per-axis values into arrays of 10: a huge
+// NDims kept the loader reading for good (fuzz finding 10).
+TEST_F(VolumeIoTest, MetaImageNDimsOutsideOneToTenIsRefusedBeforeMetaIoLoopsOnIt) {
+    const std::string rest = "DimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n" + std::string(8, '\1');
+    writeFile(dir / "huge_ndims.mha", "ObjectType = Image\nNDims = " + std::string(120, '9') + "\n" + rest);
+    expectLoadError(dir / "huge_ndims.mha", {"ndims", "1 to 10"});
+    writeFile(dir / "eleven.mha", "ObjectType = Image\nNDims = 11\n" + rest);
+    expectLoadError(dir / "eleven.mha", {"ndims is '11'"});
+    writeFile(dir / "zero.mha", "ObjectType = Image\nNDims = 0\n" + rest);
+    expectLoadError(dir / "zero.mha", {"ndims is '0'"});
+}
+
 TEST_F(VolumeIoTest, TruncatedMetaImage) {
     // MetaIO prints "data not read completely" and ITK returns garbage; the loader refuses.
     writeFile(dir / "short.mha", "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n"
