@@ -47,6 +47,9 @@ class LevelTimer {
     static constexpr double kInitialMsPerSample = 1.0 / 50e3;   // 50 M samples/s (docs/platform.md: 30-150 M)
     static constexpr double kSmoothing = 0.3;                   // weight of the newest frame in the EMA
     void reset(size_t levels) { msPerSample_.assign(levels, 0); }
+    void forget(size_t level) {
+        if (level < msPerSample_.size()) msPerSample_[level] = 0;
+    }
     void record(size_t level, double ms, double samples);
     double predictMs(size_t level, double samples) const;
     // Whether this level itself was measured (not borrowed from another, not the guess).

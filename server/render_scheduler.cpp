@@ -254,10 +254,20 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     work.job = s.job;
     work.generation = s.generation;
 
-    if (s.timerLadderSize != job.ladder.size()) {
+    // A level's measured cost holds for its quality on this volume only: a level whose
+    // quality changed (tricubic or shading ticked) forgets it, or its first frame is planned
+    // at the old cost (a linear level's cost predicted a cubic, shaded one at a fifth).
+    if (s.timerLadder.size() != job.ladder.size() || s.timerVolumeId != job.volumeId) {
         s.timer.reset(job.ladder.size());
-        s.timerLadderSize = job.ladder.size();
+        s.timerLadder.clear();
+        for (const Level &l : job.ladder) s.timerLadder.push_back(l.quality);
+        s.timerVolumeId = job.volumeId;
     }
+    for (size_t i = 0; i < job.ladder.size(); ++i)
+        if (!(s.timerLadder[i] == job.ladder[i].quality)) {
+            s.timer.forget(i);
+            s.timerLadder[i] = job.ladder[i].quality;
+        }
     const auto samplesOf = [&](const Quality &q) { return predictedSamples(job.renderer->volume(), q, job.width, job.height); };
 
     if (!s.refining) {
@@ -294,7 +304,8 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
         const bool final = level == last && (job.stillOnly || !firstOfView || (last == 0 && still));
         bool substitute = false;
         const Quality q = renderable(id, s, l.quality, substitute);
-        s.refining = std::make_shared<TiledFrame>(q, substitute ? 1 : l.passes, job.width, job.height);
+        s.refining = std::make_shared<TiledFrame>(q, substitute ? 1 : l.passes, job.width, job.height,
+                                                  job.renderer->bandRows());
         s.refiningLevel = level;
         s.refiningFinal = final;
         s.refiningSubstitute = substitute;
@@ -305,22 +316,24 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     work.substitute = s.refiningSubstitute;
     work.quality = frame.quality();
     work.frame = s.refining;
-    // As many rows as fit the unit at the cost measured by this frame's own units, else by
-    // this level's earlier frames, in whole bands of the renderer's bandRows() (a thinner
-    // band costs as much, and measures its cost per ray too high); a level never measured
-    // starts with one band (a guess of the cost could be off a hundredfold, and a unit must
-    // not overrun). A renderer that cannot render part of a frame cheaply renders it whole.
+    // As many cells as fit the unit at the cost measured by this frame's own units, else by
+    // this level's earlier frames; a level never measured starts with one cell (a guess of
+    // the cost could be off a hundredfold, and a unit must not overrun). A frame planned from
+    // earlier frames' average that will not fit one unit starts with half the unit: its first
+    // cells are the centre's, which cost more than the average. A renderer that cannot render
+    // part of a frame cheaply renders each pass whole.
     const double rays = double(frame.gridWidth()) * frame.gridHeight();
-    double msPerRay = frame.msPerRay();
-    if (msPerRay == 0 && s.timer.measured(size_t(work.level)) && !work.substitute)
+    double msPerRay = frame.msPerRayEstimate();
+    double budgetMs = options_.unitMs;
+    if (msPerRay == 0 && s.timer.measured(size_t(work.level)) && !work.substitute) {
         msPerRay = s.timer.predictMs(size_t(work.level), samplesOf(frame.quality())) / std::max(rays, 1.0);
+        if (msPerRay * rays > budgetMs) budgetMs /= 2;
+    }
     if (!job.renderer->rendersWindowsCheaply())
-        work.rows = frame.gridHeight();
-    else if (msPerRay == 0)
-        work.rows = std::min(std::max(1, job.renderer->bandRows()), frame.gridHeight());
+        work.cells = frame.cellsLeftInPass();
     else
-        work.rows = rowsForBudget(options_.unitMs, msPerRay, frame.gridWidth(), frame.gridHeight(),
-                                  job.renderer->bandRows());
+        work.cells = std::min(frame.cellsLeftInPass(),
+                              cellsForBudget(budgetMs, msPerRay, frame.cellRays(), frame.lastUnitCells()));
     return true;
 }
 
@@ -400,7 +413,7 @@ void RenderScheduler::workerLoop() {
 void RenderScheduler::runUnit(Work &work) {
     const ViewJob &job = *work.job;
     TiledFrame &frame = *work.frame;
-    const double ms = frame.renderUnit(*job.renderer, job.transferFunction, job.camera, job.clipPlanes, work.rows);
+    const double ms = frame.renderUnit(*job.renderer, job.transferFunction, job.camera, job.clipPlanes, work.cells);
     {
         std::lock_guard lock(mutex_);
         longestUnitMs_ = std::max(longestUnitMs_, ms);
@@ -423,7 +436,9 @@ void RenderScheduler::runUnit(Work &work) {
             metrics_.frameDroppedStale();
             return;
         }
-        if (!work.substitute && size_t(work.level) < s.timerLadderSize)
+        // Timed at the quality it was rendered at: not onto a level whose quality changed meanwhile.
+        if (!work.substitute && size_t(work.level) < s.timerLadder.size() &&
+            s.timerLadder[size_t(work.level)] == frame.quality())
             s.timer.record(size_t(work.level), frame.renderMs(), samples * double(frame.passes()));
         s.inFlight = true;
         if (work.kind == Kind::Interactive) ++s.interactiveFrames;

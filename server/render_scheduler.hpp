@@ -3,9 +3,9 @@
 // one render thread: the device is one PoCL CPU device, and one worker with a fair queue is
 // the simplest thing that shares it fairly.
 //
-// Units: an interactive frame (its level is chosen to fit the frame-time target), or one
-// band of rows of one pass of a refinement level (as many rows as fit unitMs at the level's
-// measured cost). Between units the worker picks again: any session's interactive frame
+// Units: an interactive frame (its level is chosen to fit the frame-time target), or some
+// cells of one pass of a refinement level (as many as fit unitMs at the cost measured;
+// TiledFrame). Between units the worker picks again: any session's interactive frame
 // first, then the next refinement unit; within each, the session that has had the fewest
 // interactive frames, or the least render time for refinement (ties round-robin).
 // So a session's interactive frame waits for at most one unit, whatever another session's
@@ -125,7 +125,8 @@ class RenderScheduler {
         double serviceMs = 0;         // render time received: the least served refines next
         double interactiveFrames = 0; // interactive frames received: the fewest goes next
         LevelTimer timer;
-        size_t timerLadderSize = 0;
+        std::vector<Quality> timerLadder;   // the qualities the timer's levels were measured at
+        uint64_t timerVolumeId = 0;
         std::shared_ptr<TiledFrame> refining;   // the frame under way, unit by unit
         int refiningLevel = -1;
         bool refiningFinal = false;
@@ -144,7 +145,7 @@ class RenderScheduler {
         Quality quality;              // what is rendered: the level's, or its substitute
         bool substitute = false;
         std::shared_ptr<TiledFrame> frame;   // Refine: the frame the unit belongs to
-        int rows = 0;                        // Refine: the unit's rows
+        int cells = 0;                       // the unit's cells (TiledFrame)
     };
 
     void workerLoop();

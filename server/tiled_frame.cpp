@@ -3,16 +3,47 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <tuple>
 
 namespace volcast::server {
 
-TiledFrame::TiledFrame(const Quality &quality, int passes, int width, int height)
+std::vector<int> middleOutOrder(int n) {
+    std::vector<int> order;
+    if (n <= 0) return order;
+    int bits = 0;
+    while ((1 << bits) < n) ++bits;
+    for (int i = 0; i < (1 << bits); ++i) {
+        int r = 0;
+        for (int b = 0; b < bits; ++b)
+            if (i & (1 << b)) r |= 1 << (bits - 1 - b);
+        if (r < n) order.push_back((r + n / 2) % n);
+    }
+    return order;
+}
+
+TiledFrame::TiledFrame(const Quality &quality, int passes, int width, int height, int bandRows)
     : quality_(quality), passes_(std::max(1, passes)), width_(width), height_(height),
       gridWidth_(raysForScale(width, quality.imageScale)), gridHeight_(raysForScale(height, quality.imageScale)),
-      current_(gridWidth_, gridHeight_) {}
+      current_(gridWidth_, gridHeight_) {
+    const int rows = std::max(1, bandRows);
+    const int bands = (gridHeight_ + rows - 1) / rows;
+    const int columns = (gridWidth_ + kCellColumns - 1) / kCellColumns;
+    cellRays_ = rows * std::min(gridWidth_, kCellColumns);
+    for (int band : middleOutOrder(bands))
+        for (int k = 0; k < columns; ++k) {
+            const int column = (columns / 2 + k) % columns;   // from the centre column, wrapping
+            const int x = column * kCellColumns, y = band * rows;
+            order_.push_back({x, y, std::min(kCellColumns, gridWidth_ - x), std::min(rows, gridHeight_ - y)});
+        }
+}
+
+double TiledFrame::msPerRayEstimate() const {
+    if (raysDone_ == 0) return 0;
+    return std::max(lastUnitMsPerRay_, renderMs_ / double(raysDone_));
+}
 
 double TiledFrame::renderUnit(FrameRenderer &renderer, const TransferFunction &tf, const Camera &camera,
-                              const std::vector<ClipPlane> &clipPlanes, int maxRows) {
+                              const std::vector<ClipPlane> &clipPlanes, int cells) {
     const auto t0 = std::chrono::steady_clock::now();
     Quality q = quality_;
     if (passes_ > 1) {
@@ -20,22 +51,50 @@ double TiledFrame::renderUnit(FrameRenderer &renderer, const TransferFunction &t
         q.jitter = true;
         q.seed = quality_.seed + uint64_t(pass_);
     }
-    const RayWindow window{0, row_, gridWidth_, std::min(std::max(1, maxRows), gridHeight_ - row_)};
-    const Image band = renderer.renderWindow(tf, camera, width_, height_, q, clipPlanes, window);
-    std::copy(band.rgba.begin(), band.rgba.end(), current_.pixel(0, row_));
-    row_ += window.height;
-    raysDone_ += uint64_t(window.width) * uint64_t(window.height);
+    const int take = std::clamp(cells, 1, cellsLeftInPass());
+    // The unit's cells as few windows as cover them: cells side by side in a band join, and
+    // bands of the same columns one above the other join (a unit of the whole frame is one
+    // window, one call).
+    std::vector<Cell> windows(order_.begin() + next_, order_.begin() + next_ + take);
+    std::sort(windows.begin(), windows.end(), [](const Cell &a, const Cell &b) { return std::tie(a.y, a.x) < std::tie(b.y, b.x); });
+    std::vector<Cell> joined;
+    for (const Cell &c : windows)
+        if (!joined.empty() && joined.back().y == c.y && joined.back().x + joined.back().width == c.x)
+            joined.back().width += c.width;
+        else
+            joined.push_back(c);
+    std::sort(joined.begin(), joined.end(), [](const Cell &a, const Cell &b) { return std::tie(a.x, a.width, a.y) < std::tie(b.x, b.width, b.y); });
+    windows.clear();
+    for (const Cell &c : joined)
+        if (!windows.empty() && windows.back().x == c.x && windows.back().width == c.width &&
+            windows.back().y + windows.back().height == c.y)
+            windows.back().height += c.height;
+        else
+            windows.push_back(c);
+
+    uint64_t rays = 0;
+    for (const Cell &c : windows) {
+        const Image part = renderer.renderWindow(tf, camera, width_, height_, q, clipPlanes,
+                                                 RayWindow{c.x, c.y, c.width, c.height});
+        for (int row = 0; row < c.height; ++row)
+            std::copy_n(part.pixel(0, row), size_t(c.width) * 4, current_.pixel(c.x, c.y + row));
+        rays += uint64_t(c.width) * uint64_t(c.height);
+    }
+    next_ += take;
     ++units_;
-    if (row_ >= gridHeight_) {
+    lastUnitCells_ = take;
+    if (next_ >= cellsPerPass()) {
         if (pass_ == 0)
             sum_ = current_;
         else
             for (size_t i = 0; i < sum_.rgba.size(); ++i) sum_.rgba[i] += current_.rgba[i];
         ++pass_;
-        row_ = 0;
+        next_ = 0;
     }
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     renderMs_ += ms;
+    raysDone_ += rays;
+    lastUnitMsPerRay_ = ms / double(std::max<uint64_t>(rays, 1));
     return ms;
 }
 
@@ -46,11 +105,12 @@ Image TiledFrame::finish() {
     return resizeBilinear(sum_, width_, height_);
 }
 
-int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight, int bandRows) {
-    if (!(msPerRay > 0) || gridWidth <= 0) return std::max(1, gridHeight);
-    const double band = std::max(1, bandRows);
-    const double rows = std::max(band, std::floor(budgetMs / (msPerRay * gridWidth) / band) * band);
-    return int(std::min(rows, double(std::max(1, gridHeight))));
+int cellsForBudget(double budgetMs, double msPerRay, int cellRays, int previousUnitCells) {
+    if (!(msPerRay > 0) || cellRays <= 0) return 1;
+    const double fit = std::floor(budgetMs / (msPerRay * double(cellRays)));
+    double cells = std::max(1.0, std::min(fit, 1e9));
+    if (previousUnitCells > 0) cells = std::min(cells, 2.0 * previousUnitCells);
+    return int(cells);
 }
 
 } // namespace volcast::server

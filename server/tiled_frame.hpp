@@ -1,8 +1,16 @@
 #pragma once
-// One frame rendered in bounded units: bands of rows of its ray grid, pass after pass (a
-// jittered level accumulates several passes). The scheduler renders one band, then serves
-// other sessions, then comes back; new input drops the frame between bands. A band is as
-// many rows as fit the unit's time budget at the level's measured cost per ray.
+// One frame rendered in bounded units: cells of its ray grid, pass after pass (a jittered
+// level accumulates several passes). The scheduler renders one unit of cells, then serves
+// other sessions, then comes back; new input drops the frame between units.
+//
+// A cell is bandRows rows (the renderer's FrameRenderer::bandRows(): a thinner window costs
+// as much) by kCellColumns rays, so that one cell of an expensive frame (cubic, shaded, a
+// fine step, a wide viewport) still fits a unit where a whole band of rows would not. Cells
+// are visited middle out and spread over the frame (the centre band of rows first, then the
+// top, three quarters, a quarter, ...; in each band from the centre column), so the first
+// units measure the rays that hit the volume rather than the empty rows above it, and each
+// unit's cost per ray stands for the rest of the frame: a frame whose top rows are empty no
+// longer measures a cost near zero there and then plans one unit for everything below.
 
 #include "renderer/frame_renderer.hpp"
 #include "server/quality_ladder.hpp"
@@ -14,12 +22,15 @@ namespace volcast::server {
 
 class TiledFrame {
   public:
-    // quality: what is rendered (the level's, or its substitute while its preparation runs).
-    TiledFrame(const Quality &quality, int passes, int width, int height);
+    static constexpr int kCellColumns = 64;   // a multiple of the CPU tile (16) and the OpenCL work-group (8)
 
-    // Renders the next band of at most maxRows rows (at least one); returns its ms.
+    // quality: what is rendered (the level's, or its substitute while its preparation runs).
+    TiledFrame(const Quality &quality, int passes, int width, int height, int bandRows);
+
+    // Renders the next `cells` cells of this pass (at least one, at most cellsLeftInPass());
+    // returns the unit's ms.
     double renderUnit(FrameRenderer &renderer, const TransferFunction &tf, const Camera &camera,
-                      const std::vector<ClipPlane> &clipPlanes, int maxRows);
+                      const std::vector<ClipPlane> &clipPlanes, int cells);
     bool done() const { return pass_ >= passes_; }
     // The averaged passes, brought to the frame's size; only once done().
     Image finish();
@@ -30,28 +41,41 @@ class TiledFrame {
     int passes() const { return passes_; }
     int units() const { return units_; }
     double renderMs() const { return renderMs_; }   // the units' sum
-    // Measured by this frame's units so far; 0 before its first unit.
-    double msPerRay() const { return raysDone_ > 0 ? renderMs_ / double(raysDone_) : 0; }
+    int cellsPerPass() const { return int(order_.size()); }
+    int cellsLeftInPass() const { return int(order_.size()) - next_; }
+    int cellRays() const { return cellRays_; }      // rays of a whole cell
+    int lastUnitCells() const { return lastUnitCells_; }
+    // The cost per ray to plan the next unit with: the larger of the last unit's and this
+    // frame's average (a unit of cheap rays must not make the next one large); 0 before the
+    // first unit.
+    double msPerRayEstimate() const;
 
   private:
+    struct Cell {
+        int x, y, width, height;
+    };
     Quality quality_;
     int passes_;
     int width_, height_;          // the frame
     int gridWidth_, gridHeight_;  // rays cast (image_scale < 1: fewer, upsampled at the end)
-    int pass_ = 0, row_ = 0;
+    int cellRays_;
+    std::vector<Cell> order_;     // the cells of a pass, in the order they are rendered
+    int pass_ = 0, next_ = 0;
     int units_ = 0;
+    int lastUnitCells_ = 0;
     uint64_t raysDone_ = 0;
     double renderMs_ = 0;
+    double lastUnitMsPerRay_ = 0;
     Image sum_, current_;
 };
 
-// Rows of a w-ray-wide grid that fit budgetMs at msPerRay: a multiple of bandRows (the
-// renderer's FrameRenderer::bandRows()), at least bandRows even where that overruns the
-// budget, at most gridHeight. A thinner band costs as much as bandRows rows (the OpenCL
-// renderer's work-groups are 8 rows high, the CPU renderer's ray packets 4) and would measure
-// a cost per ray several times too high, sizing the next band thinner still: under load a
-// frame then crawled one row per unit at 4 to 8 times its real cost (docs/service.md,
-// "Scheduling and fairness").
-int rowsForBudget(double budgetMs, double msPerRay, int gridWidth, int gridHeight, int bandRows);
+// 0, ..., n-1 middle out and spread: n/2 first, then the other positions in bit-reversed
+// order shifted by n/2, so that every prefix is spread over the whole range.
+std::vector<int> middleOutOrder(int n);
+
+// Cells of cellRays rays that fit budgetMs at msPerRay: at least one (a cell is the smallest
+// unit), at most twice the previous unit's cells when there was one (a unit's rays may cost
+// more than those measured so far; growing by at most 2 bounds the overrun when they do).
+int cellsForBudget(double budgetMs, double msPerRay, int cellRays, int previousUnitCells);
 
 } // namespace volcast::server
