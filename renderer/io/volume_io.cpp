@@ -614,6 +614,8 @@ struct NiftiHeader {
 // the specification (sizeof_hdr, dim, bitpix against datatype, vox_offset inside the
 // header, pixdim 0, negative or NaN) into a zero-filled or shifted volume without a word.
 // Each refusal names the field.
+constexpr double kNiftiLargestCoordinate = 1e9;   // mm; squares stay far below float overflow (3.4e38)
+
 NiftiHeader readNiftiHeader(const fs::path &path) {
     std::array<unsigned char, 540> h{};
     int got = 0;
@@ -686,15 +688,20 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
                                    "greater than 0",
                                    i, i - 1, pixdim[size_t(i)]));
     // niftilib builds the orientation from the quaternion (qform_code > 0) or the affine rows
-    // (sform_code > 0), and ITK takes an SVD of it: on a NaN or an infinity that SVD never
-    // ends (fuzz finding 8: the one loader spun for good). The codes are the specification's
-    // NIFTI_XFORM_* values, 0 to 5.
+    // (sform_code > 0), and ITK takes a single-precision SVD of it: on a NaN, an infinity or
+    // values whose products overflow a float (-1.7e38 beside 1.5e26) that SVD never ends (fuzz
+    // findings 8 and 11: the one loader spun for good). Nothing physical comes near 1e9 mm.
+    // The codes are the specification's NIFTI_XFORM_* values, 0 to 5.
     for (const auto &[name, code] : {std::pair{"qform_code", qformCode}, std::pair{"sform_code", sformCode}})
         if (code < 0 || code > 5)
             fail(path, fmt::format("NIfTI header's {} is {}; the specification's codes are 0 to 5", name, code));
     const auto checkFinite = [&](const std::string &field, double v) {
-        if (!std::isfinite(v)) fail(path, fmt::format("NIfTI header's {} is {}; it must be finite", field, v));
+        if (!std::isfinite(v) || std::abs(v) > kNiftiLargestCoordinate)
+            fail(path, fmt::format("NIfTI header's {} is {}; it must be finite and at most {:g} in size", field, v,
+                                   kNiftiLargestCoordinate));
     };
+    for (int64_t i = 1; i <= std::min<int64_t>(n.dim[0], 3); ++i)
+        checkFinite(fmt::format("pixdim[{}]", i), pixdim[size_t(i)]);
     if (qformCode > 0) {
         static constexpr const char *kNames[] = {"quatern_b", "quatern_c", "quatern_d",
                                                  "qoffset_x", "qoffset_y", "qoffset_z"};

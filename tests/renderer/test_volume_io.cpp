@@ -981,6 +981,13 @@ TEST_F(VolumeIoNiftiHeader, NanInTheSformRowsIsRefusedBeforeItkLoopsOnIt) {
                     {"srow_y[2]", "finite"});
     expectLoadError(writeWith("inf_srow.nii", 280, std::numeric_limits<float>::infinity()), {"srow_x[0]"});
 }
+// Finite but huge affine rows overflowed inside the single-precision SVD, which then never
+// ended either (fuzz finding 11: -1.7e38 beside 1.5e26).
+TEST_F(VolumeIoNiftiHeader, HugeAffineRowsAndSpacingsAreRefused) {
+    expectLoadError(writeWith("huge_srow.nii", 280 + 16 * 1 + 4 * 1, -1.7e38f), {"srow_y[1]", "at most 1e+09"});
+    expectLoadError(writeWith("huge_offset.nii", 280 + 16 * 2 + 4 * 3, 2e9f), {"srow_z[3]"});
+    expectLoadError(writeWith("huge_spacing.nii", 80, 1e12f), {"pixdim[1]", "at most 1e+09"});
+}
 TEST_F(VolumeIoNiftiHeader, NanInTheQuaternionIsRefused) {
     const std::string good =
         niftiHeader(kDims, 4, 16, kSform) + encode(VoxelType::Int16, testValues(VoxelType::Int16, kCount), false);
