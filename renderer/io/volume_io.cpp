@@ -514,7 +514,14 @@ std::optional<MetaLayout> scanMetaHeader(const fs::path &path) {
     std::string line;
     MetaLayout layout;
     for (int count = 0; count < 10000 && std::getline(in, line); ++count) {
-        const auto eq = line.find('=');
+        // MetaIO takes ':' as well as '=' between a field's name and value, and compares
+        // names as C strings (a NUL ends one): "ElementDataFile: LIST…" and
+        // "ElementDataFile<NUL>…: LIST…" were its ElementDataFile but not ours, and reached
+        // MetaIO's LIST reader unchecked (a segmentation fault; fuzz finding 12). A header is
+        // text: a NUL in it is refused.
+        if (line.find('\0') != std::string::npos)
+            fail(path, fmt::format("MetaImage header line {} holds a NUL byte; the header must be text", count + 1));
+        const auto eq = line.find_first_of("=:");
         // MetaIO copies each line's field name (up to the '=' or the line's end) into a
         // 255-byte buffer unchecked: a longer one overflowed it and aborted the process
         // (fortified strcpy; fuzz finding 9).

@@ -885,6 +885,20 @@ TEST_F(VolumeIoTest, MetaImageNDimsOutsideOneToTenIsRefusedBeforeMetaIoLoopsOnIt
     expectLoadError(dir / "zero.mha", {"ndims is '0'"});
 }
 
+// MetaIO reads "Name: value" as "Name = value", and a NUL ends a name: both spellings of
+// ElementDataFile reached its LIST reader without the loader's data-file checks (a crash;
+// fuzz finding 12). The colon form is now checked like the other; a NUL is refused.
+TEST_F(VolumeIoTest, MetaImageColonSeparatorIsCheckedAndANulIsRefused) {
+    const std::string head = "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n";
+    writeFile(dir / "colon.mha", head + "ElementDataFile: LIST\nmissing_a.raw\nmissing_b.raw\n");
+    expectLoadError(dir / "colon.mha", {"missing_a.raw"});
+    writeFile(dir / "nul.mha", head + std::string("ElementDataFile\0x: LIST\n", 24) + "a.raw\n");
+    expectLoadError(dir / "nul.mha", {"line 5", "nul"});
+    // The colon form of a sound header loads as the '=' form does.
+    writeFile(dir / "colon_ok.mha", head + "ElementDataFile: LOCAL\n" + std::string(8, '\1'));
+    EXPECT_EQ(loadVolume(dir / "colon_ok.mha").dims, Vec3i(2, 2, 2));
+}
+
 TEST_F(VolumeIoTest, TruncatedMetaImage) {
     // MetaIO prints "data not read completely" and ITK returns garbage; the loader refuses.
     writeFile(dir / "short.mha", "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n"
