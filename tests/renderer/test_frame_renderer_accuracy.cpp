@@ -20,6 +20,8 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <stdexcept>
+#include <string>
 
 namespace volcast {
 namespace {
@@ -150,8 +152,27 @@ TEST_P(FrameRendererAccuracy, AWindowIsExactlyThoseRaysOfTheWholeGrid) {
                                          << w.y << " differs from the whole grid in " << differ << " values";
                 }
             }
-    // A window off the grid is refused.
-    EXPECT_THROW(r->renderWindow(tf, cam, kW, kH, plain(1), {}, RayWindow{60, 0, 2, 1}), std::invalid_argument);
+    // A window off the grid or empty is refused, with a message naming it (the server logs
+    // it as the unit that failed). At image_scale 0.5 the grid is 31x24: x = 40 is inside the
+    // full-size grid but off the smaller one.
+    Quality half = plain(1);
+    half.imageScale = 0.5;
+    const struct {
+        RayWindow window;
+        Quality quality;
+        const char *named;
+    } refused[] = {{{60, 0, 2, 1}, plain(1), "window 2x1+60+0"},   {{-1, 0, 2, 1}, plain(1), "window 2x1+-1+0"},
+                   {{0, 3, 5, 0}, plain(1), "window 5x0+0+3"},     {{0, 46, 1, 2}, plain(1), "window 1x2+0+46"},
+                   {{40, 0, 1, 1}, half, "window 1x1+40+0"}};
+    for (const auto &bad : refused) {
+        try {
+            r->renderWindow(tf, cam, kW, kH, bad.quality, {}, bad.window);
+            ADD_FAILURE() << r->description() << ": " << bad.named << " was rendered, not refused";
+        } catch (const std::invalid_argument &e) {
+            EXPECT_NE(std::string(e.what()).find(bad.named), std::string::npos)
+                << r->description() << ": the refusal \"" << e.what() << "\" does not name " << bad.named;
+        }
+    }
 }
 
 TEST_P(FrameRendererAccuracy, ConstantBoxIsExactWithPartialSegmentsAtAnyStep) {

@@ -1,6 +1,12 @@
 #pragma once
-// Helpers shared by the server's test files: a GET, a request sent byte for byte as given
-// (for the malformed ones no client library would write), and a camera orbiting the demo.
+// Helpers shared by the server's test files: an in-process server started and ready, a
+// client that said hello, a GET, a request sent byte for byte as given (for the malformed
+// ones no client library would write), and a camera orbiting the demo.
+
+#include "client/ws_client.hpp"
+#include "server/server.hpp"
+
+#include <gtest/gtest.h>
 
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
@@ -10,10 +16,38 @@
 
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <string>
+#include <thread>
+#include <variant>
 
 namespace volcast::test {
+
+// Starts `server` and waits until it is ready (its default volume in memory) or `timeout`
+// has passed; a test then sees what is not ready in its own failures.
+inline void startAndWaitReady(server::Server &server, std::chrono::milliseconds timeout) {
+    server.start();
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (!server.state().notReadyReason().empty() && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+}
+
+// The error a message is, or null.
+inline const protocol::ProtocolError *asError(const client::Message &m) {
+    return m.decoded ? std::get_if<protocol::ProtocolError>(&*m.decoded) : nullptr;
+}
+
+// A client on loopback `port` that has said hello (request id 1) as `clientName`; the test
+// fails if the answer is not the server's hello.
+inline std::unique_ptr<client::Client> helloClient(uint16_t port, const std::string &clientName,
+                                                   std::chrono::milliseconds timeout) {
+    auto c = std::make_unique<client::Client>("127.0.0.1", port);
+    c->sendText(nlohmann::json{{"type", "hello"}, {"id", 1}, {"protocol", 1}, {"client", clientName}}.dump());
+    const client::Message hello = client::waitForReply(*c, 1, timeout);
+    EXPECT_TRUE(hello.decoded && std::holds_alternative<protocol::ServerHello>(*hello.decoded)) << hello.text;
+    return c;
+}
 
 // A scene-file camera on a circle around the demo volume's centre (63.5³), angleDeg around y.
 inline nlohmann::json cameraAt(double angleDeg) {

@@ -5,44 +5,28 @@
 // test executable.
 
 #include "renderer/io/volume_io.hpp"
-#include "server/metrics.hpp"
 #include "server/volume_registry.hpp"
+#include "tests/server/registry_fixture.hpp"
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <future>
 #include <iterator>
-#include <unistd.h>
 
 namespace {
 
 namespace fs = std::filesystem;
-using volcast::server::VolumeEntry;
 using volcast::server::VolumeRegistry;
+using volcast::test::kMiB;
+using volcast::test::loadFailure;
+using volcast::test::openNow;
 namespace protocol = volcast::protocol;
 
-constexpr uint64_t kMiB = uint64_t(1) << 20;
-
-class DicomIsolationTest : public ::testing::Test {
+class DicomIsolationTest : public volcast::test::RegistryTest {
   protected:
-    volcast::server::Metrics metrics;
-    fs::path data;
-
-    void SetUp() override {
-        const auto *info = ::testing::UnitTest::GetInstance()->current_test_info();
-        data = fs::temp_directory_path() / ("volcast_dicom_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(data);
-        fs::create_directories(data);
-    }
-    void TearDown() override { fs::remove_all(data); }
-
-    std::unique_ptr<VolumeRegistry> registry() {
-        return std::make_unique<VolumeRegistry>(std::vector<fs::path>{data}, 64 * kMiB, nullptr, metrics, 120.0);
-    }
+    std::unique_ptr<VolumeRegistry> registry() { return RegistryTest::registry(64 * kMiB); }
     // The 223-byte DICOM file of finding 7: the committed fuzz input less its first byte (the
     // fuzz target's choice of file name).
     void writeAbortingDicom(const fs::path &to) {
@@ -61,34 +45,10 @@ class DicomIsolationTest : public ::testing::Test {
     }
 };
 
-VolumeRegistry::Result openNow(VolumeRegistry &r, const std::string &name) {
-    auto promise = std::make_shared<std::promise<VolumeRegistry::Result>>();
-    auto future = promise->get_future();
-    r.open(
-        name, [](const protocol::ProgressMessage &) {},
-        [promise](VolumeRegistry::Result result) { promise->set_value(std::move(result)); });
-    if (future.wait_for(std::chrono::seconds(60)) != std::future_status::ready) {
-        ADD_FAILURE() << "open " << name << " gave no answer in 60 s";
-        return protocol::ProtocolError{};
-    }
-    return future.get();
-}
-
-std::string loadFailure(const VolumeRegistry::Result &r) {
-    if (auto *e = std::get_if<protocol::ProtocolError>(&r)) {
-        EXPECT_EQ(e->code, protocol::ErrorCode::LoadFailed) << e->message;
-        return e->message;
-    }
-    ADD_FAILURE() << "the open succeeded but should have failed";
-    return "";
-}
-
 void expectLoaded(const VolumeRegistry::Result &r, int n) {
-    if (auto *e = std::get_if<protocol::ProtocolError>(&r)) {
-        ADD_FAILURE() << "unexpected error: " << e->message;
-        return;
+    if (const auto entry = volcast::test::entryOf(r)) {
+        EXPECT_EQ(entry->volume->dims.z, n);
     }
-    EXPECT_EQ(std::get<std::shared_ptr<VolumeEntry>>(r)->volume->dims.z, n);
 }
 
 TEST_F(DicomIsolationTest, FileOnWhichGdcmAbortsFailsItsLoadAndTheServerServesTheNextVolume) {

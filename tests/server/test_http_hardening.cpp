@@ -60,12 +60,7 @@ void expectRefusal(const volcast::test::RawExchange &x, int status, const std::s
     EXPECT_TRUE(x.closedAfter) << "the connection stayed open after the refusal";
 }
 
-void startAndWaitReady(volcast::server::Server &server) {
-    server.start();
-    const auto deadline = std::chrono::steady_clock::now() + kStartTimeout;
-    while (!server.state().notReadyReason().empty() && std::chrono::steady_clock::now() < deadline)
-        std::this_thread::sleep_for(20ms);
-}
+void startAndWaitReady(volcast::server::Server &server) { volcast::test::startAndWaitReady(server, kStartTimeout); }
 
 // ---- a server with the default HTTP settings on loopback (and a token) -----------------
 

@@ -9,6 +9,7 @@
 #include "renderer/io/volume_source.hpp"
 #include "server/frame_encoder.hpp"
 #include "server/server.hpp"
+#include "tests/server/child_process.hpp"
 #include "tests/server/server_fixture.hpp"
 
 #include <OpenImageIO/filesystem.h>
@@ -44,9 +45,7 @@ constexpr auto kTimeout = 20s;   // generous: a cold PoCL cache builds programs 
 using volcast::test::HttpReply;
 using volcast::test::httpGet;
 
-const protocol::ProtocolError *asError(const Message &m) {
-    return m.decoded ? std::get_if<protocol::ProtocolError>(&*m.decoded) : nullptr;
-}
+using volcast::test::asError;
 
 // Send a request and return its reply (text), keeping frames and other messages aside.
 Message request(Client &c, json message, std::vector<Message> *skipped = nullptr) {
@@ -148,11 +147,7 @@ class ServerTest : public ::testing::Test {
         // test_ws_hardening.cpp.
         config.writeTimeoutMs = 120000;
         server = std::make_unique<volcast::server::Server>(config);
-        server->start();
-        // Ready once the default (demo) volume is in memory.
-        const auto deadline = std::chrono::steady_clock::now() + kTimeout;
-        while (!server->state().notReadyReason().empty() && std::chrono::steady_clock::now() < deadline)
-            std::this_thread::sleep_for(20ms);
+        volcast::test::startAndWaitReady(*server, kTimeout);
     }
     static void TearDownTestSuite() {
         server.reset();
@@ -163,9 +158,7 @@ class ServerTest : public ::testing::Test {
 
     // A client that said hello and opened `volume` with a 64² viewport; returns the state.
     std::unique_ptr<Client> openSession(const std::string &volume, json *stateOut = nullptr, int side = 64) {
-        auto c = std::make_unique<Client>("127.0.0.1", port());
-        const Message hello = request(*c, {{"type", "hello"}, {"id", 1}, {"protocol", 1}, {"client", "gtest"}});
-        EXPECT_TRUE(hello.decoded && std::holds_alternative<protocol::ServerHello>(*hello.decoded)) << hello.text;
+        auto c = volcast::test::helloClient(port(), "gtest", kTimeout);
         c->sendText(json{{"type", "viewport"}, {"id", 2}, {"image", {{"width", side}, {"height", side}}}}.dump());
         const Message state = request(*c, {{"type", "open_volume"}, {"id", 3}, {"name", volume}});
         EXPECT_TRUE(state.decoded && std::holds_alternative<protocol::StateMessage>(*state.decoded)) << state.text;
@@ -503,24 +496,10 @@ TEST_F(ServerTest, ClientThatStopsReadingStallsNoOneAndHoldsOneFrame) {
 TEST(ServerProcess, SigtermClosesSessionsWithAReasonAndExitsZero) {
     const fs::path portFile = fs::temp_directory_path() / ("volcast_port_" + std::to_string(::getpid()));
     fs::remove(portFile);
-    const pid_t pid = ::fork();
+    const pid_t pid = volcast::test::startServerProcess(
+        {"--port", "0", "--port-file", portFile.string(), "--default-volume", "builtin:sphere", "--log-level", "warn"});
     ASSERT_GE(pid, 0);
-    if (pid == 0) {
-        ::execl(VOLCAST_SERVER_EXE, VOLCAST_SERVER_EXE, "--port", "0", "--port-file", portFile.c_str(),
-                "--default-volume", "builtin:sphere", "--log-level", "warn", static_cast<char *>(nullptr));
-        ::_exit(127);
-    }
-    uint16_t port = 0;
-    const auto deadline = std::chrono::steady_clock::now() + kTimeout;
-    while (port == 0 && std::chrono::steady_clock::now() < deadline) {
-        std::ifstream in(portFile);
-        int p = 0;
-        if (in >> p) {
-            port = uint16_t(p);
-        } else {
-            std::this_thread::sleep_for(20ms);
-        }
-    }
+    const uint16_t port = volcast::test::waitForPort(portFile, kTimeout);
     ASSERT_NE(port, 0) << "the server did not start";
     {
         Client c("127.0.0.1", port);

@@ -6,6 +6,7 @@
 #include "client/ws_client.hpp"
 #include "renderer/make_frame_renderer.hpp"
 #include "server/server.hpp"
+#include "tests/server/child_process.hpp"
 
 #include <gtest/gtest.h>
 
@@ -27,47 +28,10 @@ using namespace std::chrono_literals;
 using nlohmann::json;
 using volcast::client::Client;
 
-// The server executable with `args`, its output in `log`; returns its pid.
-pid_t startServer(std::vector<std::string> args, const fs::path &log) {
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-        if (FILE *f = std::freopen(log.c_str(), "w", stdout)) (void)f;
-        ::dup2(::fileno(stdout), 2);
-        std::vector<char *> argv{const_cast<char *>(VOLCAST_SERVER_EXE)};
-        for (auto &a : args) argv.push_back(a.data());
-        argv.push_back(nullptr);
-        ::execv(VOLCAST_SERVER_EXE, argv.data());
-        ::_exit(127);
-    }
-    return pid;
-}
-
-uint16_t waitForPort(const fs::path &portFile, std::chrono::seconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (std::chrono::steady_clock::now() < deadline) {
-        std::ifstream in(portFile);
-        int p = 0;
-        if (in >> p) return uint16_t(p);
-        std::this_thread::sleep_for(20ms);
-    }
-    return 0;
-}
-
-// Exit status once the process ends, or -1 if it is still running after `timeout`.
-int waitForExit(pid_t pid, std::chrono::milliseconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    int status = 0;
-    while (std::chrono::steady_clock::now() < deadline) {
-        if (::waitpid(pid, &status, WNOHANG) == pid) return status;
-        std::this_thread::sleep_for(10ms);
-    }
-    return -1;
-}
-
-std::string readAll(const fs::path &p) {
-    std::ifstream in(p);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+using volcast::test::readAll;
+using volcast::test::startServerProcess;
+using volcast::test::waitForExit;
+using volcast::test::waitForPort;
 
 class ServerLifecycle : public ::testing::Test {
   protected:
@@ -87,7 +51,7 @@ class ServerLifecycle : public ::testing::Test {
 TEST_F(ServerLifecycle, UnwritableKernelCacheFailsNamingTheFolder) {
     std::ofstream(tmp / "file") << "a regular file, not a folder";
     const fs::path cache = tmp / "file" / "kcache";
-    const pid_t pid = startServer({"--port", "0", "--device", "opencl", "--kernel-cache", cache.string(),
+    const pid_t pid = startServerProcess({"--port", "0", "--device", "opencl", "--kernel-cache", cache.string(),
                                    "--default-volume", ""},
                                   tmp / "log.txt");
     ASSERT_GT(pid, 0);
@@ -107,7 +71,7 @@ TEST_F(ServerLifecycle, DefaultsToTheNativePathWithoutAnOpenClGpu) {
     if (volcast::openClGpuPresent()) GTEST_SKIP() << "this machine has an OpenCL GPU: auto picks it";
     std::ofstream(tmp / "file") << "a regular file, not a folder";
     const fs::path portFile = tmp / "port";
-    const pid_t pid = startServer({"--port", "0", "--port-file", portFile.string(), "--kernel-cache",
+    const pid_t pid = startServerProcess({"--port", "0", "--port-file", portFile.string(), "--kernel-cache",
                                    (tmp / "file" / "kcache").string(), "--default-volume", "builtin:sphere"},
                                   tmp / "log.txt");
     ASSERT_GT(pid, 0);
@@ -123,7 +87,7 @@ TEST_F(ServerLifecycle, DefaultsToTheNativePathWithoutAnOpenClGpu) {
 
 // A --device value that is none of the accepted forms stops the server at once, naming it.
 TEST_F(ServerLifecycle, AnUnknownDeviceIsAClearError) {
-    const pid_t pid = startServer({"--port", "0", "--device", "cuda", "--default-volume", ""}, tmp / "log.txt");
+    const pid_t pid = startServerProcess({"--port", "0", "--device", "cuda", "--default-volume", ""}, tmp / "log.txt");
     ASSERT_GT(pid, 0);
     const int status = waitForExit(pid, 30s);
     ASSERT_NE(status, -1) << "the server started with --device cuda";
@@ -156,7 +120,7 @@ TEST_F(ServerLifecycle, ReadinessWaitsForACompiledKernel) {
 // must still end the process within the grace period (1.5 s here), exiting 0.
 TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongRender) {
     const fs::path portFile = tmp / "port";
-    const pid_t pid = startServer({"--port", "0", "--port-file", portFile.string(), "--default-volume",
+    const pid_t pid = startServerProcess({"--port", "0", "--port-file", portFile.string(), "--default-volume",
                                    "builtin:sphere", "--shutdown-grace-ms", "1500", "--error-calibration", "false",
                                    "--log-level", "info"},
                                   tmp / "log.txt");
@@ -214,7 +178,7 @@ TEST_F(ServerLifecycle, SigtermExitsWithinTheGracePeriodDuringALongPreparation) 
     const fs::path data = VOLCAST_DATA_DIR;
     if (!fs::exists(data / "MANIFEST.md")) GTEST_SKIP() << "no scans in " << data << " (tests/README.md)";
     const fs::path portFile = tmp / "port";
-    const pid_t pid = startServer({"--port", "0", "--port-file", portFile.string(), "--default-volume",
+    const pid_t pid = startServerProcess({"--port", "0", "--port-file", portFile.string(), "--default-volume",
                                    "builtin:sphere", "--data", data.string(), "--shutdown-grace-ms", "1500",
                                    "--log-level", "info"},
                                   tmp / "log.txt");

@@ -7,6 +7,7 @@
 #include "renderer/io/volume_source.hpp"
 #include "renderer/slice.hpp"
 #include "server/server.hpp"
+#include "tests/server/server_fixture.hpp"
 
 #include <gtest/gtest.h>
 
@@ -40,10 +41,7 @@ class SliceServerTest : public ::testing::Test {
         config.idleMs = 100;
         config.ioThreads = 2;
         server = std::make_unique<volcast::server::Server>(config);
-        server->start();
-        const auto deadline = std::chrono::steady_clock::now() + kTimeout;
-        while (!server->state().notReadyReason().empty() && std::chrono::steady_clock::now() < deadline)
-            std::this_thread::sleep_for(20ms);
+        volcast::test::startAndWaitReady(*server, kTimeout);
     }
     static void TearDownTestSuite() {
         server.reset();
@@ -51,10 +49,7 @@ class SliceServerTest : public ::testing::Test {
     }
 
     std::unique_ptr<Client> helloSession() {
-        auto c = std::make_unique<Client>("127.0.0.1", server->port());
-        c->sendText(R"({"type":"hello","id":1,"protocol":1,"client":"gtest slices"})");
-        const Message hello = volcast::client::waitForReply(*c, 1, kTimeout);
-        EXPECT_TRUE(hello.decoded && std::holds_alternative<protocol::ServerHello>(*hello.decoded)) << hello.text;
+        auto c = volcast::test::helloClient(server->port(), "gtest slices", kTimeout);
         c->sendText(R"({"type":"viewport","id":2,"image":{"width":32,"height":32}})");
         return c;
     }
@@ -84,9 +79,7 @@ Message sliceAnswer(Client &c, const json &id) {
     return {};
 }
 
-const protocol::ProtocolError *errorOf(const Message &m) {
-    return m.decoded ? std::get_if<protocol::ProtocolError>(&*m.decoded) : nullptr;
-}
+using volcast::test::asError;
 
 TEST_F(SliceServerTest, ThreeSlicesHaveTheRequestedSizeAndTheRendererSliceBytes) {
     auto c = helloSession();
@@ -155,8 +148,8 @@ TEST_F(SliceServerTest, BadSlicesGetTheirErrorAndTheSessionCarriesOn) {
     auto c = helloSession();
     c->sendText(R"({"type":"slice","id":"early","axis":"axial","width":8,"height":8})");
     const Message early = sliceAnswer(*c, "early");
-    ASSERT_TRUE(errorOf(early)) << early.text;
-    EXPECT_EQ(errorOf(early)->code, protocol::ErrorCode::BadState);
+    ASSERT_TRUE(asError(early)) << early.text;
+    EXPECT_EQ(asError(early)->code, protocol::ErrorCode::BadState);
 
     openVolume(*c, "builtin:demo");
     const std::vector<std::tuple<std::string, protocol::ErrorCode, std::string>> cases = {
@@ -170,7 +163,7 @@ TEST_F(SliceServerTest, BadSlicesGetTheirErrorAndTheSessionCarriesOn) {
     for (const auto &[fields, code, mention] : cases) {
         c->sendText(R"({"type":"slice","id":)" + std::to_string(++id) + "," + fields + "}");
         const Message m = sliceAnswer(*c, id);
-        const protocol::ProtocolError *e = errorOf(m);
+        const protocol::ProtocolError *e = asError(m);
         ASSERT_TRUE(e) << fields << " was not refused";
         EXPECT_EQ(e->code, code) << e->message;
         EXPECT_EQ(e->requestType, "slice");

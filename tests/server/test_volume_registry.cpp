@@ -5,43 +5,24 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/mip_pyramid.hpp"
-#include "server/metrics.hpp"
 #include "server/volume_registry.hpp"
+#include "tests/server/registry_fixture.hpp"
 
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <future>
-#include <unistd.h>
 
 namespace {
 
 namespace fs = std::filesystem;
-using volcast::server::VolumeEntry;
-using volcast::server::VolumeRegistry;
-namespace protocol = volcast::protocol;
+using volcast::test::kMiB;
+using volcast::test::entryOf;
+using volcast::test::loadFailure;
+using volcast::test::openNow;
 
-constexpr uint64_t kMiB = uint64_t(1) << 20;
-
-class VolumeRegistryTest : public ::testing::Test {
+class VolumeRegistryTest : public volcast::test::RegistryTest {
   protected:
-    volcast::server::Metrics metrics;
-    fs::path data;
-
-    void SetUp() override {
-        const auto *info = ::testing::UnitTest::GetInstance()->current_test_info();
-        data = fs::temp_directory_path() / ("volcast_registry_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(data);
-        fs::create_directories(data);
-    }
-    void TearDown() override { fs::remove_all(data); }
-
-    std::unique_ptr<VolumeRegistry> registry(uint64_t budget, double loadTimeout = 120) {
-        // The native CPU path (no OpenCL context): what the registry does is the same for both.
-        return std::make_unique<VolumeRegistry>(std::vector<fs::path>{data}, budget, nullptr, metrics, loadTimeout);
-    }
     // A uint8 NRRD of dims x*y*z: counted as about 3.7 * x*y*z*4 bytes once loaded (float32
     // voxels, mips, the renderer's padded copies and coefficients: CpuRenderer::plannedBytes).
     void writeVolume(const std::string &name, int x, int y, int z) {
@@ -53,41 +34,10 @@ class VolumeRegistryTest : public ::testing::Test {
     }
 };
 
-VolumeRegistry::Result openNow(VolumeRegistry &r, const std::string &name,
-                               const std::shared_ptr<const VolumeEntry> &releasing = nullptr) {
-    auto promise = std::make_shared<std::promise<VolumeRegistry::Result>>();
-    auto future = promise->get_future();
-    r.open(
-        name, [](const protocol::ProgressMessage &) {},
-        [promise](VolumeRegistry::Result result) { promise->set_value(std::move(result)); }, releasing);
-    if (future.wait_for(std::chrono::seconds(60)) != std::future_status::ready) {
-        ADD_FAILURE() << "open " << name << " gave no answer in 60 s";
-        return protocol::ProtocolError{};
-    }
-    return future.get();
-}
-
-std::shared_ptr<VolumeEntry> entryOf(const VolumeRegistry::Result &r) {
-    if (auto *e = std::get_if<protocol::ProtocolError>(&r)) {
-        ADD_FAILURE() << "unexpected error: " << e->message;
-        return nullptr;
-    }
-    return std::get<std::shared_ptr<VolumeEntry>>(r);
-}
-
-std::string errorOf(const VolumeRegistry::Result &r) {
-    if (auto *e = std::get_if<protocol::ProtocolError>(&r)) {
-        EXPECT_EQ(e->code, protocol::ErrorCode::LoadFailed) << e->message;
-        return e->message;
-    }
-    ADD_FAILURE() << "the open succeeded but should have failed";
-    return "";
-}
-
 TEST_F(VolumeRegistryTest, VolumeLargerThanTheWholeBudgetIsRefusedSayingSo) {
     auto r = registry(1 * kMiB);
     // builtin:sphere (64³) counts 3.7 MiB.
-    const std::string builtin = errorOf(openNow(*r, "builtin:sphere"));
+    const std::string builtin = loadFailure(openNow(*r, "builtin:sphere"));
     for (const char *words : {"needs 4 MiB", "whole memory budget of 1 MiB", "--memory-budget-mib"})
         EXPECT_NE(builtin.find(words), std::string::npos) << "no '" << words << "' in: " << builtin;
     // A file is refused from its header: its data file here holds 10 bytes of the 16 MiB the
@@ -96,7 +46,7 @@ TEST_F(VolumeRegistryTest, VolumeLargerThanTheWholeBudgetIsRefusedSayingSo) {
     std::ofstream(data / "big.nhdr") << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 256 256 256\nencoding: raw\n"
                                         "data file: big.raw\n";
     std::ofstream(data / "big.raw") << "0123456789";
-    const std::string file = errorOf(openNow(*r, "big.nhdr"));
+    const std::string file = loadFailure(openNow(*r, "big.nhdr"));
     for (const char *words : {"big.nhdr", "needs 218 MiB", "whole memory budget of 1 MiB", "--memory-budget-mib"})
         EXPECT_NE(file.find(words), std::string::npos) << "no '" << words << "' in: " << file;
     EXPECT_EQ(file.find("truncated"), std::string::npos) << file;
@@ -110,12 +60,12 @@ TEST_F(VolumeRegistryTest, FailedLoadEvictsNothing) {
     // 128 x 128 x 32 voxels count 7.4 MiB: it would fit only by evicting both, and the
     // sphere is held, so it fails, and the unused blob must still be there.
     writeVolume("wide.nrrd", 128, 128, 32);
-    const std::string message = errorOf(openNow(*r, "wide.nrrd"));
+    const std::string message = loadFailure(openNow(*r, "wide.nrrd"));
     EXPECT_NE(message.find("cannot be evicted"), std::string::npos) << message;
     EXPECT_TRUE(r->isLoaded("builtin:gaussian_blob")) << "a failed load evicted an unused volume";
     // A file that fails to load evicts nothing either.
     std::ofstream(data / "broken.nrrd") << "NRRD0004\ntype: float\n";
-    errorOf(openNow(*r, "broken.nrrd"));
+    loadFailure(openNow(*r, "broken.nrrd"));
     EXPECT_TRUE(r->isLoaded("builtin:gaussian_blob"));
     EXPECT_TRUE(r->isLoaded("builtin:sphere"));
 }
@@ -126,12 +76,12 @@ TEST_F(VolumeRegistryTest, SwitchingSessionMayHaveItsOwnVolumeEvicted) {
     auto current = entryOf(openNow(*r, "builtin:sphere"));
     ASSERT_TRUE(current);
     // Without saying that it gives the sphere up, the session's own hold blocks the load.
-    errorOf(openNow(*r, "wide.nrrd"));
+    loadFailure(openNow(*r, "wide.nrrd"));
     EXPECT_TRUE(r->isLoaded("builtin:sphere"));
     // Another session holding the sphere too keeps it, whatever this one releases.
     {
         auto other = entryOf(openNow(*r, "builtin:sphere"));
-        errorOf(openNow(*r, "wide.nrrd", current));
+        loadFailure(openNow(*r, "wide.nrrd", current));
         EXPECT_TRUE(r->isLoaded("builtin:sphere"));
     }
     // Released by its only holder, the sphere makes room; the session still has it until it
@@ -195,7 +145,7 @@ TEST_F(VolumeRegistryTest, LoadPastItsTimeLimitFailsNamingTheFlag) {
     v.voxels.assign(v.voxelCount(), 10.0f);
     volcast::saveDicomSeries(v, data / "series");
     auto r = registry(64 * kMiB, 0.001);
-    const std::string message = errorOf(openNow(*r, "series"));
+    const std::string message = loadFailure(openNow(*r, "series"));
     for (const char *words : {"series", "time limit", "--load-timeout-s"})
         EXPECT_NE(message.find(words), std::string::npos) << "no '" << words << "' in: " << message;
 }
@@ -209,7 +159,7 @@ TEST_F(VolumeRegistryTest, ClientMessagesNameNoServerPath) {
                                                   "encoding: raw\ndata file: ../../outside.raw\n";
     auto r = registry(64 * kMiB);
     for (const char *name : {"ct/missing.nhdr", "ct/broken.nrrd", "ct/escape.nhdr"}) {
-        const std::string message = errorOf(openNow(*r, name));
+        const std::string message = loadFailure(openNow(*r, name));
         EXPECT_EQ(message.find(data.string()), std::string::npos) << message;
         EXPECT_EQ(message.find(fs::canonical(data).string()), std::string::npos) << message;
         EXPECT_EQ(message.find(fs::temp_directory_path().string()), std::string::npos) << message;

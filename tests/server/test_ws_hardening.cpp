@@ -36,15 +36,11 @@ std::unique_ptr<volcast::server::Server> startServer(volcast::server::ServerConf
     config.defaultVolume = "builtin:demo";
     config.errorCalibration = false;   // keeps the worker's time for the frames measured here
     auto server = std::make_unique<volcast::server::Server>(config);
-    server->start();
-    const auto deadline = Clock::now() + kTimeout;
-    while (!server->state().notReadyReason().empty() && Clock::now() < deadline) std::this_thread::sleep_for(20ms);
+    volcast::test::startAndWaitReady(*server, kTimeout);
     return server;
 }
 
-const protocol::ProtocolError *asError(const Message &m) {
-    return m.decoded ? std::get_if<protocol::ProtocolError>(&*m.decoded) : nullptr;
-}
+using volcast::test::asError;
 
 Message request(Client &c, const json &message, std::vector<Message> *skipped = nullptr) {
     c.sendText(message.dump());

@@ -121,12 +121,45 @@ def _compact(obj: Any) -> bytes:
                       allow_nan=False).encode("utf-8")
 
 
+# Frames (VCF1) and slices (VCS1) share one layout: a 4-byte magic, the JSON header's length
+# (uint32 little-endian), the header, then the payload, whose length the header's image_bytes
+# gives. `what` ("frame", "slice") starts every error message.
+
+def _encode_binary(magic: bytes, what: str, header: Dict[str, Any], payload: bytes) -> bytes:
+    text = _compact(dict(header, image_bytes=len(payload)))
+    if len(text) > MAX_FRAME_HEADER_BYTES:
+        raise FrameError(f"{what} header: {len(text)} bytes, over the limit of {MAX_FRAME_HEADER_BYTES}")
+    return magic + struct.pack("<I", len(text)) + text + bytes(payload)
+
+
+def _decode_binary(data: Union[bytes, bytearray, memoryview], magic: bytes,
+                   what: str) -> Tuple[Dict[str, Any], bytes]:
+    """The header (a JSON object, not checked further) and the payload after it."""
+    data = bytes(data)
+    if len(data) < FRAME_PREAMBLE_BYTES:
+        raise FrameError(f"{what}: {len(data)} bytes, shorter than the {FRAME_PREAMBLE_BYTES}-byte "
+                         "preamble (magic and header length)")
+    if data[:4] != magic:
+        raise FrameError(f"{what}: starts with {data[:4]!r}, not the magic {magic!r}")
+    (length,) = struct.unpack_from("<I", data, 4)
+    rest = len(data) - FRAME_PREAMBLE_BYTES
+    if length > MAX_FRAME_HEADER_BYTES:
+        raise FrameError(f"{what}: header length {length} is over the limit of {MAX_FRAME_HEADER_BYTES} bytes")
+    if length > rest:
+        raise FrameError(f"{what}: header length {length} runs past the message's end "
+                         f"({rest} bytes follow the preamble); truncated?")
+    try:
+        header = json.loads(data[FRAME_PREAMBLE_BYTES:FRAME_PREAMBLE_BYTES + length].decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as e:
+        raise FrameError(f"{what} header: malformed JSON: {e}") from None
+    if not isinstance(header, dict):
+        raise FrameError(f"{what} header: must be a JSON object, got {type(header).__name__}")
+    return header, data[FRAME_PREAMBLE_BYTES + length:]
+
+
 def encode_frame(header: Dict[str, Any], image: bytes) -> bytes:
     """The frame message for a header dict and image; image_bytes is filled in."""
-    text = _compact(dict(header, image_bytes=len(image)))
-    if len(text) > MAX_FRAME_HEADER_BYTES:
-        raise FrameError(f"frame header: {len(text)} bytes, over the limit of {MAX_FRAME_HEADER_BYTES}")
-    return FRAME_MAGIC + struct.pack("<I", len(text)) + text + bytes(image)
+    return _encode_binary(FRAME_MAGIC, "frame", header, image)
 
 
 def _require(header: Dict[str, Any], key: str, kinds: Tuple[Type[Any], ...], what: str) -> Any:
@@ -141,25 +174,7 @@ def _require(header: Dict[str, Any], key: str, kinds: Tuple[Type[Any], ...], wha
 
 def decode_frame(data: Union[bytes, bytearray, memoryview]) -> Frame:
     """Decode one binary frame message; raises FrameError naming what is wrong."""
-    data = bytes(data)
-    if len(data) < FRAME_PREAMBLE_BYTES:
-        raise FrameError(f"frame: {len(data)} bytes, shorter than the {FRAME_PREAMBLE_BYTES}-byte "
-                         "preamble (magic and header length)")
-    if data[:4] != FRAME_MAGIC:
-        raise FrameError(f"frame: starts with {data[:4]!r}, not the magic b'VCF1'")
-    (length,) = struct.unpack_from("<I", data, 4)
-    rest = len(data) - FRAME_PREAMBLE_BYTES
-    if length > MAX_FRAME_HEADER_BYTES:
-        raise FrameError(f"frame: header length {length} is over the limit of {MAX_FRAME_HEADER_BYTES} bytes")
-    if length > rest:
-        raise FrameError(f"frame: header length {length} runs past the message's end "
-                         f"({rest} bytes follow the preamble); truncated?")
-    try:
-        header = json.loads(data[FRAME_PREAMBLE_BYTES:FRAME_PREAMBLE_BYTES + length].decode("utf-8"))
-    except (UnicodeDecodeError, ValueError) as e:
-        raise FrameError(f"frame header: malformed JSON: {e}") from None
-    if not isinstance(header, dict):
-        raise FrameError(f"frame header: must be a JSON object, got {type(header).__name__}")
+    header, image = _decode_binary(data, FRAME_MAGIC, "frame")
     for key, low in (("seq", 0), ("level", 0), ("width", 1), ("height", 1)):
         if _require(header, key, (int,), "an integer") < low:
             raise FrameError(f"frame header: {key}: must be at least {low}, got {header[key]}")
@@ -172,7 +187,6 @@ def decode_frame(data: Union[bytes, bytearray, memoryview]) -> Frame:
     image_bytes = _require(header, "image_bytes", (int,), "a non-negative integer")
     if image_bytes < 0:
         raise FrameError(f"frame header: image_bytes: must be a non-negative integer, got {image_bytes}")
-    image = data[FRAME_PREAMBLE_BYTES + length:]
     if len(image) != image_bytes:
         raise FrameError(f"frame: the header's image_bytes is {image_bytes} but {len(image)} bytes "
                          "follow the header" + ("; truncated?" if len(image) < image_bytes else ""))

@@ -6,13 +6,11 @@ Standard library only, except Slice.to_numpy, which imports numpy when called.""
 
 from __future__ import annotations
 
-import json
 import math
-import struct
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Dict, Optional, Sequence, Tuple, Union
 
-from .frames import FRAME_PREAMBLE_BYTES, MAX_FRAME_HEADER_BYTES, FrameError, _compact, _import_optional
+from .frames import FrameError, _decode_binary, _encode_binary, _import_optional
 from .messages import RequestId, _message
 
 if TYPE_CHECKING:
@@ -73,8 +71,7 @@ def is_slice_message(data: Union[bytes, bytearray, memoryview]) -> bool:
 
 def encode_slice(header: Dict[str, Any], pixels: bytes) -> bytes:
     """The slice message for a header dict and pixels; image_bytes is filled in."""
-    text = _compact(dict(header, image_bytes=len(pixels)))
-    return SLICE_MAGIC + struct.pack("<I", len(text)) + text + bytes(pixels)
+    return _encode_binary(SLICE_MAGIC, "slice", header, pixels)
 
 
 def _number(header: Dict[str, Any], key: str) -> float:
@@ -86,20 +83,7 @@ def _number(header: Dict[str, Any], key: str) -> float:
 
 def decode_slice(data: Union[bytes, bytearray, memoryview]) -> Slice:
     """Decode one slice message; raises FrameError naming what is wrong."""
-    data = bytes(data)
-    if len(data) < FRAME_PREAMBLE_BYTES:
-        raise FrameError(f"slice: {len(data)} bytes, shorter than the 8-byte preamble")
-    if data[:4] != SLICE_MAGIC:
-        raise FrameError(f"slice: starts with {data[:4]!r}, not the magic b'VCS1'")
-    (length,) = struct.unpack_from("<I", data, 4)
-    if length > MAX_FRAME_HEADER_BYTES or length > len(data) - FRAME_PREAMBLE_BYTES:
-        raise FrameError(f"slice: header length {length} runs past the message's end or over the limit")
-    try:
-        header = json.loads(data[FRAME_PREAMBLE_BYTES:FRAME_PREAMBLE_BYTES + length].decode("utf-8"))
-    except (UnicodeDecodeError, ValueError) as e:
-        raise FrameError(f"slice header: malformed JSON: {e}") from None
-    if not isinstance(header, dict):
-        raise FrameError("slice header: must be a JSON object")
+    header, pixels = _decode_binary(data, SLICE_MAGIC, "slice")
     for key in ("width", "height"):
         value = header.get(key)
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SLICE_SIDE:
@@ -114,7 +98,6 @@ def decode_slice(data: Union[bytes, bytearray, memoryview]) -> Slice:
             raise FrameError(f"slice header: {key}: must be 3 numbers, got {value!r}")
         for i in range(3):
             _number({f"{key}[{i}]": value[i]}, f"{key}[{i}]")
-    pixels = data[FRAME_PREAMBLE_BYTES + length:]
     expected = header["width"] * header["height"]
     if header.get("image_bytes") != expected or len(pixels) != expected:
         raise FrameError(f"slice: {len(pixels)} pixel bytes (header says {header.get('image_bytes')!r}) "

@@ -41,6 +41,28 @@ class SliceMessageTests(unittest.TestCase):
         with self.assertRaisesRegex(vc.FrameError, r"origin\[1\]"):
             vc.decode_slice(vc.encode_slice(dict(HEADER, origin=[0, "x", 0]), PIXELS))
 
+    def test_framing_is_checked_as_for_frames(self):
+        # Slices and frames share their framing (frames._decode_binary): every cut of a slice
+        # message is refused, and each refusal of the preamble and header starts with "slice".
+        data = vc.encode_slice(HEADER, PIXELS)
+        for n in range(len(data)):
+            with self.assertRaises(vc.FrameError, msg=f"{n} bytes"):
+                vc.decode_slice(data[:n])
+        with self.assertRaisesRegex(vc.FrameError, "^slice: 6 bytes, shorter than the 8-byte preamble"):
+            vc.decode_slice(data[:6])
+        with self.assertRaisesRegex(vc.FrameError, r"^slice: header length \d+ runs past the message's end .*truncated\?"):
+            vc.decode_slice(data[:50])
+        with self.assertRaisesRegex(vc.FrameError, "^slice: header length .* over the limit of 65536"):
+            vc.decode_slice(data[:7] + b"\x7f" + data[8:])
+        with self.assertRaisesRegex(vc.FrameError, "^slice header: malformed JSON"):
+            vc.decode_slice(data[:8] + b"[" + data[9:])
+        text = b"[1, 2]"
+        with self.assertRaisesRegex(vc.FrameError, "^slice header: must be a JSON object, got list"):
+            vc.decode_slice(b"VCS1" + len(text).to_bytes(4, "little") + text)
+        # The encoder refuses a header the decoder would refuse.
+        with self.assertRaisesRegex(vc.FrameError, "^slice header: .* over the limit of 65536"):
+            vc.encode_slice(dict(HEADER, axis="x" * 70000), PIXELS)
+
     def test_request_builder_keeps_only_given_fields(self):
         self.assertEqual(vc.slice_request("axial", 64, 32, id=1),
                          {"type": "slice", "id": 1, "axis": "axial", "width": 64, "height": 32})
