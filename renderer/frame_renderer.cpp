@@ -29,6 +29,8 @@ void validateFrameRequest(const Volume &volume, const TransferFunction &tf, cons
         if (!(quality.crop.min[a] >= 0 && quality.crop.min[a] < quality.crop.max[a] && quality.crop.max[a] <= 1))
             throw std::invalid_argument("quality.crop: axis " + std::to_string(a) +
                                         " must have 0 <= min < max <= 1 (normalised box coordinates)");
+    if (const std::string problem = signedPermutationProblem(quality.orientationCorrection); !problem.empty())
+        throw std::invalid_argument("quality.orientation_correction: is not a signed permutation: " + problem);
 }
 
 Quality compositedQuality(const Quality &quality) {

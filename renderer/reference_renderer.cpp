@@ -338,6 +338,12 @@ ReferenceRenderer::ReferenceRenderer(const Volume &volume, TransferFunction tf,
     opacityUnit_ = tf_.resolvedOpacityUnit(volume);
 }
 
+void ReferenceRenderer::setOrientationCorrection(const OrientationCorrection &correction) {
+    if (const std::string problem = signedPermutationProblem(correction); !problem.empty())
+        throw std::invalid_argument("quality.orientation_correction: is not a signed permutation: " + problem);
+    placement_ = correctedPlacement(volume_, correction);
+}
+
 double ReferenceRenderer::valueAtIndex(const Vec3d &q) const {
     switch (reconstruction_) {
     case Reconstruction::Linear: return TrilinearField(volume_)(q);
@@ -351,8 +357,8 @@ bool ReferenceRenderer::clipRay(const Ray &ray, std::span<const ClipPlane> clipP
                                 double &t1) const {
     t0 = 0;
     t1 = std::numeric_limits<double>::infinity();
-    const Vec3d p0 = volume_.indexFromWorld(ray.origin);
-    const Vec3d dq = volume_.indexFromWorldDir(ray.dir);
+    const Vec3d p0 = placement_.indexFromWorld(ray.origin);
+    const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
     // Slabs of the cell-extent box [-1/2, n - 1/2] in index space (closed), or of the crop
     // box [-1/2 + min·n, -1/2 + max·n] inside it.
     for (int a = 0; a < 3; ++a) {
@@ -389,8 +395,8 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
     if (!clipRay(ray, clipPlanes, t0, t1)) return {};
     if (compositing_ != Compositing::EmissionAbsorption) return project(ray, t0, t1, tolerance, stats);
 
-    const Vec3d p0 = volume_.indexFromWorld(ray.origin);
-    const Vec3d dq = volume_.indexFromWorldDir(ray.dir);
+    const Vec3d p0 = placement_.indexFromWorld(ray.origin);
+    const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
 
     // Split points: the knot planes of the grid (integer index coordinates), or for an
     // analytic field pieces of a quarter voxel, short enough for a degree-9 fit.
@@ -457,7 +463,7 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
                 e[a] = 1;
                 g[a] = (valueAtIndex(q + e) - valueAtIndex(q - e)) / volume_.spacing[a];
             }
-            const Vec3d gWorld = volume_.direction * g;
+            const Vec3d gWorld = placement_.direction * g;
             const double gLength = length(gWorld);
             if (!(gLength > 0)) {
                 diffuse = 1;
@@ -469,7 +475,8 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
         integrator.setLight(shading_ ? &light : nullptr);
 
         if (reconstruction_ == Reconstruction::Analytic) {
-            auto valueAt = [&](double s) { return analytic_(ray.origin + ray.dir * (ta + s * len)); };
+            // The field at the sample's index position: its world point as the file places it.
+            auto valueAt = [&](double s) { return valueAtIndex(indexAt(s)); };
             for (size_t r = 0; r + 1 < roots.size(); ++r)
                 integrator.integrateSubPiece(valueAt, roots[r], roots[r + 1], len);
         } else {
@@ -494,8 +501,8 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
 // that tolerance, not sampled: a thin peak between samples is found wherever it is.
 RayIntegral ReferenceRenderer::project(const Ray &ray, double t0, double t1, double tolerance,
                                        ReferenceStats *stats) const {
-    const Vec3d p0 = volume_.indexFromWorld(ray.origin);
-    const Vec3d dq = volume_.indexFromWorldDir(ray.dir);
+    const Vec3d p0 = placement_.indexFromWorld(ray.origin);
+    const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
     std::vector<double> splits{t0, t1};
     if (reconstruction_ == Reconstruction::Analytic) {
         const double maxRate = std::max({std::fabs(dq.x), std::fabs(dq.y), std::fabs(dq.z)});

@@ -67,11 +67,15 @@ class ReferenceRenderer {
     void setCompositing(Compositing compositing) { compositing_ = compositing; }
     // The crop box (quality.crop), normalised box coordinates; default the whole volume.
     void setCrop(const CropBox &crop) { crop_ = crop; }
-    // Both from a scene's quality; shading too.
+    // Where the volume is drawn (quality.orientation_correction); default: as the file puts it.
+    // An analytic field keeps its own world coordinates and moves with the volume.
+    void setOrientationCorrection(const OrientationCorrection &correction);
+    // All of them from a scene's quality; shading too.
     void setQuality(const Quality &quality) {
         setShading(quality.shading);
         setCompositing(quality.compositing);
         setCrop(quality.crop);
+        setOrientationCorrection(quality.orientationCorrection);
     }
 
     double preprocessSeconds() const { return preprocessSeconds_; }
@@ -92,6 +96,7 @@ class ReferenceRenderer {
     bool shading_ = false;
     Compositing compositing_ = Compositing::EmissionAbsorption;
     CropBox crop_;
+    VolumePlacement placement_ = correctedPlacement(volume_, {});   // the volume's, corrected
 };
 
 } // namespace volcast

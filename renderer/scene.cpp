@@ -202,11 +202,29 @@ CropBox parseCrop(const json &j, const std::string &path) {
     return c;
 }
 
+// Rows of a signed permutation matrix: [[1, 0, 0], [0, -1, 0], [0, 0, 1]] flips y.
+OrientationCorrection parseOrientationCorrection(const json &j, const std::string &path) {
+    const std::string what = "a 3x3 signed permutation matrix, rows of -1, 0 or 1, e.g. [[1, 0, 0], [0, -1, 0], [0, 0, 1]]";
+    array(j, path, what);
+    check(j.size() == 3, path, "must be " + what + ", got " + std::to_string(j.size()) + " rows");
+    OrientationCorrection c;
+    for (size_t r = 0; r < 3; ++r) {
+        const std::string rowPath = element(path, r);
+        array(j[r], rowPath, "a row of 3 integers -1, 0 or 1");
+        check(j[r].size() == 3, rowPath, "must be a row of 3 integers -1, 0 or 1, got " + std::to_string(j[r].size()));
+        for (size_t k = 0; k < 3; ++k)
+            c.m[r * 3 + k] = int(integer(j[r][k], element(rowPath, k), -1, 1, "-1, 0 or 1"));
+    }
+    const std::string problem = signedPermutationProblem(c);
+    check(problem.empty(), path, "is not a signed permutation: " + problem);
+    return c;
+}
+
 Quality parseQuality(const json &j) {
     const Fields f(j, "quality",
                    {"step", "jitter", "preintegrated", "interpolation", "boundary_segment",
                     "early_termination", "empty_space_skipping", "mip_level", "image_scale",
-                    "shading", "seed", "compositing", "crop"});
+                    "shading", "seed", "compositing", "crop", "orientation_correction"});
     Quality q;
     f.optional("step", q.step, number);
     f.optional("jitter", q.jitter, boolean);
@@ -226,6 +244,7 @@ Quality parseQuality(const json &j) {
     f.optional("compositing", q.compositing,
                [](const json &v, const std::string &p) { return choice(v, p, kCompositings); });
     f.optional("crop", q.crop, parseCrop);
+    f.optional("orientation_correction", q.orientationCorrection, parseOrientationCorrection);
 
     check(q.step >= kMinStep, f.pathOf("step"), "must be a positive number of at least 1e-6");
     check(q.earlyTermination > 0 && q.earlyTermination <= 1, f.pathOf("early_termination"),
@@ -337,6 +356,10 @@ ojson qualityJson(const Quality &q) {
     // without them read as before.
     if (q.compositing != Compositing::EmissionAbsorption) out["compositing"] = nameOf(q.compositing, kCompositings);
     if (!q.crop.full()) out["crop"] = {{"min", toJson(q.crop.min)}, {"max", toJson(q.crop.max)}};
+    if (!q.orientationCorrection.identity()) {
+        const auto &m = q.orientationCorrection.m;
+        out["orientation_correction"] = {{m[0], m[1], m[2]}, {m[3], m[4], m[5]}, {m[6], m[7], m[8]}};
+    }
     return out;
 }
 

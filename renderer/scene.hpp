@@ -3,6 +3,7 @@
 // quality + clip planes. One JSON form, read by volcast-render and the server alike.
 
 #include "renderer/camera.hpp"
+#include "renderer/orientation_correction.hpp"
 #include "renderer/transfer_function.hpp"
 
 #include <nlohmann/json.hpp>
@@ -46,9 +47,11 @@ struct Quality {
     bool shading = false;
     uint64_t seed = 0;
     // Not remedies, but part of every frame the ladder derives from the final quality, and
-    // set by the protocol's quality_policy: the compositing mode and the crop box.
+    // set by the protocol's quality_policy: the compositing mode, the crop box and the
+    // user's correction of the patient orientation (orientation_correction.hpp).
     Compositing compositing = Compositing::EmissionAbsorption;
     CropBox crop;
+    OrientationCorrection orientationCorrection;
     bool operator==(const Quality &) const = default;
 };
 

@@ -51,7 +51,8 @@ std::optional<SliceAxis> parseSliceAxis(std::string_view name) {
     return std::nullopt;
 }
 
-SlicePlane slicePlane(const Volume &volume, const SliceRequestGeometry &g) {
+SlicePlane slicePlane(const Volume &volume, const SliceRequestGeometry &g, const OrientationCorrection &correction) {
+    const VolumePlacement placed = correctedPlacement(volume, correction);
     if (g.width < 1 || g.width > kMaxSliceSide)
         throw std::invalid_argument("width: must be in [1, " + std::to_string(kMaxSliceSide) + "], got " +
                                     std::to_string(g.width));
@@ -82,7 +83,7 @@ SlicePlane slicePlane(const Volume &volume, const SliceRequestGeometry &g) {
         const Vec3d idx{(corner & 1) ? double(volume.dims.x) - 0.5 : -0.5,
                         (corner & 2) ? double(volume.dims.y) - 0.5 : -0.5,
                         (corner & 4) ? double(volume.dims.z) - 0.5 : -0.5};
-        const Vec3d w = volume.worldFromIndex(idx);
+        const Vec3d w = placed.worldFromIndex(idx);
         for (int a = 0; a < 3; ++a) {
             lo[a] = std::min(lo[a], w[a]);
             hi[a] = std::max(hi[a], w[a]);
@@ -108,7 +109,8 @@ SlicePlane slicePlane(const Volume &volume, const SliceRequestGeometry &g) {
     return p;
 }
 
-SliceImage sampleSlice(const Volume &volume, const SlicePlane &plane) {
+SliceImage sampleSlice(const Volume &volume, const SlicePlane &plane, const OrientationCorrection &correction) {
+    const VolumePlacement placed = correctedPlacement(volume, correction);
     SliceImage out;
     out.width = plane.width;
     out.height = plane.height;
@@ -119,9 +121,9 @@ SliceImage sampleSlice(const Volume &volume, const SlicePlane &plane) {
     const TrilinearField field(volume);
     const Vec3d hiIndex = Vec3d(volume.dims) - Vec3d{0.5, 0.5, 0.5};
     // Index space is affine in the pixel position: one start and two steps.
-    const Vec3d start = volume.indexFromWorld(plane.origin);
-    const Vec3d dc = volume.indexFromWorldDir(plane.column * plane.pixelSpacing);
-    const Vec3d dr = volume.indexFromWorldDir(plane.row * plane.pixelSpacing);
+    const Vec3d start = placed.indexFromWorld(plane.origin);
+    const Vec3d dc = placed.indexFromWorldDir(plane.column * plane.pixelSpacing);
+    const Vec3d dr = placed.indexFromWorldDir(plane.row * plane.pixelSpacing);
     for (int r = 0; r < plane.height; ++r) {
         for (int c = 0; c < plane.width; ++c) {
             const Vec3d q = start + dc * double(c) + dr * double(r);

@@ -11,6 +11,7 @@
 //   sagittal  columns +y (towards posterior),    rows -z: anterior on the left, superior on top
 // Pixel (c, r) samples world = origin + c·s·column + r·s·row, row 0 at the top.
 
+#include "renderer/orientation_correction.hpp"
 #include "renderer/volume.hpp"
 
 #include <cstdint>
@@ -59,7 +60,10 @@ struct SliceRequestGeometry {
 
 // Throws std::invalid_argument naming the field for a size outside [1, kMaxSliceSide] or over
 // kMaxSlicePixels, a non-finite point or centre, or a spacing not finite and > 0.
-SlicePlane slicePlane(const Volume &volume, const SliceRequestGeometry &geometry);
+// `correction` places the volume as the session's frames do (quality.orientation_correction):
+// a slice of a flipped volume is the flipped slice.
+SlicePlane slicePlane(const Volume &volume, const SliceRequestGeometry &geometry,
+                      const OrientationCorrection &correction = {});
 
 // The volume's values on the plane; outside the cell box `inside` is 0 and the value is the
 // volume's minimum (never NaN: non-finite voxels were replaced by the loader).
@@ -69,7 +73,7 @@ struct SliceImage {
     std::vector<float> values;     // row-major, row 0 at the top
     std::vector<uint8_t> inside;   // 1 where the pixel centre lies in the cell box
 };
-SliceImage sampleSlice(const Volume &volume, const SlicePlane &plane);
+SliceImage sampleSlice(const Volume &volume, const SlicePlane &plane, const OrientationCorrection &correction = {});
 
 // 8-bit grey of the values under window/level (data units): level - window/2 -> 0,
 // level + window/2 -> 255, linear between, rounded to nearest, clamped; background -> 0.

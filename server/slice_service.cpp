@@ -32,7 +32,8 @@ void SliceService::stop() {
     if (thread_.joinable()) thread_.join();
 }
 
-SliceService::Prepared SliceService::prepare(const Volume &volume, const protocol::SliceRequest &request) {
+SliceService::Prepared SliceService::prepare(const Volume &volume, const protocol::SliceRequest &request,
+                                             const OrientationCorrection &correction) {
     const auto axis = parseSliceAxis(request.axis);
     if (!axis) throw std::invalid_argument("axis: must be \"axial\", \"coronal\" or \"sagittal\"");
     SliceRequestGeometry g;
@@ -43,7 +44,8 @@ SliceService::Prepared SliceService::prepare(const Volume &volume, const protoco
     g.pixelSpacing = request.pixelSpacing;
     if (request.center) g.center = vec(*request.center);
     Prepared p;
-    p.plane = slicePlane(volume, g);
+    p.plane = slicePlane(volume, g, correction);
+    p.correction = correction;
     p.point = g.point;
     const WindowLevel wl = defaultWindowLevel(volume);
     p.window = request.window.value_or(wl.window);
@@ -55,7 +57,7 @@ SliceService::Prepared SliceService::prepare(const Volume &volume, const protoco
 
 std::vector<uint8_t> SliceService::render(const Volume &volume, const Prepared &p, const protocol::RequestId &request) {
     const auto start = std::chrono::steady_clock::now();
-    const SliceImage image = sampleSlice(volume, p.plane);
+    const SliceImage image = sampleSlice(volume, p.plane, p.correction);
     const std::vector<uint8_t> grey = windowToGray8(image, p.window, p.level);
     protocol::SliceHeader h;
     h.request = request;
@@ -74,7 +76,8 @@ std::vector<uint8_t> SliceService::render(const Volume &volume, const Prepared &
 }
 
 std::optional<ProtocolError> SliceService::submit(uint64_t session, std::shared_ptr<const Volume> volume,
-                                                  const protocol::SliceRequest &request, Reply reply) {
+                                                  const protocol::SliceRequest &request, Reply reply,
+                                                  const OrientationCorrection &correction) {
     const auto refuse = [&](ErrorCode code, std::string message) {
         return ProtocolError{code, std::move(message), request.id, std::string(kType)};
     };
@@ -86,7 +89,7 @@ std::optional<ProtocolError> SliceService::submit(uint64_t session, std::shared_
                                                " (--max-still-pixels)");
     Job job;
     try {
-        job.prepared = prepare(*volume, request);
+        job.prepared = prepare(*volume, request, correction);
     } catch (const std::invalid_argument &e) {
         return refuse(ErrorCode::BadField, e.what());
     }

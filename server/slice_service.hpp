@@ -49,9 +49,11 @@ class SliceService {
     // Checks the request against the volume and the limits and queues it; reply then runs
     // once with the answer. A refusal is returned instead (reply never runs): bad_field
     // naming the field, too_large over maxPixels, busy with kMaxQueuedPerSession queued for
-    // this session or after stop().
+    // this session or after stop(). `correction` is the session's orientation correction
+    // (quality.orientation_correction): its slices show the volume where its frames do.
     std::optional<protocol::ProtocolError> submit(uint64_t session, std::shared_ptr<const Volume> volume,
-                                                  const protocol::SliceRequest &request, Reply reply);
+                                                  const protocol::SliceRequest &request, Reply reply,
+                                                  const OrientationCorrection &correction = {});
     // Drops the queued requests (unanswered: their sessions are going) and joins the worker.
     void stop();
 
@@ -62,8 +64,10 @@ class SliceService {
         double window = 1;
         double level = 0;
         Vec3d point;
+        OrientationCorrection correction;
     };
-    static Prepared prepare(const Volume &volume, const protocol::SliceRequest &request);
+    static Prepared prepare(const Volume &volume, const protocol::SliceRequest &request,
+                            const OrientationCorrection &correction = {});
     // The whole answer on the calling thread: the slice message's bytes.
     static std::vector<uint8_t> render(const Volume &volume, const Prepared &prepared,
                                        const protocol::RequestId &request);

@@ -455,7 +455,7 @@ void WebsocketSession::onSlice(const protocol::SliceRequest &m) {
                 else self->sendError(std::get<ProtocolError>(std::move(*a)));
             });
         });
-    });
+    }, scene_.scene().quality.orientationCorrection);   // slices show the volume where its frames do
     if (refusal) sendError(std::move(*refusal));
 }
 

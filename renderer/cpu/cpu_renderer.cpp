@@ -306,12 +306,14 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
     set3(p.forward, rays.forward);
     set3(p.right, rays.right * rays.halfWidth());
     set3(p.up, rays.up * rays.halfHeight());
-    const Mat3d dt = volume_->direction.transposed();
+    // The volume where this frame's orientation correction puts it (orientation_correction.hpp).
+    const VolumePlacement placed = correctedPlacement(*volume_, quality.orientationCorrection);
+    const Mat3d dt = placed.direction.transposed();
     for (int r = 0; r < 3; ++r) {
         const Vec3d row{dt(r, 0) / volume_->spacing[r], dt(r, 1) / volume_->spacing[r],
                         dt(r, 2) / volume_->spacing[r]};
         set3(p.indexFromWorld[r], row);
-        p.indexFromWorld[r][3] = float(-dot(row, volume_->origin));
+        p.indexFromWorld[r][3] = float(-dot(row, placed.origin));
     }
     for (size_t c = 0; c < clipPlanes.size(); ++c) {
         const Vec3d nrm = clipPlanes[c].normal;

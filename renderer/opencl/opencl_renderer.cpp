@@ -303,11 +303,13 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
     p.right = f4(rays.right * rays.halfWidth());
     p.up = f4(rays.up * rays.halfHeight());
     // indexFromWorld(x) = Dᵀ(x − origin) / s, written as rows (linear part, translation).
-    const Mat3d dt = volume_->direction.transposed();
+    // The volume where this frame's orientation correction puts it (orientation_correction.hpp).
+    const VolumePlacement placed = correctedPlacement(*volume_, quality.orientationCorrection);
+    const Mat3d dt = placed.direction.transposed();
     for (int r = 0; r < 3; ++r) {
         const Vec3d row{dt(r, 0) / volume_->spacing[r], dt(r, 1) / volume_->spacing[r],
                         dt(r, 2) / volume_->spacing[r]};
-        p.indexFromWorld[r] = f4(row, -dot(row, volume_->origin));
+        p.indexFromWorld[r] = f4(row, -dot(row, placed.origin));
     }
     for (size_t c = 0; c < clipPlanes.size(); ++c) {
         const Vec3d nrm = clipPlanes[c].normal;

@@ -102,8 +102,10 @@ const tfEditor = new TransferFunctionEditor({
 }, (points, { interactive }) => onTfEdited(points, interactive));
 
 const quality = new QualityPanel(document, {
-  // The crop panel adds quality.compositing and quality.crop to the switches.
-  onPolicy: (policy) => session.setQualityPolicy(policy.quality ? { ...policy, quality: crop.decorate(policy.quality) } : policy),
+  // The crop panel adds quality.compositing and quality.crop to the switches, the
+  // orientation controls quality.orientation_correction.
+  onPolicy: (policy) => session.setQualityPolicy(policy.quality
+    ? { ...policy, quality: orientation.decorate(crop.decorate(policy.quality)) } : policy),
   onResolution: (choice) => { app.resolution = choice; updateViewport(); },
   onClip: (planes, { interactive }) => {
     if (!session.volume) return;
@@ -131,6 +133,8 @@ const orientation = new OrientationControls(document, session, {
   setCamera(camera) { app.camera = camera; session.setCamera(camera); },
   getCamera: () => app.camera,
   getTarget: () => app.startCamera?.target ?? null,
+  // A flip or turn of the volume travels with the quality switches, as the crop box does.
+  onCorrection: () => { quality.touched = true; quality.schedule(); },
 });
 
 // Compositing and crop box travel with the quality switches: an edit sends the policy with them.
@@ -283,6 +287,7 @@ session.on("opened", ({ state, restored }) => {
   // After the quality panel shows the state: a preset's shading then overrides it.
   presetPicker.setVolume(volume, app.tf, { restored });
   orientation.setVolume(volume);
+  orientation.showState(state.scene?.quality);
   orientation.showCamera(app.camera);
   $("volume-name").value = "";
   $("volume-info").textContent = $("volume-info").title = describeVolume(volume);
@@ -298,7 +303,9 @@ session.on("opened", ({ state, restored }) => {
 session.on("server_error", (e) => {
   errors.show(e);
   // A refused quality policy leaves the server's: show that, not the refused values.
-  if (e.request_type === "quality_policy") session.getState().then((s) => quality.showState(s), () => {});
+  if (e.request_type === "quality_policy") {
+    session.getState().then((s) => { quality.showState(s); orientation.showState(s.scene?.quality); }, () => {});
+  }
   if (e.request_type === "open_volume" && !session.volume) app.openError = e;
   if ((e.code === "render_failed" || e.code === "internal") && !app.frameSinceOpen) app.renderError = e;
   updateMessage();

@@ -1,13 +1,20 @@
 // The orientation marker (labelled patient axes L/R, A/P, S/I in the view's corner, turning
 // with the camera), the six standard views, and, where the file names no patient space, an
 // "orientation unknown" note with controls that turn the view. The turns are camera changes:
-// the session keeps them and a saved scene holds them in its camera.
+// the session keeps them and a saved scene holds them in its camera. The flips and quarter
+// turns of the volume itself (a mirror no camera move can give) are the scene's
+// quality.orientation_correction: they travel with the quality policy, so the session keeps
+// them and a saved scene holds them. Offered first where the file names no patient axes; for
+// a file that does, they sit behind "Override the file's orientation".
 //
 // The module builds its own elements (a canvas over the view, a card in the side panel) and
 // follows the session's camera from the `scene` events and the frames, so the page only
 // constructs it and hands it the volume and a way to set the camera.
 
-import { projectAxes, rollCamera, screenLabels, standardViewCamera, STANDARD_VIEWS } from "../core/orientation.js";
+import {
+  composeCorrection, CORRECTION_STEPS, describeCorrection, IDENTITY_CORRECTION, isIdentityCorrection,
+  projectAxes, rollCamera, screenLabels, standardViewCamera, STANDARD_VIEWS,
+} from "../core/orientation.js";
 
 const MARKER_CSS_PX = 96;          // the marker's side, CSS pixels
 const AXIS_COLORS = { L: "#e5534b", R: "#e5534b", A: "#3fbf6f", P: "#3fbf6f", S: "#3fb6c8", I: "#3fb6c8" };
@@ -25,17 +32,26 @@ const STYLE = `
 .standard-views button, .orientation-turns button { padding: 3px 4px; }
 .orientation-turns { display: flex; gap: 4px; flex-wrap: wrap; margin-top: 6px; }
 .orientation-turns[hidden] { display: none; }
+.orientation-fix { margin-top: 6px; }
+.orientation-fix summary { cursor: pointer; }
+.orientation-fix-buttons { display: grid; grid-template-columns: repeat(3, 1fr); gap: 4px; margin: 6px 0 4px; }
+.orientation-fix-buttons button, .orientation-fix > button { padding: 3px 4px; }
+.orientation-fix-status.overrides { color: var(--warn, #e0a73a); }
 `;
 
 export class OrientationControls {
   // options: setCamera(camera) sends a camera as a navigation step would; getCamera() the
-  // camera being navigated; getTarget() the volume's centre (the starting view's target).
-  constructor(doc, session, { setCamera, getCamera, getTarget }) {
+  // camera being navigated; getTarget() the volume's centre (the starting view's target);
+  // onCorrection() after the user changed the orientation correction (the page sends the
+  // quality policy, which decorate() completes).
+  constructor(doc, session, { setCamera, getCamera, getTarget, onCorrection = () => {} }) {
     this.doc = doc;
     this.session = session;
     this.setCamera = setCamera;
     this.getCamera = getCamera;
     this.getTarget = getTarget;
+    this.onCorrection = onCorrection;
+    this.correction = IDENTITY_CORRECTION;
     this.known = true;
     this.camera = null;
     this.build();
@@ -80,7 +96,23 @@ export class OrientationControls {
       this.turns.append(b);
     }
     this.status = Object.assign(doc.createElement("div"), { id: "orientation-status", className: "muted small" });
-    card.append(summary, views, this.status, this.turns);
+
+    // Flips and quarter turns of the volume: open where the orientation is unknown.
+    this.fix = Object.assign(doc.createElement("details"), { id: "orientation-fix", className: "orientation-fix" });
+    this.fixSummary = doc.createElement("summary");
+    const buttons = Object.assign(doc.createElement("div"), { className: "orientation-fix-buttons" });
+    for (const [name, step] of Object.entries(CORRECTION_STEPS)) {
+      const b = Object.assign(doc.createElement("button"), { type: "button", textContent: step.label, id: `orientation-${name}`, title: step.title });
+      b.addEventListener("click", () => this.correct(step.matrix));
+      buttons.append(b);
+    }
+    const reset = Object.assign(doc.createElement("button"), {
+      type: "button", id: "orientation-fix-reset", textContent: "As the file says", title: "Remove the flips and turns",
+    });
+    reset.addEventListener("click", () => this.setCorrection(IDENTITY_CORRECTION, { send: true }));
+    this.fixStatus = Object.assign(doc.createElement("div"), { id: "orientation-fix-status", className: "orientation-fix-status small" });
+    this.fix.append(this.fixSummary, buttons, reset, this.fixStatus);
+    card.append(summary, views, this.status, this.turns, this.fix);
     const panel = doc.querySelector("aside.panel");
     panel.prepend(card);
     this.setVolume(null);
@@ -90,11 +122,52 @@ export class OrientationControls {
     this.known = volume ? volume.orientation_known !== false : true;
     this.note.hidden = !volume || this.known;
     this.turns.hidden = !volume || this.known;
+    this.fix.hidden = !volume;
+    this.fix.open = !!volume && !this.known;
+    this.fixSummary.textContent = this.known ? "Override the file's orientation" : "Flip or turn the volume";
+    this.showCorrection();
     this.status.textContent = !volume ? "" : this.known
       ? "The file names its patient axes: views are anatomical."
       : "Orientation unknown: views follow the file's axes (x, y, z as if L, P, S). Turn the view to correct it.";
     this.camera = null;
     this.draw();
+  }
+
+  // The correction a state or frame reports (its scene quality).
+  showState(quality) {
+    this.setCorrection(quality?.orientation_correction ?? IDENTITY_CORRECTION, { send: false });
+  }
+
+  correct(step) {
+    if (!this.session.volume) return;
+    this.setCorrection(composeCorrection(step, this.correction), { send: true });
+  }
+
+  setCorrection(matrix, { send }) {
+    this.correction = matrix.map((row) => [...row]);
+    this.showCorrection();
+    if (send) this.onCorrection();
+  }
+
+  showCorrection() {
+    const words = describeCorrection(this.correction);
+    this.fixStatus.dataset.correction = JSON.stringify(this.correction);
+    this.fixStatus.classList.toggle("overrides", this.known && !!words);
+    this.fixStatus.textContent = !words ? "As the file places it."
+      : this.known ? `Overrides the file's orientation: ${words}.`
+        : `Corrected: ${words}. Kept by the session and saved with the scene.`;
+    this.note.textContent = !words
+      ? "Orientation unknown: the file names no patient axes; labels show the file's axes"
+      : `Orientation unknown; corrected by hand (${words})`;
+  }
+
+  // quality.orientation_correction added to a quality object (left out when none, as the
+  // server writes it).
+  decorate(quality) {
+    const q = { ...quality };
+    if (isIdentityCorrection(this.correction)) delete q.orientation_correction;
+    else q.orientation_correction = this.correction.map((row) => [...row]);
+    return q;
   }
 
   standardView(name) {

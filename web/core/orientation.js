@@ -65,3 +65,41 @@ export function screenLabels(camera) {
   const best = (score) => axes.reduce((b, a) => (score(a) > score(b) ? a : b)).label;
   return { right: best((a) => a.x), up: best((a) => a.y), toward: best((a) => -a.depth) };
 }
+
+// The user's correction of where the volume lies in patient space: the scene's
+// quality.orientation_correction, a signed permutation of the world axes (rows; flips and
+// quarter turns only) applied about the volume's centre (renderer/orientation_correction.hpp).
+// Each step below is one such matrix; pressing it again after others composes them.
+export const IDENTITY_CORRECTION = Object.freeze([[1, 0, 0], [0, 1, 0], [0, 0, 1]]);
+
+export const CORRECTION_STEPS = Object.freeze({
+  "flip-lr": { label: "Flip L/R", title: "Mirror the volume left–right (no camera move can do this)", matrix: [[-1, 0, 0], [0, 1, 0], [0, 0, 1]] },
+  "flip-ap": { label: "Flip A/P", title: "Mirror the volume front–back", matrix: [[1, 0, 0], [0, -1, 0], [0, 0, 1]] },
+  "flip-si": { label: "Flip S/I", title: "Mirror the volume head–foot (upside down)", matrix: [[1, 0, 0], [0, 1, 0], [0, 0, -1]] },
+  "turn-si": { label: "Turn 90° about S/I", title: "Turn the volume a quarter turn about the head–foot axis", matrix: [[0, -1, 0], [1, 0, 0], [0, 0, 1]] },
+  "turn-ap": { label: "Turn 90° about A/P", title: "Turn the volume a quarter turn about the front–back axis", matrix: [[0, 0, 1], [0, 1, 0], [-1, 0, 0]] },
+  "turn-lr": { label: "Turn 90° about L/R", title: "Turn the volume a quarter turn about the left–right axis", matrix: [[1, 0, 0], [0, 0, -1], [0, 1, 0]] },
+});
+
+// step · correction: the step applied after the correction so far.
+export function composeCorrection(step, correction) {
+  return step.map((row) => [0, 1, 2].map((c) => row.reduce((s, v, k) => s + v * correction[k][c], 0)));
+}
+
+export function isIdentityCorrection(m) {
+  return !m || m.every((row, r) => row.every((v, c) => v === (r === c ? 1 : 0)));
+}
+
+// In words, for the panel: "" for none; "flipped L/R, S/I" for flips; otherwise where each
+// of the file's axes now points ("x→−z, y→y, z→x").
+export function describeCorrection(m) {
+  if (isIdentityCorrection(m)) return "";
+  const names = ["L/R", "A/P", "S/I"];
+  if (m.every((row, r) => row.every((v, c) => r === c || v === 0)))
+    return `flipped ${names.filter((_, a) => m[a][a] === -1).join(", ")}`;
+  const axis = ["x", "y", "z"];
+  return [0, 1, 2].map((c) => {
+    const r = [0, 1, 2].find((i) => m[i][c] !== 0);
+    return `${axis[c]}→${m[r][c] < 0 ? "−" : ""}${axis[r]}`;
+  }).join(", ");
+}

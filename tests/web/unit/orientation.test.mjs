@@ -3,7 +3,10 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { projectAxes, rollCamera, screenLabels, standardViewCamera, STANDARD_VIEWS } from "../../../web/core/orientation.js";
+import {
+  composeCorrection, CORRECTION_STEPS, describeCorrection, IDENTITY_CORRECTION, isIdentityCorrection,
+  projectAxes, rollCamera, screenLabels, standardViewCamera, STANDARD_VIEWS,
+} from "../../../web/core/orientation.js";
 import { windowLevelStep } from "../../../web/core/window_level.js";
 
 const start = { eye: [0, -500, 0], target: [10, 20, 30], up: [0, 0, 1], projection: "perspective", fov_y_deg: 30 };
@@ -59,4 +62,24 @@ test("window/level drag scales with the window and the data, not a fixed share o
   // Horizontal: the window grows by exp(0.004·dx), never to zero.
   assert.ok(Math.abs(windowLevelStep(bone, 100, 0, ct).window - 2000 * Math.exp(0.4)) < 1e-6);
   assert.ok(windowLevelStep(bone, -1e6, 0, ct).window > 0);
+});
+
+test("orientation correction steps are signed permutations; composing applies the step after", () => {
+  for (const [name, step] of Object.entries(CORRECTION_STEPS)) {
+    const m = step.matrix;
+    for (let i = 0; i < 3; i++) {
+      assert.equal(m[i].filter((v) => v !== 0).length, 1, `${name} row ${i}`);
+      assert.equal([0, 1, 2].filter((r) => m[r][i] !== 0).length, 1, `${name} column ${i}`);
+    }
+    // A flip twice, or a quarter turn four times, is no correction.
+    let c = IDENTITY_CORRECTION;
+    const times = name.startsWith("flip") ? 2 : 4;
+    for (let k = 0; k < times; k++) c = composeCorrection(m, c);
+    assert.ok(isIdentityCorrection(c), `${name} ×${times}: ${JSON.stringify(c)}`);
+  }
+  const flipThenTurn = composeCorrection(CORRECTION_STEPS["turn-si"].matrix, CORRECTION_STEPS["flip-lr"].matrix);
+  assert.deepEqual(flipThenTurn, [[0, -1, 0], [-1, 0, 0], [0, 0, 1]]);
+  assert.equal(describeCorrection(IDENTITY_CORRECTION), "");
+  assert.equal(describeCorrection([[-1, 0, 0], [0, 1, 0], [0, 0, -1]]), "flipped L/R, S/I");
+  assert.equal(describeCorrection(flipThenTurn), "x→−y, y→−x, z→z");
 });
