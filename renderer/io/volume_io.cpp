@@ -414,6 +414,7 @@ struct NrrdLayout {
     int64_t byteSkip = 0;
     bool attached = false;                // data follows the header's blank line
     uint64_t headerEnd = 0;
+    std::vector<uint64_t> sizes;          // the "sizes:" field, each a whole number
 };
 
 std::optional<NrrdLayout> scanNrrdHeader(const fs::path &path) {
@@ -435,7 +436,20 @@ std::optional<NrrdLayout> scanNrrdHeader(const fs::path &path) {
         if (colon == std::string::npos || (kv != std::string::npos && kv < colon)) continue;
         const std::string key = lower(trim(line.substr(0, colon)));
         const std::string value = trim(line.substr(colon + 2));
-        if (key == "encoding") {
+        if (key == "sizes") {
+            // Read here too: ITK 5.2 keeps each size as a 32-bit number, so 21474836481 reached
+            // our checks as 1 while NrrdIO allocated 343 GB for it (fuzz finding 13).
+            std::istringstream tokens(value);
+            for (std::string token; tokens >> token;) {
+                const bool digits = token.size() <= 19 && std::all_of(token.begin(), token.end(), [](char c) {
+                    return c >= '0' && c <= '9';
+                });
+                if (!digits)
+                    fail(path, fmt::format("NRRD header's sizes hold '{}', which is not a whole number",
+                                           token.size() > 24 ? token.substr(0, 24) + "..." : token));
+                layout.sizes.push_back(std::stoull(token));
+            }
+        } else if (key == "encoding") {
             layout.encoding = lower(value);
         } else if (key == "data file" || key == "datafile") {
             // "LIST" and "pattern min max step [subdim]" name several files.
@@ -1151,6 +1165,14 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
         const uint64_t size = a < nd ? uint64_t(io->GetDimensions(a)) : 1;
         v.dims[int(a)] = size > uint64_t(std::numeric_limits<int64_t>::max()) ? -1 : int64_t(size);
     }
+    if (nrrd)
+        for (size_t a = 0; a < nrrd->sizes.size(); ++a) {
+            const uint64_t itkSize = a < nd ? uint64_t(io->GetDimensions(unsigned(a))) : 1;
+            if (nrrd->sizes[a] != itkSize)
+                fail(path, fmt::format("NRRD header's sizes give axis {} {} samples, but ITK read {} (it keeps a "
+                                       "size in 32 bits): the header is refused",
+                                       a, nrrd->sizes[a], itkSize));
+        }
     checkShape(path, v.dims, options);
     Mat3d direction;
     for (unsigned a = 0; a < 3 && a < nd; ++a) {
