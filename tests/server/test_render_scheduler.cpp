@@ -388,21 +388,15 @@ TEST(RenderScheduler, BandsThinnerThanAWorkGroupDoNotSlowRefinementToOneRowPerUn
 // top half of the grid here), much where they cross it (the bottom half), and 20 times as
 // much tricubic as trilinear, 5 times what the ladder's prediction assumes (4: 64 taps
 // instead of 8), as the two-tab scenario measured for iguana cubic and shaded.
-class UnevenRenderer : public FrameRenderer {
+class UnevenRenderer : public SlowRenderer {
   public:
     UnevenRenderer(std::shared_ptr<const Volume> volume, double denseMsPerRay)
-        : slow_(std::move(volume), 0), denseMsPerRay_(denseMsPerRay) {}
-    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override {
-        const int w = raysForScale(width, quality.imageScale), h = raysForScale(height, quality.imageScale);
-        Image cast = renderWindow(tf, camera, width, height, quality, clipPlanes, RayWindow{0, 0, w, h}, stats);
-        return w == width && h == height ? cast : resizeBilinear(cast, width, height);
-    }
+        : SlowRenderer(std::move(volume), 0), denseMsPerRay_(denseMsPerRay) {}
     Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
                        const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
                        RenderStats *stats = nullptr) override {
         const auto t0 = Clock::now();
-        Image part = slow_.renderWindow(tf, camera, width, height, quality, clipPlanes, window, stats);
+        Image part = SlowRenderer::renderWindow(tf, camera, width, height, quality, clipPlanes, window, stats);
         const int gridHeight = raysForScale(height, quality.imageScale);
         const int denseRows = std::max(0, window.y + window.height - std::max(window.y, gridHeight / 2));
         const double perRay = denseMsPerRay_ * (quality.interpolation == Interpolation::Cubic ? 20 : 1);
@@ -410,13 +404,9 @@ class UnevenRenderer : public FrameRenderer {
         std::this_thread::sleep_until(t0 + std::chrono::duration_cast<Clock::duration>(Ms(ms)));
         return part;
     }
-    bool rendersWindowsCheaply() const override { return true; }
     std::string description() const override { return "slow test renderer, dense bottom half"; }
-    PreprocessCounts preprocessCounts() const override { return slow_.preprocessCounts(); }
-    const Volume &volume() const override { return slow_.volume(); }
 
   private:
-    SlowRenderer slow_;
     double denseMsPerRay_;
 };
 
