@@ -20,9 +20,11 @@ void bsplinePrefilterLine(Real *data, size_t n, ptrdiff_t stride);
 template <typename Real>
 void bsplinePrefilterSimple(Real *data, Vec3i dims);
 
-// The same result, bit for bit, on several threads: all of an axis finishes before the next
-// starts. On y and z each thread filters whole slices or rows of adjacent lines together,
-// stepping along contiguous rows instead of striding through memory one line at a time.
+// The same filter on several threads, computed in float: within 432·FLT_EPSILON × the largest
+// sample of the exact (double) result (the bound is derived in test_bspline_prefilter.cpp),
+// and the same bits on any thread count. x and y run one z slice at a time while it is in
+// cache (x lines 16 side by side in a transposed block, y lines a whole slice side by side),
+// then z over chunks of the xy plane: two passes over memory instead of three.
 // threads = 0: std::thread::hardware_concurrency().
 void bsplinePrefilterMultithreaded(float *data, Vec3i dims, int threads = 0);
 

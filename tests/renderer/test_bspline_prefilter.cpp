@@ -127,28 +127,76 @@ std::string name(Vec3i d) {
     return std::to_string(d.x) + "x" + std::to_string(d.y) + "x" + std::to_string(d.z);
 }
 
-TEST(BSplinePrefilter, MultithreadedAgreesWithSimple) {
-    for (const Vec3i &dims : kAgreementDims)
+// The multithreaded prefilter computes in float (simple in double, then rounds), so it is held
+// to float rounding of the recursion, relative to the largest sample M. Per axis: the causal
+// values reach 6/(1 − |z|)·m ≈ 8.2·m (m the axis's largest input), each step rounds twice
+// (½ε each) and an error decays by |z| per step, so ≤ 8.2·ε/(1 − |z|) ≈ 11ε·m; the anticausal
+// sweep passes on |z|/(1 − |z|) of that and adds ≈ 2ε·m: ≤ 12ε·m per axis, rounded up to 16ε.
+// Each axis's filter has ∞-norm √3·(1 + |z|)/(1 − |z|) = 3, so the inputs of the three axes
+// are ≤ M, 3M, 9M, and the first axis's error is multiplied by 9, the second's by 3:
+// 16ε·(9M + 3·3M + 9M) = 432ε·M ≈ 5.2e-5·M. A wrong initialisation or a missing pass is off
+// by a sizeable fraction of M (a causal sum truncated after 6 terms: |z|^6·8.2M ≈ 3e-3·M).
+constexpr double kFloatRecursionBound = 432 * 1.1920928955078125e-7; // × M; FLT_EPSILON
+
+void expectWithinFloatRounding(const std::vector<float> &got, const std::vector<float> &samples, Vec3i dims,
+                               const std::string &what) {
+    std::vector<double> exact(samples.begin(), samples.end());
+    bsplinePrefilterSimple(exact.data(), dims);
+    double largestSample = 0, worst = 0;
+    size_t worstAt = 0;
+    for (float x : samples) largestSample = std::max(largestSample, double(std::fabs(x)));
+    ASSERT_EQ(got.size(), samples.size()) << what;
+    for (size_t k = 0; k < got.size(); ++k)
+        if (const double e = std::fabs(double(got[k]) - exact[k]); e > worst) worst = e, worstAt = k;
+    EXPECT_LE(worst, kFloatRecursionBound * largestSample)
+        << what << ": largest error " << worst << " at voxel " << worstAt << " (" << got[worstAt] << " against "
+        << exact[worstAt] << "), " << worst / largestSample / 1.1920928955078125e-7
+        << " FLT_EPSILON × the largest sample; the bound is 432";
+}
+
+// Odd sizes; full and partial groups of 16 x lines; axes of 1, 2 and 3 samples in every
+// position; axes shorter than, equal to and longer than the float initialisation's horizon
+// (13: there the causal sum switches from the whole mirrored period to a truncated sum).
+const Vec3i kMultithreadedDims[] = {{37, 5, 3},  {70, 21, 9},  {9, 40, 23}, {1, 2, 17}, {3, 1, 2},
+                                     {16, 9, 11}, {12, 13, 14}, {2, 2, 2},   {1, 1, 1},  {33, 1, 1}};
+
+TEST(BSplinePrefilter, MultithreadedWithinFloatRoundingOfTheExactResult) {
+    for (const Vec3i &dims : kMultithreadedDims)
         for (int threads : {1, 2, 3, 0}) {
             const std::vector<float> samples = randomVolume(dims, 3);
             std::vector<float> got = samples;
             bsplinePrefilterMultithreaded(got.data(), dims, threads);
-            expectAgreesWithSimple(got, samples, dims, name(dims) + " threads=" + std::to_string(threads));
+            expectWithinFloatRounding(got, samples, dims, name(dims) + " threads=" + std::to_string(threads));
         }
 }
 
-TEST(BSplinePrefilter, MultithreadedMatchesSimpleBitForBit) {
-    // Same line filter on the same lines: only the order of lines differs, never the arithmetic
-    // (the x lines are filtered 16 side by side in a transposed block: full and partial blocks
-    // here, lines shorter and longer than the initialisation's horizon).
-    for (const Vec3i &dims : {Vec3i{37, 5, 3}, Vec3i{70, 21, 9}, Vec3i{9, 40, 23}})
-        for (int threads : {1, 2, 3}) {
-            const std::vector<float> samples = randomVolume(dims, 4);
-            std::vector<float> simple = samples, threaded = samples;
-            bsplinePrefilterSimple(simple.data(), dims);
-            bsplinePrefilterMultithreaded(threaded.data(), dims, threads);
-            EXPECT_EQ(simple, threaded) << name(dims) << " threads=" << threads;
+TEST(BSplinePrefilter, MultithreadedWithinFloatRoundingOnTheWorstCaseCheckerboard) {
+    // ±M alternating along every axis meets each axis's gain of 3 in full: coefficients ±27M.
+    for (const Vec3i &dims : {Vec3i{40, 17, 33}, Vec3i{5, 64, 7}}) {
+        std::vector<float> samples(size_t(dims.x * dims.y * dims.z));
+        for (int64_t k = 0; k < dims.z; ++k)
+            for (int64_t j = 0; j < dims.y; ++j)
+                for (int64_t i = 0; i < dims.x; ++i)
+                    samples[size_t((k * dims.y + j) * dims.x + i)] = (i + j + k) % 2 ? -1000.0f : 1000.0f;
+        std::vector<float> got = samples;
+        bsplinePrefilterMultithreaded(got.data(), dims, 2);
+        expectWithinFloatRounding(got, samples, dims, "checkerboard " + name(dims));
+    }
+}
+
+TEST(BSplinePrefilter, MultithreadedGivesTheSameBitsOnAnyThreadCount) {
+    // Lines are grouped by slice (x, y) and by fixed chunks of the xy plane (z), never by a
+    // thread's share, so the arithmetic of every voxel is the same on 1, 2 or 3 threads.
+    for (const Vec3i &dims : {Vec3i{70, 21, 9}, Vec3i{9, 40, 23}, Vec3i{130, 67, 5}}) {
+        const std::vector<float> samples = randomVolume(dims, 4);
+        std::vector<float> one = samples;
+        bsplinePrefilterMultithreaded(one.data(), dims, 1);
+        for (int threads : {2, 3}) {
+            std::vector<float> many = samples;
+            bsplinePrefilterMultithreaded(many.data(), dims, threads);
+            EXPECT_EQ(one, many) << name(dims) << " threads=" << threads;
         }
+    }
 }
 
 TEST(BSplinePrefilter, OpenClAgreesWithSimple) {
