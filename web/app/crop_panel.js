@@ -25,10 +25,12 @@ export function withCompositingAndCrop(quality, compositing, crop) {
 }
 
 export class CropPanel {
-  // card: an empty <details> to fill; onChange({ interactive }) after every edit.
+  // card: an empty <details> to fill; onChange({ interactive }) after every edit:
+  // interactive while a slider is dragged, not for its release or any other edit.
   constructor(card, onChange) {
     this.card = card;
     this.onChange = onChange;
+    this.dragging = false;
     this.build();
   }
 
@@ -66,14 +68,22 @@ export class CropPanel {
         Object.assign(input, { id, type: "range", min: "0", max: "1", step: "0.005", value: side === "min" ? "0" : "1" });
         const out = document.createElement("output");
         out.htmlFor = id;
-        input.addEventListener("input", () => { this.keepOrder(a, side); this.show(); this.onChange({ interactive: true }); });
-        input.addEventListener("change", () => { this.keepOrder(a, side); this.show(); this.onChange({ interactive: false }); });
+        // A drag is an interaction (input, input, …), its release (change) the end of it.
+        input.addEventListener("input", () => { this.dragging = true; this.keepOrder(a, side); this.show(); this.onChange({ interactive: true }); });
+        input.addEventListener("change", () => { this.dragging = false; this.keepOrder(a, side); this.show(); this.onChange({ interactive: false }); });
         row.append(label, input, out);
         card.append(row);
         this.sliders[side][a] = input;
         this.outputs[side][a] = out;
       }
     }
+    // A drag back to where it started fires no change: the release still ends the
+    // interaction (after the change event, where there is one).
+    document.addEventListener("pointerup", () => setTimeout(() => {
+      if (!this.dragging) return;
+      this.dragging = false;
+      this.onChange({ interactive: false });
+    }, 0));
     const reset = document.createElement("button");
     reset.type = "button";
     reset.id = "crop-reset";

@@ -101,11 +101,14 @@ const tfEditor = new TransferFunctionEditor({
   remove: $("tf-point-remove"), window: $("tf-window"), level: $("tf-level"),
 }, (points, { interactive }) => onTfEdited(points, interactive));
 
+// The crop panel adds quality.compositing and quality.crop to the switches, the
+// orientation controls quality.orientation_correction.
+const completePolicy = (policy) => (policy.quality
+  ? { ...policy, quality: orientation.decorate(crop.decorate(policy.quality)) } : policy);
+const sendPolicy = perAnimationFrame((policy) => session.setQualityPolicy(policy));
+
 const quality = new QualityPanel(document, {
-  // The crop panel adds quality.compositing and quality.crop to the switches, the
-  // orientation controls quality.orientation_correction.
-  onPolicy: (policy) => session.setQualityPolicy(policy.quality
-    ? { ...policy, quality: orientation.decorate(crop.decorate(policy.quality)) } : policy),
+  onPolicy: (policy) => session.setQualityPolicy(completePolicy(policy)),
   onResolution: (choice) => { app.resolution = choice; updateViewport(); },
   onClip: (planes, { interactive }) => {
     if (!session.volume) return;
@@ -135,10 +138,22 @@ const orientation = new OrientationControls(document, session, {
   getTarget: () => app.startCamera?.target ?? null,
   // A flip or turn of the volume travels with the quality switches, as the crop box does.
   onCorrection: () => { quality.touched = true; quality.schedule(); },
+  // The clip slider spans the volume as drawn: a quarter turn swaps its extents.
+  onCorrectionShown: (matrix) => quality.setCorrection(matrix),
 });
 
-// Compositing and crop box travel with the quality switches: an edit sends the policy with them.
-const crop = new CropPanel($("crop-card"), () => { quality.touched = true; quality.schedule(); });
+// Compositing and crop box travel with the quality switches. A crop slider's drag is an
+// interaction, as a camera drag is: between interaction_start and interaction_end the policy
+// goes at most once per animation frame (the server answers with cheap frames), and the
+// release sends it at once, for the refinement up to the final frame.
+const crop = new CropPanel($("crop-card"), ({ interactive }) => {
+  quality.touched = true;
+  if (!session.volume) return quality.schedule();
+  quality.cancelScheduled();
+  if (interactive) { session.beginInteraction(); sendPolicy(completePolicy(quality.policy())); return; }
+  sendPolicy.now(completePolicy(quality.policy()));
+  if (!view.interacting) session.endInteraction();
+});
 
 // --- transfer function ----------------------------------------------------------------
 
@@ -282,7 +297,7 @@ session.on("opened", ({ state, restored }) => {
   showTransferFunction(session.scene.transfer_function ?? state.scene?.transfer_function);
   quality.showState(state);
   crop.showState(state.scene?.quality);
-  quality.setVolume(volume, session.scene.clip_planes);
+  quality.setVolume(volume, session.scene.clip_planes, state.scene?.quality?.orientation_correction);
   showOpenVolume();
   // After the quality panel shows the state: a preset's shading then overrides it.
   presetPicker.setVolume(volume, app.tf, { restored });

@@ -43,16 +43,19 @@ export class OrientationControls {
   // options: setCamera(camera) sends a camera as a navigation step would; getCamera() the
   // camera being navigated; getTarget() the volume's centre (the starting view's target);
   // onCorrection() after the user changed the orientation correction (the page sends the
-  // quality policy, which decorate() completes).
-  constructor(doc, session, { setCamera, getCamera, getTarget, onCorrection = () => {} }) {
+  // quality policy, which decorate() completes); onCorrectionShown(matrix) after every
+  // change of the correction shown, the user's or the server's (the clip slider's box).
+  constructor(doc, session, { setCamera, getCamera, getTarget, onCorrection = () => {}, onCorrectionShown = () => {} }) {
     this.doc = doc;
     this.session = session;
     this.setCamera = setCamera;
     this.getCamera = getCamera;
     this.getTarget = getTarget;
     this.onCorrection = onCorrection;
+    this.onCorrectionShown = onCorrectionShown;
     this.correction = IDENTITY_CORRECTION;
     this.known = true;
+    this.hasVolume = false;
     this.camera = null;
     this.build();
     session.on("scene", ({ key, value }) => { if (key === "camera") this.showCamera(value); });
@@ -125,10 +128,8 @@ export class OrientationControls {
     this.fix.hidden = !volume;
     this.fix.open = !!volume && !this.known;
     this.fixSummary.textContent = this.known ? "Override the file's orientation" : "Flip or turn the volume";
+    this.hasVolume = !!volume;
     this.showCorrection();
-    this.status.textContent = !volume ? "" : this.known
-      ? "The file names its patient axes: views are anatomical."
-      : "Orientation unknown: views follow the file's axes (x, y, z as if L, P, S). Turn the view to correct it.";
     this.camera = null;
     this.draw();
   }
@@ -146,6 +147,7 @@ export class OrientationControls {
   setCorrection(matrix, { send }) {
     this.correction = matrix.map((row) => [...row]);
     this.showCorrection();
+    this.onCorrectionShown(this.correction);
     if (send) this.onCorrection();
   }
 
@@ -159,6 +161,12 @@ export class OrientationControls {
     this.note.textContent = !words
       ? "Orientation unknown: the file names no patient axes; labels show the file's axes"
       : `Orientation unknown; corrected by hand (${words})`;
+    // An override of a file's own axes is said where the views are explained, not only
+    // in the closed "Override" panel.
+    this.status.textContent = !this.hasVolume ? "" : !this.known
+      ? "Orientation unknown: views follow the file's axes (x, y, z as if L, P, S). Turn the view to correct it."
+      : words ? `The file names its patient axes, corrected by hand (${words}): views follow the corrected axes.`
+        : "The file names its patient axes: views are anatomical.";
   }
 
   // quality.orientation_correction added to a quality object (left out when none, as the

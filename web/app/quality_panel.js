@@ -2,6 +2,8 @@
 // switches), the render resolution, and the clip plane.
 
 import { volumeBounds } from "../core/camera.js";
+import { axisClipPlane, sliderOfPlane } from "../core/clip_plane.js";
+import { correctedBounds, IDENTITY_CORRECTION } from "../core/orientation.js";
 
 export const POLICY_SETTLE_MS = 250;   // ms after the last edit before the policy is sent
 
@@ -37,7 +39,9 @@ export class QualityPanel {
     this.touched = false;        // the user changed a switch: send them with the policy
     this.seed = 0;
     this.timer = null;
-    this.bounds = null;
+    this.volumeBox = null;      // the volume's own box (camera.js's volumeBounds)
+    this.correction = IDENTITY_CORRECTION;
+    this.bounds = null;         // the box it is drawn in: volumeBox after the orientation correction
     this.bind();
   }
 
@@ -76,6 +80,10 @@ export class QualityPanel {
     clearTimeout(this.timer);
     this.timer = setTimeout(() => this.cb.onPolicy(this.policy()), POLICY_SETTLE_MS);
   }
+
+  // The policy is being sent now by the caller: a scheduled send would only repeat it (and
+  // restart the server's refinement).
+  cancelScheduled() { clearTimeout(this.timer); this.timer = null; }
 
   quality() {
     const q = { seed: this.seed };
@@ -122,37 +130,42 @@ export class QualityPanel {
 
   // --- clip plane -------------------------------------------------------------------------
 
-  setVolume(volume, planes) {
-    this.bounds = volumeBounds(volume);
-    const plane = planes?.[0];
-    if (plane && this.bounds) {
+  // correction: the scene's quality.orientation_correction (null: none). The slider spans
+  // the box the volume is drawn in, which a quarter turn of the volume changes.
+  setVolume(volume, planes, correction = null) {
+    this.volumeBox = volumeBounds(volume);
+    this.correction = correction ?? IDENTITY_CORRECTION;
+    this.bounds = correctedBounds(this.volumeBox, this.correction);
+    const slider = planes?.[0] && this.bounds ? sliderOfPlane(this.bounds, planes[0]) : null;
+    if (slider) {
       // Show a plane the server reports (after a reconnection) if it is axis-aligned.
-      const axis = plane.normal.findIndex((n) => Math.abs(n) > 0.999);
-      if (axis >= 0) {
-        this.$("clip-enabled").checked = true;
-        this.$("clip-axis").value = String(axis);
-        this.$("clip-flip").checked = plane.normal[axis] < 0;
-        const { lo, hi } = this.bounds;
-        this.$("clip-position").value = (plane.point[axis] - lo[axis]) / (hi[axis] - lo[axis]);
-      }
+      this.$("clip-enabled").checked = true;
+      this.$("clip-axis").value = String(slider.axis);
+      this.$("clip-flip").checked = slider.flipped;
+      this.$("clip-position").value = slider.t;
     } else {
       this.$("clip-enabled").checked = false;
     }
     this.showClip();
   }
 
+  // The volume was flipped or turned: the slider keeps its place in the new box, and an
+  // enabled plane moves with it (one clip_planes request), so plane and slider agree.
+  setCorrection(correction) {
+    const next = correction ?? IDENTITY_CORRECTION;
+    if (JSON.stringify(next) === JSON.stringify(this.correction)) return;
+    this.correction = next;
+    this.bounds = correctedBounds(this.volumeBox, next);
+    this.showClip();
+    if (this.$("clip-enabled").checked && this.bounds) this.cb.onClip(this.clipPlanes(), { interactive: false });
+  }
+
   // One axis-aligned plane through the slider's position; keeps the half-space its normal
   // points into (the + side, or − with "Flip").
   clipPlanes() {
     if (!this.$("clip-enabled").checked || !this.bounds) return [];
-    const axis = Number(this.$("clip-axis").value);
-    const t = Number(this.$("clip-position").value);
-    const { lo, hi, center } = this.bounds;
-    const point = [...center];
-    point[axis] = lo[axis] + t * (hi[axis] - lo[axis]);
-    const normal = [0, 0, 0];
-    normal[axis] = this.$("clip-flip").checked ? -1 : 1;
-    return [{ point: point.map((x) => Number(x.toPrecision(8))), normal }];
+    return [axisClipPlane(this.bounds, Number(this.$("clip-axis").value), Number(this.$("clip-position").value),
+      this.$("clip-flip").checked)];
   }
 
   showClip() {

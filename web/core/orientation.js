@@ -90,6 +90,24 @@ export function isIdentityCorrection(m) {
   return !m || m.every((row, r) => row.every((v, c) => v === (r === c ? 1 : 0)));
 }
 
+// The axis-aligned box a volume is drawn in after the correction: `bounds` (camera.js's
+// volumeBounds) turned by the signed permutation C about its centre, as the renderer places
+// it (renderer/orientation_correction.hpp: the voxel at x is drawn at c + C·(x − c)). Along
+// world axis r the box spans the volume's extent along the axis k with C[r][k] ≠ 0, so a
+// quarter turn of a non-cubic volume swaps two extents. Clip planes are in world space:
+// their slider spans this box, not the file's.
+export function correctedBounds(bounds, correction) {
+  if (!bounds || isIdentityCorrection(correction)) return bounds;
+  const half = [0, 1, 2].map((k) => (bounds.hi[k] - bounds.lo[k]) / 2);
+  const reach = [0, 1, 2].map((r) => half[correction[r].findIndex((v) => v !== 0)]);
+  return {
+    lo: bounds.center.map((c, r) => c - reach[r]),
+    hi: bounds.center.map((c, r) => c + reach[r]),
+    center: [...bounds.center],
+    radius: bounds.radius,
+  };
+}
+
 // In words, for the panel: "" for none; "flipped L/R, S/I" for flips; otherwise where each
 // of the file's axes now points ("x→−z, y→y, z→x").
 export function describeCorrection(m) {

@@ -2,33 +2,21 @@
 // port. The tests run in order on one page, as a user would: connect, look, drag, change
 // the transfer function, save and reproduce the scene, open a volume that does not exist,
 // and survive a server restart. Each saves a screenshot into the artifacts folder.
-import { after, before, test } from "node:test";
+import { test } from "node:test";
 import assert from "node:assert/strict";
 import { existsSync, readFileSync, writeFileSync } from "node:fs";
 import path from "node:path";
 
 import {
-  ARTIFACTS, DATA_DIR, RENDER_EXE, VIEWPORT, artifact, canvasSummary, checkPrerequisites, connectionState, download, launchBrowser,
+  DATA_DIR, RENDER_EXE, VIEWPORT, artifact, canvasSummary, connectionState, download, launchBrowser,
   openPage, run, screenshot, shownSeq, startServer, thumbDifference, waitForFinal,
 } from "./harness.mjs";
+import { pageUnderTest } from "./page_setup.mjs";
 import { compareBytes, decodePng, overBlack } from "../lib/png.mjs";
 
-const missing = checkPrerequisites();
-if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
-
-let server, browser, page, problems;
-
-before(async () => {
-  server = await startServer(0);
-  browser = await launchBrowser();
-  ({ page, problems } = await openPage(browser.context, server.url));
-}, { timeout: 180000 });
-
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-  console.log(`artifacts in ${ARTIFACTS}`);
-});
+// The first test waits for the connection and the volume itself.
+let page, problems;
+const setup = pageUnderTest({ volume: null, ready: (s) => ({ page, problems } = s) });
 
 test("the page loads and connects", async () => {
   await page.waitForFunction(() => document.getElementById("connection").dataset.state === "ready", null, { timeout: 30000 });
@@ -278,9 +266,9 @@ test("opening an unknown volume shows the server's error", async () => {
 });
 
 test("after the server restarts, the page reconnects by itself and restores the view", async () => {
-  const port = server.port;
+  const port = setup.server.port;
   const camera = await page.evaluate(() => window.volcast.session.scene.camera);
-  const stopped = await server.stop();
+  const stopped = await setup.server.stop();
   assert.ok(stopped.code === 0 || stopped.signal === "SIGTERM", `server stopped cleanly: ${JSON.stringify(stopped)}`);
   await page.waitForFunction(() => document.getElementById("connection").dataset.state === "waiting", null, { timeout: 15000 });
   assert.match(await page.textContent("#connection-text"), /Disconnected · retrying in/);
@@ -288,7 +276,7 @@ test("after the server restarts, the page reconnects by itself and restores the 
   await screenshot(page, "07-server-down.png");
 
   const sentBefore = await page.evaluate(() => window.sentLog.length);
-  server = await startServer(port);
+  setup.server = await startServer(port);
   await page.waitForFunction(() => document.getElementById("connection").dataset.state === "ready", null, { timeout: 30000 });
   // Request ids keep counting across connections: the first frame of the new session
   // answers the reopened volume or a later request.
@@ -353,7 +341,7 @@ test("a real CT scan opens from the picker, with progress, and renders", { skip:
 test("on a high-density screen the canvas has device pixels and the resolution choice is honoured", async () => {
   const hiDpi = await launchBrowser({ deviceScaleFactor: 2 });
   try {
-    const { page: p2, problems: p2problems } = await openPage(hiDpi.context, `${server.url}?volume=builtin:demo`);
+    const { page: p2, problems: p2problems } = await openPage(hiDpi.context, `${setup.server.url}?volume=builtin:demo`);
     await p2.waitForFunction(() => window.volcast.session.volume?.name === "builtin:demo", null, { timeout: 60000 });
     const css = await p2.$eval("#view-canvas", (el) => [el.clientWidth, el.clientHeight]);
     const backing = await p2.$eval("#view-canvas", (el) => [el.width, el.height]);

@@ -3,36 +3,23 @@
 // camera move can), the correction reaches the server as the scene's
 // quality.orientation_correction, camera and transfer function changes keep it, the state and
 // the saved scene hold it, and volcast-render draws the saved scene as the browser showed it.
-// Saves the screenshot web/README.md shows (web/doc/flip.png) into the artifacts.
-import { after, before, test } from "node:test";
+// Saves the screenshot web/README.md shows (web/doc/flip.png) into the artifacts, and with
+// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over web/doc/flip.png.
+import { test } from "node:test";
 import assert from "node:assert/strict";
 import { readFileSync, writeFileSync } from "node:fs";
 
 import {
-  ARTIFACTS, RENDER_EXE, artifact, canvasSummary, checkPrerequisites, download, launchBrowser, openPage, run,
-  screenshot, shownSeq, startServer, thumbDifference,
+  RENDER_EXE, artifact, canvasSummary, download, keepCanvas, mirrored, pixelsDiffering, run, screenshot, shownSeq,
+  thumbDifference, updateDocScreenshot,
 } from "./harness.mjs";
+import { pageUnderTest } from "./page_setup.mjs";
 import { compareBytes, decodePng, overBlack } from "../lib/png.mjs";
-
-const missing = checkPrerequisites();
-if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
 
 const FLIP_LR = [[-1, 0, 0], [0, 1, 0], [0, 0, 1]];
 
-let server, browser, page, problems;
-
-before(async () => {
-  server = await startServer(0);
-  browser = await launchBrowser();
-  ({ page, problems } = await openPage(browser.context, server.url));
-  await page.waitForFunction(() => window.volcast.session.volume?.name === "builtin:demo", null, { timeout: 60000 });
-}, { timeout: 240000 });
-
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-  console.log(`artifacts in ${ARTIFACTS}`);
-});
+let page, problems;
+pageUnderTest({ ready: (s) => ({ page, problems } = s) });
 
 const serverQuality = () => page.evaluate(async () => (await window.volcast.session.getState()).scene?.quality ?? null);
 
@@ -52,30 +39,6 @@ async function finalWith(afterSeq, correction, view = null) {
   return handle.jsonValue();
 }
 
-// The thumbnail mirrored left-right (32 × 32, row-major).
-const mirrored = (thumb) => thumb.map((_, i) => thumb[Math.floor(i / 32) * 32 + (31 - (i % 32))]);
-
-// The view canvas's pixels, kept in the page as window[name].
-const keepCanvas = (name) => page.evaluate((name) => {
-  const c = document.getElementById("view-canvas");
-  window[name] = { width: c.width, height: c.height, data: c.getContext("2d").getImageData(0, 0, c.width, c.height).data };
-}, name);
-
-// How many pixels of canvas b differ from canvas a (mirrored left-right when `mirror`) by
-// more than 16 levels in some channel: full resolution, where the demo's thin vessels show.
-const pixelsDiffering = (a, b, mirror) => page.evaluate(({ a, b, mirror }) => {
-  const A = window[a], B = window[b];
-  if (A.width !== B.width || A.height !== B.height) return -1;
-  let n = 0;
-  for (let y = 0; y < A.height; y++)
-    for (let x = 0; x < A.width; x++) {
-      const i = (y * A.width + x) * 4, j = (y * A.width + (mirror ? A.width - 1 - x : x)) * 4;
-      if (Math.abs(B.data[i] - A.data[j]) > 16 || Math.abs(B.data[i + 1] - A.data[j + 1]) > 16 ||
-          Math.abs(B.data[i + 2] - A.data[j + 2]) > 16) n++;
-    }
-  return n;
-}, { a, b, mirror });
-
 test("a volume without patient axes offers the flips and turns, open, beside the unknown-orientation note", async () => {
   assert.equal(await page.evaluate(() => window.volcast.session.volume.orientation_known), false);
   assert.ok(await page.isVisible("#orientation-note"));
@@ -90,21 +53,22 @@ test("Flip L/R mirrors the image; the server keeps the correction", async () => 
   await page.click("#view-anterior");
   await finalWith(seq, null, "anterior");
   const plain = await canvasSummary(page);
-  await keepCanvas("flipTestPlain");
+  await keepCanvas(page, "flipTestPlain");
 
   seq = await shownSeq(page);
   await page.click("#orientation-flip-lr");
   const flippedHeader = await finalWith(seq, FLIP_LR);
   assert.equal(flippedHeader.codec, "png");
   const flipped = await canvasSummary(page);
-  await keepCanvas("flipTestFlipped");
+  await keepCanvas(page, "flipTestFlipped");
   await screenshot(page, "flip.png");
+  updateDocScreenshot("flip.png", "flip.png");
 
   const toMirror = thumbDifference(mirrored(plain.thumb), flipped.thumb);
   const toPlain = thumbDifference(plain.thumb, flipped.thumb);
   const pixels = plain.width * plain.height;
-  const offMirror = await pixelsDiffering("flipTestPlain", "flipTestFlipped", true);
-  const offPlain = await pixelsDiffering("flipTestPlain", "flipTestFlipped", false);
+  const offMirror = await pixelsDiffering(page, "flipTestPlain", "flipTestFlipped", true);
+  const offPlain = await pixelsDiffering(page, "flipTestPlain", "flipTestFlipped", false);
   writeFileSync(artifact("flip-comparison.json"), `${JSON.stringify({ toMirror, toPlain, offMirror, offPlain, pixels }, null, 2)}\n`);
   // The thumbnail samples pixel floor((t + ½)/32 · W) and its mirror W − 1 − that, one pixel
   // apart at most: the mirrored frames' thumbnails agree to a few levels on edges only.

@@ -10,7 +10,7 @@
 //   CHROMIUM             the browser (default: /usr/bin/chromium)
 
 import { spawn } from "node:child_process";
-import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, createWriteStream } from "node:fs";
+import { copyFileSync, existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, createWriteStream } from "node:fs";
 import { createRequire } from "node:module";
 import { createServer } from "node:net";
 import os from "node:os";
@@ -191,6 +191,37 @@ export function thumbDifference(a, b) {
   let sum = 0;
   for (let i = 0; i < a.length; i++) for (let k = 0; k < 3; k++) sum += Math.abs(a[i][k] - b[i][k]);
   return sum / (a.length * 3);
+}
+
+// The thumbnail mirrored left-right (32 × 32, row-major).
+export const mirrored = (thumb) => thumb.map((_, i) => thumb[Math.floor(i / 32) * 32 + (31 - (i % 32))]);
+
+// The view canvas's pixels, kept in the page as window[name].
+export const keepCanvas = (page, name) => page.evaluate((name) => {
+  const c = document.getElementById("view-canvas");
+  window[name] = { width: c.width, height: c.height, data: c.getContext("2d").getImageData(0, 0, c.width, c.height).data };
+}, name);
+
+// How many pixels of kept canvas b differ from kept canvas a (mirrored left-right when
+// `mirror`) by more than 16 levels in some channel, at full resolution; −1 when their
+// sizes differ.
+export const pixelsDiffering = (page, a, b, mirror) => page.evaluate(({ a, b, mirror }) => {
+  const A = window[a], B = window[b];
+  if (A.width !== B.width || A.height !== B.height) return -1;
+  let n = 0;
+  for (let y = 0; y < A.height; y++)
+    for (let x = 0; x < A.width; x++) {
+      const i = (y * A.width + x) * 4, j = (y * A.width + (mirror ? A.width - 1 - x : x)) * 4;
+      if (Math.abs(B.data[i] - A.data[j]) > 16 || Math.abs(B.data[i + 1] - A.data[j + 1]) > 16 ||
+          Math.abs(B.data[i + 2] - A.data[j + 2]) > 16) n++;
+    }
+  return n;
+}, { a, b, mirror });
+
+// With VOLCAST_UPDATE_DOC_SCREENSHOTS=1 an artifact web/README.md shows is copied over its
+// web/doc/ file (reviewed in the diff like any change).
+export function updateDocScreenshot(artifactName, docName) {
+  if (process.env.VOLCAST_UPDATE_DOC_SCREENSHOTS) copyFileSync(artifact(artifactName), path.join(REPO, "web/doc", docName));
 }
 
 export async function screenshot(page, name) {

@@ -2,32 +2,14 @@
 // headless Chromium against a real volcast-server: each reaches the server in the quality
 // policy, the state reports it back, and the image changes the way the mode says. Saves the
 // screenshots web/README.md shows (web/doc/mip.png, web/doc/crop.png) into the artifacts.
-import { after, before, test } from "node:test";
+import { test } from "node:test";
 import assert from "node:assert/strict";
 
-import {
-  ARTIFACTS, canvasSummary, checkPrerequisites, launchBrowser, openPage, screenshot, shownSeq, startServer,
-  thumbDifference, waitForFinal,
-} from "./harness.mjs";
+import { canvasSummary, screenshot, shownSeq, thumbDifference } from "./harness.mjs";
+import { pageUnderTest } from "./page_setup.mjs";
 
-const missing = checkPrerequisites();
-if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
-
-let server, browser, page, problems;
-
-before(async () => {
-  server = await startServer(0);
-  browser = await launchBrowser();
-  ({ page, problems } = await openPage(browser.context, server.url));
-  await page.waitForFunction(() => window.volcast.session.volume?.name === "builtin:demo", null, { timeout: 60000 });
-  await waitForFinal(page);
-}, { timeout: 240000 });
-
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-  console.log(`artifacts in ${ARTIFACTS}`);
-});
+let page, problems;
+pageUnderTest({ finalFrame: true, ready: (s) => ({ page, problems } = s) });
 
 // The quality the server last reported for the session's scene.
 const serverQuality = () => page.evaluate(async () => {
@@ -108,5 +90,55 @@ test("emission–absorption with a crop box; whole volume restores the image", a
   await page.click("#crop-reset");
   await finalWith(seq, {});
   assert.equal((await serverQuality()).crop, undefined);
+  assert.deepEqual(problems, []);
+});
+
+test("dragging a crop slider is an interaction: cheap frames while it moves, the final frame after release", async () => {
+  const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+  await page.$eval("#crop-card", (el) => { el.open = true; });
+  const slider = page.locator("#crop-min-x");
+  await slider.scrollIntoViewIfNeeded();
+  const box = await slider.boundingBox();
+  const y = box.y + box.height / 2;
+  const sentBefore = await page.evaluate(() => window.sentLog.length);
+  const seqBefore = await page.evaluate(() => window.volcast.frames.at(-1)?.seq ?? 0);
+  const since = (seq) => page.evaluate((seq) => window.volcast.frames.filter((h) => h.seq > seq)
+    .map((h) => ({ seq: h.seq, final: h.final, codec: h.codec, cropMinX: h.quality?.crop?.min?.[0] ?? 0 })), seq);
+
+  // Press on the thumb (at 0: the slider's left end) and drag it over 40 % of the track in
+  // steps 120 ms apart, shorter than the 250 ms an edit settles before a policy is sent alone.
+  await page.mouse.move(box.x + 6, y);
+  await page.mouse.down();
+  for (let i = 1; i <= 12; i++) {
+    await page.mouse.move(box.x + 6 + (i * box.width * 0.4) / 12, y);
+    await sleep(120);
+  }
+  await sleep(300);
+  const held = await since(seqBefore);
+  const sentHeld = await page.evaluate((n) => window.sentLog.slice(n).map((m) => m.type), sentBefore);
+  const interactingHeld = await page.evaluate(async () => (await window.volcast.session.getState()).interacting);
+  const seqAtRelease = held.at(-1)?.seq ?? seqBefore;
+  await page.mouse.up();
+  const value = Number(await page.inputValue("#crop-min-x"));
+
+  // While held: interaction_start before the first policy, policies as the slider moves, and
+  // the frames answering them are the interactive level's (JPEG, never final).
+  assert.ok(value > 0.2, `the drag moved the slider to ${value}`);
+  assert.equal(sentHeld[0], "interaction_start", `sent while held: ${sentHeld.join(", ")}`);
+  assert.ok(sentHeld.filter((m) => m === "quality_policy").length >= 2, `policies sent while held: ${sentHeld.join(", ")}`);
+  assert.ok(!sentHeld.includes("interaction_end"), `sent while held: ${sentHeld.join(", ")}`);
+  assert.equal(interactingHeld, true, "the server's state says interacting while the slider is held");
+  const cropped = held.filter((h) => h.cropMinX > 0);
+  assert.ok(cropped.length >= 1, `frames with the moving crop arrived while the slider was held: ${JSON.stringify(held)}`);
+  assert.deepEqual(cropped.filter((h) => h.final || h.codec !== "jpeg"), [], "frames while held are interactive JPEG, not final");
+
+  // After release: interaction_end, and the refinement ends in a final PNG of the new crop.
+  const final = await finalWith(seqAtRelease, { crop: { min: [value, 0, 0], max: [1, 1, 1] } });
+  assert.equal(final.codec, "png");
+  const sentAfter = await page.evaluate((n) => window.sentLog.slice(n).map((m) => m.type), sentBefore);
+  assert.equal(sentAfter.at(-1), "interaction_end", `sent: ${sentAfter.join(", ")}`);
+  assert.equal(await page.evaluate(async () => (await window.volcast.session.getState()).interacting), false);
+  assert.deepEqual((await serverQuality()).crop, { min: [value, 0, 0], max: [1, 1, 1] });
+  await screenshot(page, "modes-crop-drag.png");
   assert.deepEqual(problems, []);
 });
