@@ -113,8 +113,11 @@ test("dragging a crop slider is an interaction: cheap frames while it moves, the
     await page.mouse.move(box.x + 6 + (i * box.width * 0.4) / 12, y);
     await sleep(120);
   }
-  await sleep(300);
+  // Frames while it moves; taken before the pause below, since the server refines after
+  // idleMs (150 ms) without input even while an interaction is open (a still hand gets the
+  // sharp frame, as with a camera drag held still).
   const held = await since(seqBefore);
+  await sleep(300);
   const sentHeld = await page.evaluate((n) => window.sentLog.slice(n).map((m) => m.type), sentBefore);
   const interactingHeld = await page.evaluate(async () => (await window.volcast.session.getState()).interacting);
   const seqAtRelease = held.at(-1)?.seq ?? seqBefore;
