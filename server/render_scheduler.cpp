@@ -127,6 +127,11 @@ void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
             s.serviceMs = std::max(s.serviceMs, leastServiceMs());
             s.interactiveFrames = std::max(s.interactiveFrames, leastInteractiveFrames());
         }
+        // An interactive frame under way is finished and delivered, stale or not: dropping
+        // it would leave a client whose input comes faster than one frame renders (a loaded
+        // server, a slow level) with no frame at all for as long as it drags. A refinement
+        // or a final frame is dropped: the new view's interactive frame comes next.
+        const bool keepInteractive = s.refining && s.refiningInteractive && !job->stillOnly;
         s.job = std::move(job);
         s.calibration = std::move(calibration);
         ++s.generation;
@@ -134,8 +139,10 @@ void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
         s.substituteSent = -1;
         s.finalSent = false;
         s.failed_ = false;
-        s.refining.reset();
-        s.refiningLevel = -1;
+        if (!keepInteractive) {
+            s.refining.reset();
+            s.refiningLevel = -1;
+        }
         s.levelImages.clear();
         s.lastInput = Clock::now();
     }
@@ -245,14 +252,14 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
                                Clock::time_point &wakeAt) {
     if (s.inFlight || !s.job || s.finalSent || s.failed_) return false;
     const ViewJob &job = *s.job;
-    if (preparing_.count(job.renderer.get())) return false;   // its preparation's end wakes us
+    // The renderer of the frame under way: an older view's while its interactive frame finishes.
+    const ViewJob &underWay = s.refining ? *s.refiningJob : job;
+    if (preparing_.count(underWay.renderer.get())) return false;   // its preparation's end wakes us
     const int last = int(job.ladder.size()) - 1;
     const bool firstOfView = !job.stillOnly && s.sentLevel < 0 && s.substituteSent < 0;
     if ((kind == Kind::Interactive) != firstOfView) return false;
     work.kind = kind;
     work.slot = id;
-    work.job = s.job;
-    work.generation = s.generation;
 
     // A level's measured cost holds for its quality on this volume only: a level whose
     // quality changed (tricubic or shading ticked) forgets it, or its first frame is planned
@@ -306,10 +313,15 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
         const Quality q = renderable(id, s, l.quality, substitute);
         s.refining = std::make_shared<TiledFrame>(q, substitute ? 1 : l.passes, job.width, job.height,
                                                   job.renderer->bandRows());
+        s.refiningJob = s.job;
+        s.refiningGeneration = s.generation;
+        s.refiningInteractive = firstOfView && !final;
         s.refiningLevel = level;
         s.refiningFinal = final;
         s.refiningSubstitute = substitute;
     }
+    work.job = s.refiningJob;
+    work.generation = s.refiningGeneration;
     const TiledFrame &frame = *s.refining;
     work.level = s.refiningLevel;
     work.final = s.refiningFinal && !s.refiningSubstitute;
@@ -326,10 +338,12 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     double msPerRay = frame.msPerRayEstimate();
     double budgetMs = options_.unitMs;
     if (msPerRay == 0 && s.timer.measured(size_t(work.level)) && !work.substitute) {
-        msPerRay = s.timer.predictMs(size_t(work.level), samplesOf(frame.quality())) / std::max(rays, 1.0);
+        msPerRay = s.timer.predictMs(size_t(work.level), predictedSamples(underWay.renderer->volume(), frame.quality(),
+                                                                           underWay.width, underWay.height)) /
+                   std::max(rays, 1.0);
         if (msPerRay * rays > budgetMs) budgetMs /= 2;
     }
-    if (!job.renderer->rendersWindowsCheaply())
+    if (!underWay.renderer->rendersWindowsCheaply())
         work.cells = frame.cellsLeftInPass();
     else
         work.cells = std::min(frame.cellsLeftInPass(),

@@ -11,7 +11,8 @@
 // So a session's interactive frame waits for at most one unit, whatever another session's
 // final frame costs, and new input drops a refinement at the next unit boundary.
 //
-// Per session ("slot"): the newest view only (latest wins), at most one frame in flight
+// Per session ("slot"): the newest view only (latest wins; an interactive frame under way
+// is finished first, or input faster than a frame would starve the drag), at most one frame in flight
 // (from its delivery until the session has written it), and a position on the view's
 // ladder: one interactive frame, then after idleMs without input (or at interaction_end)
 // refinement level by level to the final one.
@@ -128,6 +129,9 @@ class RenderScheduler {
         std::vector<Quality> timerLadder;   // the qualities the timer's levels were measured at
         uint64_t timerVolumeId = 0;
         std::shared_ptr<TiledFrame> refining;   // the frame under way, unit by unit
+        std::shared_ptr<const ViewJob> refiningJob;   // the view it belongs to: an interactive
+        uint64_t refiningGeneration = 0;              // frame outlives newer input (submit)
+        bool refiningInteractive = false;
         int refiningLevel = -1;
         bool refiningFinal = false;
         bool refiningSubstitute = false;       // rendered without its pending preparation

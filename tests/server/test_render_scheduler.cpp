@@ -186,6 +186,44 @@ TEST(RenderScheduler, NewInputCancelsRefinementAtTheNextUnit) {
         }
 }
 
+TEST(RenderScheduler, InteractiveFramesKeepComingWhileInputArrivesFasterThanOneRenders) {
+    Metrics metrics;
+    const double unitMs = 20;
+    RenderScheduler scheduler(metrics, options(unitMs));
+    // 256² at 0.05 ms a ray: even the cheapest level (a quarter of the side, the automatic
+    // ladder's smallest image scale: 64² rays) is ~200 ms, ten units. A loaded server is like this.
+    auto renderer = std::make_shared<SlowRenderer>(smallVolume(), 0.05);
+    Session s(scheduler, renderer, 1);
+    // A small view refined to its final frame first, so that every level's cost is measured
+    // (unmeasured, the first frame's level comes from a guess of the cost per sample).
+    scheduler.submit(s.slot, s.view(-1, 0, 64, ladderFor(1)));
+    ASSERT_TRUE(s.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 10000));
+    const size_t warmed = s.count();
+    // A drag that sends a camera every 10 ms for 3 s and never waits for a frame.
+    const auto started = Clock::now();
+    int request = 0;
+    while (Clock::now() - started < std::chrono::seconds(3)) {
+        scheduler.submit(s.slot, s.view(request, 0.01 * request, 256, ladderFor(1)));
+        ++request;
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    const size_t during = s.count() - warmed;
+    // Dropping the interactive frame under way at every new camera left such a drag with no
+    // frame at all (the slow-reader test saw none for 15 s on a loaded CI machine). Each one
+    // now finishes: at ~0.2 s a frame, 3 s give ~15; 3 leaves a factor 5 for a loaded machine.
+    EXPECT_GE(during, 3u) << "frames delivered during a 3 s drag of " << request << " cameras";
+    std::cout << during << " frames during a 3 s drag of " << request << " cameras\n";
+    std::lock_guard lock(s.mutex);
+    for (size_t i = warmed; i < s.frames.size(); ++i) {
+        EXPECT_FALSE(s.frames[i].header.final) << "a final frame while the input kept coming";
+        if (i > warmed) {
+            EXPECT_GT(s.frames[i].header.request.get<int>(), s.frames[i - 1].header.request.get<int>())
+                << "frames go forward in time";
+        }
+    }
+    EXPECT_EQ(renderer->overlaps(), 0);
+}
+
 TEST(RenderScheduler, InteractiveFramesWaitAtMostOneUnitWhileAnotherSessionRendersAnExpensiveFinal) {
     Metrics metrics;
     const double unitMs = 20;
