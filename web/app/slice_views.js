@@ -110,6 +110,16 @@ export class SliceViews {
       for (const pane of Object.values(this.panes)) pane.inFlight = false;
     });
     session.on("opened", ({ restored }) => this.onOpened(restored));
+    // A flip or turn of the volume (the policy's orientation_correction) changes what every
+    // plane cuts: slice again once the policy carrying it has gone. The server answers a
+    // session's messages in order, so these slices are cut with it.
+    this.correction = "null";
+    session.on("policy", (policy) => {
+      const correction = JSON.stringify(policy.quality?.orientation_correction ?? null);
+      if (correction === this.correction) return;
+      this.correction = correction;
+      this.requestAll();
+    });
     session.on("frame", (f) => { if (f.header.camera) { this.camera = f.header.camera; this.drawMarker(); } });
     new ResizeObserver(() => this.requestAll()).observe(container);
   }

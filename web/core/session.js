@@ -153,7 +153,7 @@ export class Session extends Emitter {
   // policy: {mode: "automatic", target_frame_ms, quality?} or {mode: "explicit", quality}.
   setQualityPolicy(policy) {
     this.policy = policy;
-    this.sendIfReady(this.policyRequest(policy));
+    if (this.sendIfReady(this.policyRequest(policy)) !== null) this.emit("policy", policy);
   }
 
   policyRequest(p) {

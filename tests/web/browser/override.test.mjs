@@ -2,7 +2,8 @@
 // here), in headless Chromium against a real volcast-server: the flips and turns sit behind
 // "Override the file's orientation" until it is opened, a flip mirrors the image, and the
 // card says the file's axes were corrected by hand. The volume is not a cube, so a quarter
-// turn changes the box it is drawn in: the clip plane's slider spans that box.
+// turn changes the box it is drawn in: the clip plane's slider spans that box. The slice
+// panes follow a flip and a turn as the 3D view does.
 // Saves the card's screenshot web/README.md shows (web/doc/orient-override.png) into the
 // artifacts, and with VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over the doc file.
 import { test } from "node:test";
@@ -71,6 +72,28 @@ async function serverClipAt(axis, value) {
   assert.fail(`the server's clip plane did not reach ${value} along axis ${axis}: ${JSON.stringify(planes)}`);
 }
 
+// Where the block (250; the ball is 120) lies in the axial slice pane's own image, as the
+// server cut it: its mean column and row relative to the image's centre, in mm. The
+// image is radiological (columns towards the patient's left, rows towards posterior).
+async function axialBlock() {
+  await page.waitForFunction(() => {
+    const p = window.volcast.slices.panes.axial;
+    return p.image && !p.inFlight && !p.dirty;
+  }, null, { timeout: 30000, polling: 50 });
+  return page.evaluate(() => {
+    const { image, header } = window.volcast.slices.panes.axial;
+    let n = 0, cs = 0, rs = 0;
+    for (let i = 0; i < header.width * header.height; i++) {
+      if (image.data[4 * i] <= 200) continue;
+      n++;
+      cs += i % header.width;
+      rs += Math.floor(i / header.width);
+    }
+    const mm = header.pixel_spacing;
+    return { n, column: n ? (cs / n + 0.5 - header.width / 2) * mm : 0, row: n ? (rs / n + 0.5 - header.height / 2) * mm : 0 };
+  });
+}
+
 const setClipPosition = (t) => page.$eval("#clip-position", (el, t) => { el.value = String(t); el.dispatchEvent(new Event("change")); }, t);
 
 test("a file that names its patient axes keeps the flips and turns behind Override", async () => {
@@ -98,6 +121,9 @@ test("Override's Flip L/R mirrors the image; the card says the file's axes were 
   await page.click("#view-anterior");
   await finalWith(seq, null, true);
   await keepCanvas(page, "overridePlain");
+  // The block's centre is 16.5 mm towards the patient's left (+x): the axial slice's right half.
+  const plainSlice = await axialBlock();
+  assert.ok(plainSlice.n > 20 && plainSlice.column > 12 && plainSlice.column < 21, `axial slice before the flip: ${JSON.stringify(plainSlice)}`);
 
   seq = await shownSeq(page);
   await page.click("#orientation-flip-lr");
@@ -113,6 +139,12 @@ test("Override's Flip L/R mirrors the image; the card says the file's axes were 
   assert.ok(offPlain > 200 && offPlain > 20 * offMirror, `the flip changed too little: ${offPlain} pixels differ from the plain image, ${offMirror} from its mirror`);
 
   assert.deepEqual((await serverState()).scene.quality.orientation_correction, FLIP_LR);
+  // The slice panes follow the flip, mirrored about the centre like the 3D view (they kept
+  // the file's placement until something else made them slice again).
+  const flippedSlice = await axialBlock();
+  // 1 mm: a voxel; the pixels are finer, and the cut is symmetric about the centre.
+  assert.ok(Math.abs(flippedSlice.column + plainSlice.column) <= 1 && Math.abs(flippedSlice.row - plainSlice.row) <= 1,
+    `axial slice after Flip L/R ${JSON.stringify(flippedSlice)}, before ${JSON.stringify(plainSlice)}: not mirrored`);
   assert.match(await page.textContent("#orientation-fix-status"), /Overrides the file's orientation: flipped L\/R/);
   assert.match(await page.textContent("#orientation-status"), /corrected by hand \(flipped L\/R\)/);
   assert.ok(await page.isHidden("#orientation-note"), "the file's orientation is known: still no 'unknown' note");
@@ -134,6 +166,11 @@ test("after a quarter turn the clip slider spans the volume as drawn, not the fi
   seq = await shownSeq(page);
   await page.click("#orientation-turn-si");
   await finalWith(seq, TURN_SI);
+  // The slices turn too: the block, centred 16.5 mm towards +x and 0.5 mm towards +y of the
+  // centre, is drawn 16.5 mm towards +y (posterior: the lower half) and 0.5 mm towards −x.
+  const turnedSlice = await axialBlock();
+  assert.ok(Math.abs(turnedSlice.row - 16.5) <= 1 && Math.abs(turnedSlice.column + 0.5) <= 1,
+    `axial slice after the quarter turn: ${JSON.stringify(turnedSlice)}`);
   await serverClipAt(0, 23.5 - 16);
   assert.equal(await page.inputValue("#clip-position"), "0", "the slider kept its place");
   assert.equal(await page.textContent("#clip-position-out"), "7.5");
