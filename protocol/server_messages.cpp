@@ -27,6 +27,7 @@ json volumeToJson(const VolumeInfo &v) {
     if (v.dims) j["dims"] = *v.dims;
     if (v.spacing) j["spacing"] = *v.spacing;
     if (v.origin) j["origin"] = *v.origin;
+    if (v.direction) j["direction"] = *v.direction;
     if (!v.voxelType.empty()) j["voxel_type"] = v.voxelType;
     if (v.valueRange) j["value_range"] = *v.valueRange;
     if (v.histogram) j["histogram"] = {{"range", v.histogram->range}, {"counts", v.histogram->counts}};
@@ -121,6 +122,14 @@ VolumeInfo readVolume(const json &j, const std::string &path) {
     }
     if (const json *s = f.find("spacing")) v.spacing = numbers<3>(*s, f.pathOf("spacing"));
     if (const json *o = f.find("origin")) v.origin = numbers<3>(*o, f.pathOf("origin"));
+    if (const json *d = f.find("direction")) {
+        const std::string at = f.pathOf("direction");
+        detail::array(*d, at);
+        if (d->size() != 3) detail::badField(at, "must have 3 rows, got " + std::to_string(d->size()));
+        std::array<std::array<double, 3>, 3> rows{};
+        for (size_t r = 0; r < 3; ++r) rows[r] = numbers<3>((*d)[r], detail::element(at, r));
+        v.direction = rows;
+    }
     if (const json *t = f.find("voxel_type")) v.voxelType = detail::string(*t, f.pathOf("voxel_type"), kAnyLength);
     if (const json *r = f.find("value_range")) v.valueRange = numbers<2>(*r, f.pathOf("value_range"));
     if (const json *h = f.find("histogram")) {

@@ -84,6 +84,8 @@ struct VolumeInfo {
     std::optional<std::array<int64_t, 3>> dims;    // samples per axis
     std::optional<std::array<double, 3>> spacing;  // world units between samples
     std::optional<std::array<double, 3>> origin;   // world position of voxel (0, 0, 0)
+    // Rows of the unit direction matrix D: voxel (i, j, k) is at origin + D·(i·sx, j·sy, k·sz).
+    std::optional<std::array<std::array<double, 3>, 3>> direction;
     std::string voxelType;                         // in the file: "uint8", "int16", "float32", ...
     std::optional<std::array<double, 2>> valueRange;   // [min, max] of the finite voxels
     std::optional<HistogramInfo> histogram;

@@ -68,6 +68,10 @@ protocol::VolumeInfo VolumeEntry::info() const {
     i.dims = std::array<int64_t, 3>{v.dims.x, v.dims.y, v.dims.z};
     i.spacing = std::array<double, 3>{v.spacing.x, v.spacing.y, v.spacing.z};
     i.origin = std::array<double, 3>{v.origin.x, v.origin.y, v.origin.z};
+    std::array<std::array<double, 3>, 3> direction{};
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) direction[size_t(r)][size_t(c)] = v.direction(r, c);
+    i.direction = direction;
     i.voxelType = std::string(voxelTypeName(v.sourceType));
     i.valueRange = std::array<double, 2>{v.range.min, v.range.max};
     protocol::HistogramInfo h;

@@ -19,6 +19,7 @@ VolumeInfo loadedVolume() {
     v.dims = {256, 256, 256};
     v.spacing = {1, 1, 1.5};
     v.origin = {0, -10, 2.5};
+    v.direction = {{{-1, 0, 0}, {0, -1, 0}, {0, 0, 1}}};   // a RAS file's axes in LPS
     v.voxelType = "uint8";
     v.valueRange = {0, 255};
     v.histogram = HistogramInfo{{0, 255}, std::vector<uint64_t>(256, 0)};
@@ -150,6 +151,10 @@ TEST(ServerMessages, BrokenServerMessagesThrow) {
          "server message: stage: unknown stage \"dreaming\""},
         {R"({"type": "volumes", "volumes": [{"name": "a", "dims": [1, 2]}]})",
          "server message: volumes[0].dims: must have 3 integers"},
+        {R"({"type": "volumes", "volumes": [{"name": "a", "direction": [[1, 0, 0], [0, 1, 0]]}]})",
+         "server message: volumes[0].direction: must have 3 rows, got 2"},
+        {R"({"type": "volumes", "volumes": [{"name": "a", "direction": [[1, 0, 0], [0, 1], [0, 0, 1]]}]})",
+         "server message: volumes[0].direction[1]: must have 3 numbers, got 2"},
         {R"({"type": "state", "scene": {}, "quality_policy": {"mode": "automatic"}})",
          "server message: interacting: is required"},
     };

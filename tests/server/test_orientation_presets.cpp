@@ -224,6 +224,20 @@ TEST(PatientOrientation, TheLoaderSaysWhetherTheFileNamesItsPatientSpace) {
     EXPECT_EQ(plain.modality, "");
 }
 
+TEST(PatientOrientation, TheVolumeInfoCarriesTheDirectionMatrix) {
+    // Clients place the volume's box from dims, spacing, origin and direction (the clip
+    // slider's range): without the direction, a flipped or permuted file's box lies elsewhere.
+    Mat3d permuted;   // index i runs along −z, j along +x, k along −y
+    permuted.m = {0, 1, 0, 0, 0, -1, -1, 0, 0};
+    server::VolumeEntry entry;
+    entry.name = "permuted";
+    entry.volume = std::make_shared<const Volume>(patientVolume(permuted));
+    const protocol::VolumeInfo info = entry.info();
+    ASSERT_TRUE(info.direction.has_value());
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) EXPECT_EQ((*info.direction)[size_t(r)][size_t(c)], permuted(r, c)) << r << "," << c;
+}
+
 TEST(PatientOrientation, TheVolumeInfoTellsTheClient) {
     TempDir dir;
     const Volume v = patientVolume(Mat3d::identity());

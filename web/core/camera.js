@@ -96,14 +96,24 @@ export function zoomFactorForWheel(deltaPx) {
   return Math.exp(deltaPx * ZOOM_PER_WHEEL_PX);
 }
 
-// Axis-aligned bounds of a volume object (protocol `volumes`): the cell extent of
-// docs/design.md, origin − s/2 to origin + (n − ½)·s.
+// World-axis-aligned bounds of a volume object (protocol `volumes`): the box around the
+// cell extent of docs/design.md, index −½ to n − ½ per axis, placed by origin + D·(index·s)
+// with D the volume's `direction` (rows; the identity where the server sends none). A
+// flipped or permuted file's box lies on the other side of its origin or along other axes.
 export function volumeBounds(volume) {
   if (!volume?.dims) return null;
   const s = volume.spacing ?? [1, 1, 1];
   const o = volume.origin ?? [0, 0, 0];
-  const lo = [0, 1, 2].map((i) => o[i] - s[i] / 2);
-  const hi = [0, 1, 2].map((i) => o[i] + (volume.dims[i] - 0.5) * s[i]);
+  const d = volume.direction ?? [[1, 0, 0], [0, 1, 0], [0, 0, 1]];
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (let corner = 0; corner < 8; corner++) {
+    const index = [0, 1, 2].map((a) => ((corner >> a) & 1 ? volume.dims[a] - 0.5 : -0.5) * s[a]);
+    for (let w = 0; w < 3; w++) {
+      const p = o[w] + d[w][0] * index[0] + d[w][1] * index[1] + d[w][2] * index[2];
+      lo[w] = Math.min(lo[w], p);
+      hi[w] = Math.max(hi[w], p);
+    }
+  }
   const center = lo.map((l, i) => (l + hi[i]) / 2);
   const radius = length(sub(hi, lo)) / 2;
   return { lo, hi, center, radius };

@@ -87,6 +87,21 @@ test("volume bounds are the cell extent of docs/design.md", () => {
   assert.equal(volumeBounds({ name: "not loaded" }), null);
 });
 
+test("volume bounds follow the direction matrix: a flipped and a permuted file", () => {
+  // A RAS file in LPS: i runs towards −x, j towards −y from the origin.
+  const ras = volumeBounds({ dims: [10, 20, 30], spacing: [1, 1, 2], origin: [0, 0, 0],
+    direction: [[-1, 0, 0], [0, -1, 0], [0, 0, 1]] });
+  assert.deepEqual(ras.lo, [-9.5, -19.5, -1]);
+  assert.deepEqual(ras.hi, [0.5, 0.5, 59]);
+  // Rows of D: world x = j, world y = −k, world z = −i (index i runs along −z).
+  const permuted = volumeBounds({ dims: [10, 20, 30], spacing: [1, 2, 3], origin: [5, 5, 5],
+    direction: [[0, 1, 0], [0, 0, -1], [-1, 0, 0]] });
+  assert.deepEqual(permuted.lo, [5 - 1, 5 - 29.5 * 3, 5 - 9.5]);
+  assert.deepEqual(permuted.hi, [5 + 19.5 * 2, 5 + 1.5, 5 + 0.5]);
+  // No direction from an older server: the identity, as before.
+  assert.deepEqual(volumeBounds({ dims: [2, 2, 2], spacing: [1, 1, 1], origin: [0, 0, 0] }).hi, [1.5, 1.5, 1.5]);
+});
+
 test("cameras compare by value", () => {
   assert.ok(camerasEqual(demo, structuredClone(demo)));
   assert.ok(!camerasEqual(demo, orbit(demo, 1, 0)));
