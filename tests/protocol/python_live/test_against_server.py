@@ -1,0 +1,185 @@
+"""The Python client against a real volcast-server (VOLCAST_SERVER_EXE, started here on a free
+port): what a script does with MIP, the crop box and slices, end to end. The offline tests
+beside it (../python) check the messages; these check that the server does what they ask.
+
+Run: VOLCAST_SERVER_EXE=build/server/volcast-server PYTHONPATH=protocol/python \
+     /usr/bin/python3 -m unittest discover -s tests/protocol/python_live -v"""
+
+import asyncio
+import os
+import subprocess
+import tempfile
+import time
+import unittest
+import urllib.request
+
+import numpy as np
+
+import volcast as vc
+
+SIZE = 96   # px: small frames keep the test quick on the CPU back end
+EXPLICIT = {"step": 0.5, "jitter": False, "early_termination": 1.0}
+GREY_RAMP = [[0, 0, 0, 0, 0], [255, 1, 1, 1, 1]]   # colour and opacity follow the value
+
+
+class LiveServer:
+    """volcast-server on a free port with the built-in phantoms only; stopped with SIGTERM."""
+
+    def __init__(self):
+        exe = os.environ.get("VOLCAST_SERVER_EXE")
+        if not exe or not os.path.exists(exe):
+            raise RuntimeError(f"VOLCAST_SERVER_EXE ({exe!r}) does not name the built volcast-server")
+        self.dir = tempfile.TemporaryDirectory(prefix="volcast-py-live-")
+        port_file = os.path.join(self.dir.name, "port")
+        self.log = open(os.path.join(self.dir.name, "server.log"), "w+")
+        self.proc = subprocess.Popen([exe, "--port", "0", "--port-file", port_file, "--log-level", "info"],
+                                     stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 60
+        self.port = 0
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"volcast-server exited with {self.proc.returncode}:\n{self.log_text()}")
+            if not self.port and os.path.exists(port_file):
+                with open(port_file) as f:
+                    text = f.read().strip()
+                self.port = int(text) if text else 0
+            if self.port:
+                try:
+                    with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/readyz", timeout=2) as r:
+                        if r.status == 200:
+                            return
+                except OSError:
+                    pass
+            time.sleep(0.1)
+        self.stop()
+        raise RuntimeError(f"volcast-server was not ready within 60 s:\n{self.log_text()}")
+
+    def log_text(self):
+        self.log.flush()
+        self.log.seek(0)
+        return self.log.read()[-4000:]
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+        self.log.close()
+        self.dir.cleanup()
+
+
+def setUpModule():
+    global server
+    server = LiveServer()
+
+
+def tearDownModule():
+    server.stop()
+
+
+async def open_demo(client):
+    state = await client.request(vc.open_volume("builtin:demo"), timeout=60)
+    await client.send(vc.viewport(SIZE, SIZE))
+    return state
+
+
+def axis_camera(state, side, axis=2):
+    """Orthographic, looking at the volume's centre along world axis `axis` (towards −axis for
+    side +1, +axis for side −1), +y up (+z when looking along y), the whole volume in view."""
+    v = state["volume"]
+    centre = [v["origin"][i] + (v["dims"][i] - 1) * v["spacing"][i] / 2 for i in range(3)]
+    size = max(v["dims"][i] * v["spacing"][i] for i in range(3))
+    eye = list(centre)
+    eye[axis] += side * 3 * size
+    up = [0, 0, 1] if axis == 1 else [0, 1, 0]
+    return {"eye": eye, "target": centre, "up": up, "projection": "orthographic", "height": 1.25 * size}
+
+
+async def final_rgba(client, quality, camera=None):
+    """The final frame of an explicit policy (and camera, when given) as float RGBA in [0, 1]."""
+    last = await client.send(vc.quality_explicit(quality))
+    if camera is not None:
+        last = await client.send(vc.camera(camera))
+    frame = await client.wait_for_final_frame(request=last, timeout=60)
+    return frame, frame.to_numpy().astype(np.float64) / 255
+
+
+def run(coroutine):
+    return asyncio.run(asyncio.wait_for(coroutine, 120))
+
+
+class LiveServerTests(unittest.TestCase):
+    def connect(self):
+        return vc.Client.connect(f"ws://127.0.0.1:{server.port}/ws", client_name="python_live")
+
+    def test_mip_does_not_depend_on_the_ray_direction(self):
+        # A maximum is the same whichever way a ray runs: an orthographic view from the
+        # opposite side is the mirror image. The phantom's vessel tree is not symmetric, so
+        # the two views differ unless mirrored.
+        async def body():
+            async with await self.connect() as client:
+                state = await open_demo(client)
+                await client.send(vc.transfer_function({"points": GREY_RAMP}))
+                q = vc.with_compositing(EXPLICIT, "mip")
+                f, front = await final_rgba(client, q, axis_camera(state, +1, axis=0))
+                self.assertEqual(f.quality["compositing"], "mip")
+                _, back = await final_rgba(client, q, axis_camera(state, -1, axis=0))
+                return front, back
+
+        front, back = run(body())
+        self.assertGreater(front[..., 3].mean(), 0.05, "the MIP image is empty")
+        mirrored_off = np.abs(front - back[:, ::-1]).mean()
+        plain_off = np.abs(front - back).mean()
+        # 0.002: half an 8-bit level on average, where the two directions' samples could fall
+        # at different depths (step 0.5 voxel; here they fall at mirrored ones, and it is 0).
+        self.assertLess(mirrored_off, 0.002, f"MIP front vs mirrored back: mean |diff| {mirrored_off:.5f}")
+        self.assertGreater(plain_off, 1e-3, f"the two views are alike unmirrored ({plain_off:.5f}): nothing was checked")
+
+    def test_crop_box_keeps_only_the_half_it_names(self):
+        # Seen along −z with +y up, +x is the image's right: a box cut to the lower half along
+        # x leaves the image's left half only, split at the centre column (orthographic).
+        async def body():
+            async with await self.connect() as client:
+                state = await open_demo(client)
+                _, whole = await final_rgba(client, EXPLICIT, axis_camera(state, +1))
+                f, kept = await final_rgba(client, vc.with_compositing(EXPLICIT, crop=vc.crop_box([0, 0, 0], [0.5, 1, 1])))
+                self.assertEqual(f.quality["crop"], {"min": [0, 0, 0], "max": [0.5, 1, 1]})
+                return whole, kept
+
+        whole, kept = run(body())
+        alpha, middle = kept[..., 3], SIZE // 2
+        self.assertGreater(whole[:, middle:, 3].mean(), 0.02, "nothing to crop on the image's right")
+        # One column's margin: the cut lies on the boundary between the two middle columns.
+        self.assertEqual(alpha[:, middle + 1:].max(), 0, "the cropped-away half (image right) is not empty")
+        # The kept half is untouched away from the cut (exact partial segments at the face).
+        self.assertLess(np.abs(kept[:, :middle - 1] - whole[:, :middle - 1]).max(), 2 / 255,
+                        "the half kept changed")
+
+    def test_slices_come_back_with_their_geometry(self):
+        async def body():
+            async with await self.connect() as client:
+                state = await open_demo(client)
+                axial = await client.request_slice("axial", 64, 48, timeout=60)
+                coronal = await client.request_slice("coronal", 64, 48, timeout=60)
+                return state, axial, coronal
+
+        state, axial, coronal = run(body())
+        for s in (axial, coronal):
+            self.assertEqual((s.width, s.height), (64, 48))
+            self.assertGreater((s.to_numpy() > 12).mean(), 0.05, f"{s.header['axis']}: a blank slice")
+        # Axial planes are perpendicular to z: columns along +x, rows along +y (anterior on top).
+        self.assertEqual(axial.header["column"], [1, 0, 0])
+        self.assertEqual(axial.header["row"], [0, 1, 0])
+        self.assertEqual(coronal.header["row"], [0, 0, -1])
+        # The default point is the volume's centre: the pixel at the image centre shows it.
+        dims, spacing, origin = (state["volume"][k] for k in ("dims", "spacing", "origin"))
+        centre = [origin[i] + (dims[i] - 1) * spacing[i] / 2 for i in range(3)]
+        shown = axial.world_at((axial.width - 1) / 2, (axial.height - 1) / 2)
+        for i in range(3):
+            self.assertAlmostEqual(shown[i], centre[i], delta=axial.header["pixel_spacing"])
+
+
+if __name__ == "__main__":
+    unittest.main()
