@@ -140,7 +140,7 @@ void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
         s.finalSent = false;
         s.failed_ = false;
         if (!keepInteractive) {
-            s.refining.reset();
+            s.dropRefining();
             s.refiningLevel = -1;
         }
         s.levelImages.clear();
@@ -443,7 +443,7 @@ void RenderScheduler::runUnit(Work &work) {
         auto it = slots_.find(work.slot);
         if (it == slots_.end()) return;
         Slot &s = it->second;
-        if (s.refining == work.frame) s.refining.reset();
+        if (s.refining == work.frame) s.dropRefining();
         // The first (interactive) frame of a view is delivered even if newer input came: it
         // is the newest picture the client can have. A refined one is dropped.
         if (s.generation != work.generation && work.kind != Kind::Interactive) {
@@ -524,7 +524,7 @@ void RenderScheduler::fail(const Work &work, const std::string &message) {
         auto it = slots_.find(work.slot);
         if (it == slots_.end()) return;
         Slot &s = it->second;
-        if (s.refining == work.frame) s.refining.reset();
+        if (s.refining == work.frame) s.dropRefining();
         if (s.generation != work.generation) return;   // a newer view replaced it: no use telling
         s.inFlight = false;
         s.failed_ = true;   // do not retry the same view in a loop

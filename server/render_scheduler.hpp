@@ -135,6 +135,12 @@ class RenderScheduler {
         int refiningLevel = -1;
         bool refiningFinal = false;
         bool refiningSubstitute = false;       // rendered without its pending preparation
+        // The frame under way is done with: its view is let go too (it may hold a volume
+        // the registry has evicted).
+        void dropRefining() {
+            refining.reset();
+            refiningJob.reset();
+        }
         std::vector<std::pair<int, std::vector<uint8_t>>> levelImages;   // this generation's JPEGs, for calibration
         std::map<std::string, std::string> announced;   // preparations this slot was told of: key, task
     };

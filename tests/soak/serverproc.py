@@ -1,6 +1,6 @@
 """Start a real volcast-server on loopback, watch its memory, stop it with SIGTERM.
 
-Shared by soak.py and load.py. The server's log goes to a file whose tail is printed when
+Shared by soak.py, load.py and tests/protocol/python_live. The server's log goes to a file whose tail is printed when
 the server dies or misbehaves, so a failure explains itself.
 """
 

@@ -1,82 +1,42 @@
-"""The Python client against a real volcast-server (VOLCAST_SERVER_EXE, started here on a free
-port): what a script does with MIP, the crop box and slices, end to end. The offline tests
-beside it (../python) check the messages; these check that the server does what they ask.
+"""The Python client against a real volcast-server (VOLCAST_SERVER_EXE, started on a free port
+by tests/soak/serverproc.py): what a script does with MIP, the crop box and slices, end to
+end. The offline tests beside it (../python) check the messages; these check that the server
+does what they ask.
 
 Run: VOLCAST_SERVER_EXE=build/server/volcast-server PYTHONPATH=protocol/python \
      /usr/bin/python3 -m unittest discover -s tests/protocol/python_live -v"""
 
 import asyncio
 import os
-import subprocess
-import tempfile
-import time
+import sys
 import unittest
-import urllib.request
 
 import numpy as np
 
 import volcast as vc
+
+# The soak tests' server process: free port, /readyz, its log's tail when it fails to start.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "soak"))
+import serverproc  # noqa: E402
 
 SIZE = 96   # px: small frames keep the test quick on the CPU back end
 EXPLICIT = {"step": 0.5, "jitter": False, "early_termination": 1.0}
 GREY_RAMP = [[0, 0, 0, 0, 0], [255, 1, 1, 1, 1]]   # colour and opacity follow the value
 
 
-class LiveServer:
-    """volcast-server on a free port with the built-in phantoms only; stopped with SIGTERM."""
-
-    def __init__(self):
-        exe = os.environ.get("VOLCAST_SERVER_EXE")
-        if not exe or not os.path.exists(exe):
-            raise RuntimeError(f"VOLCAST_SERVER_EXE ({exe!r}) does not name the built volcast-server")
-        self.dir = tempfile.TemporaryDirectory(prefix="volcast-py-live-")
-        port_file = os.path.join(self.dir.name, "port")
-        self.log = open(os.path.join(self.dir.name, "server.log"), "w+")
-        self.proc = subprocess.Popen([exe, "--port", "0", "--port-file", port_file, "--log-level", "info"],
-                                     stdout=self.log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 60
-        self.port = 0
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"volcast-server exited with {self.proc.returncode}:\n{self.log_text()}")
-            if not self.port and os.path.exists(port_file):
-                with open(port_file) as f:
-                    text = f.read().strip()
-                self.port = int(text) if text else 0
-            if self.port:
-                try:
-                    with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/readyz", timeout=2) as r:
-                        if r.status == 200:
-                            return
-                except OSError:
-                    pass
-            time.sleep(0.1)
-        self.stop()
-        raise RuntimeError(f"volcast-server was not ready within 60 s:\n{self.log_text()}")
-
-    def log_text(self):
-        self.log.flush()
-        self.log.seek(0)
-        return self.log.read()[-4000:]
-
-    def stop(self):
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-        self.log.close()
-        self.dir.cleanup()
-
-
 def setUpModule():
     global server
-    server = LiveServer()
+    exe = os.environ.get("VOLCAST_SERVER_EXE")
+    if not exe:
+        raise RuntimeError("VOLCAST_SERVER_EXE must name the built volcast-server")
+    server = serverproc.Server(exe, ["--log-level", "info"], ready_timeout=60)
 
 
 def tearDownModule():
-    server.stop()
+    code, _ = server.stop()
+    server.cleanup()
+    if code != 0:
+        raise RuntimeError(f"volcast-server exited with {code} on SIGTERM")
 
 
 async def open_demo(client):
