@@ -138,6 +138,36 @@ VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
     return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
 }
 
+// The same trilinear sample from the narrow copy (FrameParams::narrowVoxels): each 32-bit
+// gather at a sample's byte offset holds it and its +x neighbour in its low 2·Bytes bytes.
+// Widened to the same floats as the float copy holds and interpolated in the same order,
+// so the value is bit for bit the one sampleTrilinear returns.
+template <int Bytes>
+VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df);
+    x = hn::Min(hn::Max(x, zero), hn::Set(df, float(P.levelDims[0] - 1)));
+    y = hn::Min(hn::Max(y, zero), hn::Set(df, float(P.levelDims[1] - 1)));
+    z = hn::Min(hn::Max(z, zero), hn::Set(df, float(P.levelDims[2] - 1)));
+    const VI ix = hn::ConvertTo(di, x), iy = hn::ConvertTo(di, y), iz = hn::ConvertTo(di, z);
+    const VF fx = hn::Sub(x, hn::ConvertTo(df, ix)), fy = hn::Sub(y, hn::ConvertTo(df, iy)),
+             fz = hn::Sub(z, hn::ConvertTo(df, iz));
+    const VI sy = hn::Set(di, P.rowStride * Bytes), sz = hn::Set(di, P.sliceStride * Bytes);
+    VI o000 = hn::Add(hn::Add(ix, hn::Mul(iy, hn::Set(di, P.rowStride))), hn::Mul(iz, hn::Set(di, P.sliceStride)));
+    if constexpr (Bytes == 2) o000 = hn::ShiftLeft<1>(o000);
+    const int32_t *v = reinterpret_cast<const int32_t *>(P.narrowVoxels);
+    const VI g00 = hn::GatherOffset(di, v, o000), g10 = hn::GatherOffset(di, v, hn::Add(o000, sy));
+    const VI g01 = hn::GatherOffset(di, v, hn::Add(o000, sz)), g11 = hn::GatherOffset(di, v, hn::Add(hn::Add(o000, sy), sz));
+    const VI mask = hn::Set(di, Bytes == 1 ? 0xFF : 0xFFFF);
+    const VF offset = hn::Set(df, P.narrowOffset);
+    const auto lo = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(g, mask)), offset); };
+    const auto hi = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(hn::ShiftRight<8 * Bytes>(g), mask)), offset); };
+    const VF c00 = lerp(lo(g00), hi(g00), fx), c10 = lerp(lo(g10), hi(g10), fx);
+    const VF c01 = lerp(lo(g01), hi(g01), fx), c11 = lerp(lo(g11), hi(g11), fx);
+    return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
+}
+
 // Cubic B-spline weights of the four taps around fractional position f.
 inline void cubicWeights(VF f, VF w[4]) {
     const DF df;
@@ -180,7 +210,10 @@ VF sampleCubic(const FrameParams &P, VF x, VF y, VF z) {
 }
 
 inline VF sampleVolume(const FrameParams &P, VF x, VF y, VF z) {
-    return P.features.cubic ? sampleCubic(P, x, y, z) : sampleTrilinear(P, x, y, z);
+    if (P.features.cubic) return sampleCubic(P, x, y, z);
+    if (P.narrowBytes == 1) return sampleTrilinearNarrow<1>(P, x, y, z);
+    if (P.narrowBytes == 2) return sampleTrilinearNarrow<2>(P, x, y, z);
+    return sampleTrilinear(P, x, y, z);
 }
 
 // Colour and sigma, linear between table entries.

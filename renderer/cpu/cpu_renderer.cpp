@@ -49,6 +49,26 @@ std::vector<float> padAfter(const std::vector<float> &v, Vec3i n) {
     return out;
 }
 
+// padAfter's layout stored as sample − offset in `bytes` (1 or 2) bytes each, little-endian,
+// with 4 bytes of slack after the last: the march reads 32 bits at every sample's offset.
+// Indexing that copy by byte offsets needs them to fit int32 too.
+std::vector<uint8_t> padAfterNarrow(const std::vector<float> &v, Vec3i n, CpuRenderer::NarrowWidth w) {
+    const size_t px = size_t(n.x) + 1, py = size_t(n.y) + 1, pz = size_t(n.z) + 1;
+    std::vector<uint8_t> out(px * py * pz * size_t(w.bytes) + 4, 0);
+    for (size_t k = 0; k < pz; ++k)
+        for (size_t j = 0; j < py; ++j) {
+            const size_t sk = std::min(k, size_t(n.z) - 1), sj = std::min(j, size_t(n.y) - 1);
+            const float *src = v.data() + (sk * size_t(n.y) + sj) * size_t(n.x);
+            uint8_t *dst = out.data() + (k * py + j) * px * size_t(w.bytes);
+            for (size_t i = 0; i < px; ++i) {
+                const auto u = uint32_t(src[std::min(i, size_t(n.x) - 1)] - w.offset);
+                dst[i * size_t(w.bytes)] = uint8_t(u);
+                if (w.bytes == 2) dst[i * 2 + 1] = uint8_t(u >> 8);
+            }
+        }
+    return out;
+}
+
 // B-spline coefficients padded by one before and two after on each axis with the mirror
 // boundary, so the 4×4×4 footprint around any clamped position stays inside (as the OpenCL
 // back end's buffer).
@@ -148,7 +168,15 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
     data.dims = pyramid_.dims(level);
     data.cubic = cubic;
     if (!cubic) {
-        data.padded = padAfter(voxels, data.dims);
+        data.width = options_.narrowSamples ? narrowWidth(voxels) : NarrowWidth{};
+        const Vec3i n = data.dims;
+        const uint64_t paddedCount = uint64_t(n.x + 1) * uint64_t(n.y + 1) * uint64_t(n.z + 1);
+        if (data.width.bytes < 4 && paddedCount * uint64_t(data.width.bytes) + 4 <= uint64_t(INT32_MAX))
+            data.narrow = padAfterNarrow(voxels, n, data.width);
+        else {
+            data.width = {};
+            data.padded = padAfter(voxels, n);
+        }
     } else {
         const auto tc = Clock::now();
         std::vector<float> coefficients = voxels;
@@ -158,18 +186,35 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
         std::lock_guard lock(countsMutex_);
         ++counts_.coefficientVolumes;
     }
-    heldBytes_ += uint64_t(data.padded.size()) * sizeof(float);
+    heldBytes_ += uint64_t(data.padded.size()) * sizeof(float) + uint64_t(data.narrow.size());
     return dataSets_.emplace(key, std::move(data)).first->second;
 }
 
-uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options) {
+CpuRenderer::NarrowWidth CpuRenderer::narrowWidth(const std::vector<float> &samples) {
+    if (samples.empty()) return {};
+    float lo = samples[0], hi = samples[0];
+    for (const float v : samples) {
+        // An integer of magnitude ≤ 2^24 survives float(v − offset) + offset exactly; −0
+        // would come back as +0, NaN and ±inf not at all.
+        if (!(std::fabs(v) <= 16777216.0f) || v != std::trunc(v) || (v == 0 && std::signbit(v))) return {};
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+    }
+    const double span = double(hi) - double(lo);
+    if (span < 256) return {1, lo};
+    if (span < 65536) return {2, lo};
+    return {};
+}
+
+uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options, int level0Bytes) {
     const auto count = [](Vec3i d, int pad) { return uint64_t(d.x + pad) * uint64_t(d.y + pad) * uint64_t(d.z + pad); };
     const int b = std::max(1, options.brickSize);
     uint64_t bytes = 0;
     for (int level = 0;; ++level) {
         const Vec3i d = mipLevelDims(dims, level);
         if (level > 0) bytes += count(d, 0) * sizeof(float);                  // the mip level
-        bytes += (count(d, 1) + count(d, 3)) * sizeof(float);                 // trilinear and cubic copies
+        bytes += count(d, 1) * uint64_t(level == 0 ? level0Bytes : 4) + 4;  // trilinear copy (mips: float)
+        bytes += count(d, 3) * sizeof(float);                                 // cubic copy
         const Vec3i bricks{(d.x + b - 1) / b, (d.y + b - 1) / b, (d.z + b - 1) / b};
         bytes += 2 * count(bricks, 0) * (2 * sizeof(float) + sizeof(int32_t)); // min-max and visible, both
         if (d.x == 1 && d.y == 1 && d.z == 1) break;
@@ -343,6 +388,11 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
     p.seed = uint32_t(quality.seed ^ (quality.seed >> 32));
     p.maxSamples = kMaxSamplesPerRay;
     p.voxels = data.padded.data();
+    if (!data.narrow.empty()) {
+        p.narrowVoxels = data.narrow.data();
+        p.narrowBytes = data.width.bytes;
+        p.narrowOffset = data.width.offset;
+    }
     const int pad = cubic ? 3 : 1; // padMirror and padAfter checked that the padded count fits int32
     p.rowStride = int(data.dims.x + pad);
     p.sliceStride = int((data.dims.x + pad) * (data.dims.y + pad));

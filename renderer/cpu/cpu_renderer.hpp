@@ -24,6 +24,9 @@ namespace volcast {
 struct CpuRendererOptions {
     int threads = 0;   // 0: one per core
     int brickSize = 8; // level voxels per min-max brick edge
+    // Hold an 8- or 16-bit scan's level 0 in 1 or 2 bytes a sample for trilinear frames
+    // (narrowWidth). The image is the same bit for bit; off only to compare against.
+    bool narrowSamples = true;
 };
 
 class CpuRenderer : public FrameRenderer {
@@ -51,7 +54,17 @@ class CpuRenderer : public FrameRenderer {
     uint64_t memoryBytes() const { return heldBytes_.load(); }
     // What memoryBytes() reaches at most for a volume of `dims`: every mip level sampled,
     // trilinear and cubic, with empty-space skipping. The server's memory budget counts it.
-    static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {});
+    // `level0Bytes`: bytes per sample of level 0's trilinear copy (narrowWidth(voxels).bytes).
+    static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {}, int level0Bytes = 4);
+
+    // How the trilinear copy of a level stores its samples: in 1 or 2 bytes as sample −
+    // offset when every sample is an integer (not −0) of magnitude ≤ 2^24 and they span at
+    // most 2^8 or 2^16 values — what 8- and 16-bit scans hold, exactly — else as float (4).
+    struct NarrowWidth {
+        int bytes = 4;
+        float offset = 0;
+    };
+    static NarrowWidth narrowWidth(const std::vector<float> &samples);
 
     // What description() says for a renderer with these options, before any volume exists
     // (the server's start-up log and hello).
@@ -66,6 +79,10 @@ class CpuRenderer : public FrameRenderer {
         Vec3i dims;
         bool cubic = false;
         std::vector<float> padded; // voxels: one edge copy after; coefficients: mirrored 1 before, 2 after
+        // Trilinear data whose samples fit 8 or 16 bits (narrowWidth): held instead of
+        // `padded`, same layout, as sample − narrowOffset, plus 4 bytes of slack.
+        std::vector<uint8_t> narrow;
+        NarrowWidth width;
         std::optional<MinMaxBricks> bricks;
         std::optional<TransferFunction> classifiedFor;
         std::vector<int32_t> brickVisible;

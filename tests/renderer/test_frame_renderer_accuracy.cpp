@@ -627,6 +627,81 @@ TEST(CpuRenderer, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
     EXPECT_EQ(r.preprocessCounts().preintegrationTables, 2); // the table depends on the step
 }
 
+TEST(CpuRenderer, NarrowWidthTakesExactlyTheIntegersEightAndSixteenBitsHold) {
+    using W = CpuRenderer::NarrowWidth;
+    const auto width = [](std::vector<float> v) { return CpuRenderer::narrowWidth(v); };
+    const auto is = [](W w, int bytes, float offset) { return w.bytes == bytes && w.offset == offset; };
+    EXPECT_TRUE(is(width({0, 255, 17}), 1, 0));
+    EXPECT_TRUE(is(width({-1024, -769}), 1, -1024)); // 256 values: 8 bits from the lowest
+    EXPECT_TRUE(is(width({-1024, -768}), 2, -1024)); // 257 values
+    EXPECT_TRUE(is(width({-1024, 3071, 0}), 2, -1024));
+    EXPECT_TRUE(is(width({0, 65535}), 2, 0));
+    EXPECT_TRUE(is(width({16777216, 16777216 - 65535}), 2, 16777216 - 65535));
+    EXPECT_EQ(width({0, 65536}).bytes, 4) << "17 bits";
+    EXPECT_EQ(width({0, 0.5f}).bytes, 4) << "not an integer";
+    EXPECT_EQ(width({1, -0.0f}).bytes, 4) << "−0 would come back as +0";
+    EXPECT_EQ(width({1, std::nanf("")}).bytes, 4);
+    EXPECT_EQ(width({1, INFINITY}).bytes, 4);
+    EXPECT_EQ(width({16777218.0f, 16777220.0f}).bytes, 4) << "beyond 2^24 float no longer holds every integer";
+    EXPECT_EQ(width({}).bytes, 4);
+}
+
+// An 8- or 16-bit scan sampled from its narrow copy draws the float copy's image bit for bit,
+// in every switch that samples trilinearly (and with the same samples), from a quarter or half
+// of the bytes. Only the widening differs, and it is exact.
+TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const std::vector<ClipPlane> clip{{blob().volume.center(), normalize(Vec3d{0.2, 1, -0.3})}};
+    CpuRendererOptions floatCopy;
+    floatCopy.narrowSamples = false;
+    struct Scan {
+        const char *what;
+        double scale, offset; // value = round(blob·scale) + offset, and the tf's points alike
+        int bytes;
+    };
+    for (const Scan &scan : {Scan{"8-bit", 1.0, 0.0, 1}, Scan{"16-bit CT-like", 40.0, -1024.0, 2}}) {
+        Volume v = blob().volume;
+        for (float &x : v.voxels) x = float(std::round(double(x) * scan.scale) + scan.offset);
+        computeStatistics(v);
+        TransferFunction tf = blobTf();
+        for (auto &pt : tf.points) pt.value = pt.value * scan.scale + scan.offset;
+        ASSERT_EQ(CpuRenderer::narrowWidth(v.voxels).bytes, scan.bytes) << scan.what;
+        CpuRenderer narrow(v), wide(v, floatCopy);
+        const uint64_t padded = uint64_t(25) * 25 * 25; // 24³ with one edge copy after
+        EXPECT_EQ(narrow.memoryBytes(), padded * uint64_t(scan.bytes) + 4) << scan.what;
+        EXPECT_EQ(wide.memoryBytes(), padded * 4) << scan.what;
+        Quality q = plain(0.5);
+        std::vector<std::pair<std::string, Quality>> cases{{"plain", q}};
+        q.jitter = true;
+        q.seed = 3;
+        q.earlyTermination = 0.98;
+        q.emptySpaceSkipping = true;
+        cases.push_back({"jitter, early termination, skipping", q});
+        q.shading = true;
+        cases.push_back({"shading", q});
+        q.preintegrated = true;
+        q.step = 1.3;
+        cases.push_back({"pre-integrated, shading", q});
+        q = plain(0.5);
+        q.compositing = Compositing::Maximum;
+        cases.push_back({"MIP", q});
+        q = plain(0.5);
+        q.imageScale = 0.5;
+        cases.push_back({"image scale 1/2", q});
+        for (const auto &[what, quality] : cases) {
+            const std::string label = std::string(scan.what) + ", " + what;
+            for (const auto &planes : {std::vector<ClipPlane>{}, clip}) {
+                RenderStats sn, sw;
+                const Image a = narrow.render(tf, cam, 40, 40, quality, planes, &sn);
+                const Image b = wide.render(tf, cam, 40, 40, quality, planes, &sw);
+                EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label;
+                EXPECT_EQ(sn.meanSamplesPerRay, sw.meanSamplesPerRay) << label;
+                EXPECT_GT(compareImages(a, Image(40, 40)).maxAbs, 0.05) << label << ": nothing drawn";
+            }
+        }
+    }
+}
+
 TEST(CpuRenderer, ThreadCountDoesNotChangeTheImage) {
     CpuRendererOptions one;
     one.threads = 1;
