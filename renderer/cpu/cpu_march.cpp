@@ -216,17 +216,29 @@ inline VF sampleVolume(const FrameParams &P, VF x, VF y, VF z) {
     return sampleTrilinear(P, x, y, z);
 }
 
-// Colour and sigma, linear between table entries.
-void classify(const FrameParams &P, VF value, VF rgbs[4]) {
+// Where a value falls in the transfer-function table: the entry below (×4, its first float)
+// and the fraction towards the next.
+struct TableSpot {
+    VI i4;
+    VF f;
+};
+inline TableSpot tableSpot(const FrameParams &P, VF value) {
     const DF df;
     const DI di;
     const VF x = hn::Min(hn::Max(hn::Mul(hn::Sub(value, hn::Set(df, P.tfMin)), hn::Set(df, P.tfScale)), hn::Zero(df)),
                          hn::Set(df, float(P.tfEntries - 1)));
     const VI i = hn::Min(hn::ConvertTo(di, x), hn::Set(di, P.tfEntries - 2));
-    const VF f = hn::Sub(x, hn::ConvertTo(df, i));
-    const VI i4 = hn::ShiftLeft<2>(i);
-    for (int c = 0; c < 4; ++c)
-        rgbs[c] = lerp(hn::GatherIndex(df, P.tf + c, i4), hn::GatherIndex(df, P.tf + 4 + c, i4), f);
+    return {hn::ShiftLeft<2>(i), hn::Sub(x, hn::ConvertTo(df, i))};
+}
+// Channel c (r, g, b, sigma) at the spot, linear between table entries.
+inline VF tableChannel(const FrameParams &P, const TableSpot &s, int c) {
+    const DF df;
+    return lerp(hn::GatherIndex(df, P.tf + c, s.i4), hn::GatherIndex(df, P.tf + 4 + c, s.i4), s.f);
+}
+// Colour and sigma, linear between table entries.
+void classify(const FrameParams &P, VF value, VF rgbs[4]) {
+    const TableSpot s = tableSpot(P, value);
+    for (int c = 0; c < 4; ++c) rgbs[c] = tableChannel(P, s, c);
 }
 
 // Fractional node coordinate of value v: the locator gives the node intervals a uniform
@@ -603,9 +615,14 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                                 segColor[a] = hn::Min(hn::MulAdd(segColor[a], diffuse, hn::Mul(specular, alpha)), alpha);
                         }
                     } else {
-                        // Sample the segment at its centre and classify.
+                        // Sample the segment at its centre and classify: sigma first, and the
+                        // colour only if some lane's sigma is positive. Where none is, alpha is 0
+                        // and T·alpha·colour is +0 for any colour, so 0 stands in for it exactly.
                         VF c[4];
-                        classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
+                        const TableSpot spot = tableSpot(P, sampleVolume(P, q[0], q[1], q[2]));
+                        c[3] = tableChannel(P, spot, 3);
+                        const bool opaqueSomewhere = !hn::AllFalse(df, hn::And(take, hn::Gt(c[3], zero)));
+                        for (int a = 0; a < 3; ++a) c[a] = opaqueSomewhere ? tableChannel(P, spot, a) : zero;
                         // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
                         segDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
                         alpha = opacityFromDepth(segDepth);
