@@ -69,9 +69,10 @@ std::vector<Level> explicitLadder(const Quality &quality, int jitterPasses) {
 }
 
 double predictedSamples(const Volume &volume, const Quality &q, int width, int height) {
-    const double scale = double(1 << std::min(q.mipLevel, 16));
+    // The step is in level-0 voxels on every mip level (frameStep): a coarse level takes as
+    // many samples per ray, each cheaper only by the cache it hits, which the timer measures.
     const Vec3d d = Vec3d(volume.dims);
-    const double diagonalVoxels = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z) / scale;
+    const double diagonalVoxels = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
     const double rays = double(width) * double(height) * q.imageScale * q.imageScale;
     double perSample = 1;
     if (q.interpolation == Interpolation::Cubic) perSample *= 4;   // 64 taps instead of 8
