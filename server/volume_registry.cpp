@@ -34,12 +34,11 @@ std::string lower(std::string s) {
 // and what its renderer builds from them at most: every mip level, a padded copy of each
 // for trilinear sampling and one of B-spline coefficients for cubic, brick grids
 // (CpuRenderer::plannedBytes; the OpenCL back end holds about the same, as host or device
-// buffers, all float). Counted in full at load, so that frames asking for coarse levels or
-// cubic later never take the server past its budget. The native path holds level 0's
-// trilinear copy of an 8- or 16-bit scan in 1 or 2 bytes a sample (CpuRenderer::narrowWidth).
-uint64_t memoryOf(const Volume &v, bool nativePath) {
-    const int level0Bytes = nativePath ? CpuRenderer::narrowWidth(v.voxels).bytes : 4;
-    return uint64_t(v.voxels.size()) * sizeof(float) + CpuRenderer::plannedBytes(v.dims, {}, level0Bytes);
+// buffers). Counted in full at load, so that frames asking for coarse levels or cubic later
+// never take the server past its budget. Both back ends sample level 0 of an 8- or 16-bit
+// scan from a copy in 1 or 2 bytes a sample (narrow_samples.hpp).
+uint64_t memoryOf(const Volume &v) {
+    return uint64_t(v.voxels.size()) * sizeof(float) + CpuRenderer::plannedBytes(v.dims, {}, narrowWidth(v.voxels).bytes);
 }
 // The least memoryOf() / float32 voxel bytes, for refusing a file from its header: 1 (the
 // voxels) + 1/7 (mips) + 1/4 + 1/7 (trilinear copies, level 0's in 8 bits) + 8/7
@@ -314,7 +313,7 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         progress(p.name, ProgressStage::Loading, "", 1.0);
         auto entry = std::make_shared<VolumeEntry>();
         entry->name = p.name;
-        entry->bytes = memoryOf(loaded.volume, cl_ == nullptr);
+        entry->bytes = memoryOf(loaded.volume);
         if (entry->bytes > budgetBytes_) return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, entry->bytes));
         {
             // Checked before the upload; room is made only once the volume is ready (loaderLoop).

@@ -52,7 +52,7 @@ struct FrameParams {
     const float *voxels = nullptr;
     // Trilinear only: the same padded samples stored narrow, as sample − narrowOffset in
     // narrowBytes (1 or 2) bytes each, when every sample of the level is an integer spanning
-    // at most 2^8 (2^16) values (CpuRenderer::narrowWidth). Exact: the taps widen to the same
+    // at most 2^8 (2^16) values (narrowWidth). Exact: the taps widen to the same
     // floats. One 32-bit gather then fetches both x taps, so a sample takes 4 gathers, not 8,
     // from a copy a quarter (half) the size. 4 bytes of slack follow the last sample.
     // Null: `voxels` holds the level.

@@ -52,7 +52,7 @@ std::vector<float> padAfter(const std::vector<float> &v, Vec3i n) {
 // padAfter's layout stored as sample − offset in `bytes` (1 or 2) bytes each, little-endian,
 // with 4 bytes of slack after the last: the march reads 32 bits at every sample's offset.
 // Indexing that copy by byte offsets needs them to fit int32 too.
-std::vector<uint8_t> padAfterNarrow(const std::vector<float> &v, Vec3i n, CpuRenderer::NarrowWidth w) {
+std::vector<uint8_t> padAfterNarrow(const std::vector<float> &v, Vec3i n, NarrowWidth w) {
     const size_t px = size_t(n.x) + 1, py = size_t(n.y) + 1, pz = size_t(n.z) + 1;
     std::vector<uint8_t> out(px * py * pz * size_t(w.bytes) + 4, 0);
     for (size_t k = 0; k < pz; ++k)
@@ -188,22 +188,6 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
     }
     heldBytes_ += uint64_t(data.padded.size()) * sizeof(float) + uint64_t(data.narrow.size());
     return dataSets_.emplace(key, std::move(data)).first->second;
-}
-
-CpuRenderer::NarrowWidth CpuRenderer::narrowWidth(const std::vector<float> &samples) {
-    if (samples.empty()) return {};
-    float lo = samples[0], hi = samples[0];
-    for (const float v : samples) {
-        // An integer of magnitude ≤ 2^24 survives float(v − offset) + offset exactly; −0
-        // would come back as +0, NaN and ±inf not at all.
-        if (!(std::fabs(v) <= 16777216.0f) || v != std::trunc(v) || (v == 0 && std::signbit(v))) return {};
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-    }
-    const double span = double(hi) - double(lo);
-    if (span < 256) return {1, lo};
-    if (span < 65536) return {2, lo};
-    return {};
 }
 
 uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options, int level0Bytes) {

@@ -11,6 +11,7 @@
 #include "renderer/frame_renderer.hpp"
 #include "renderer/minmax_bricks.hpp"
 #include "renderer/mip_pyramid.hpp"
+#include "renderer/narrow_samples.hpp"
 #include "renderer/preintegration.hpp"
 
 #include <atomic>
@@ -57,14 +58,6 @@ class CpuRenderer : public FrameRenderer {
     // `level0Bytes`: bytes per sample of level 0's trilinear copy (narrowWidth(voxels).bytes).
     static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {}, int level0Bytes = 4);
 
-    // How the trilinear copy of a level stores its samples: in 1 or 2 bytes as sample −
-    // offset when every sample is an integer (not −0) of magnitude ≤ 2^24 and they span at
-    // most 2^8 or 2^16 values — what 8- and 16-bit scans hold, exactly — else as float (4).
-    struct NarrowWidth {
-        int bytes = 4;
-        float offset = 0;
-    };
-    static NarrowWidth narrowWidth(const std::vector<float> &samples);
 
     // What description() says for a renderer with these options, before any volume exists
     // (the server's start-up log and hello).

@@ -80,10 +80,11 @@ bool OpenClRenderer::cubicFromImage() const {
     return options_.cubicFetch == CubicFetch::Trilinear8;
 }
 
-std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes) const {
+std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes, int voxelBytes) const {
     // No -cl-fast-relaxed-math: it would break the opacity correction's exactness for tiny
     // steps and opacities (expm1/log1p), which the stability cases rely on.
     std::string o;
+    if (voxelBytes == 1 || voxelBytes == 2) o += " -DVOXEL_BYTES=" + std::to_string(voxelBytes);
     if (q.jitter) o += " -DJITTER";
     if (q.boundarySegment) o += " -DBOUNDARY_SEGMENT";
     if (q.earlyTermination < 1) o += " -DEARLY_TERMINATION";
@@ -125,7 +126,19 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
     data.cubic = cubic;
     data.dims = dims;
     if (!cubic) {
-        data.buffer = upload(cl_, voxels, "volume " + volume_->name);
+        data.width = options_.narrowSamples ? narrowWidth(voxels) : NarrowWidth{};
+        if (data.width.bytes < 4) {
+            const std::vector<unsigned char> narrow = narrowSamples(voxels, data.width);
+            try {
+                data.buffer = cl::Buffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, narrow.size(),
+                                         const_cast<unsigned char *>(narrow.data()));
+            } catch (const cl::Error &e) {
+                throw OpenClError("cannot upload volume " + volume_->name + " to " + cl_.deviceName() + ": " +
+                                  describe(e));
+            }
+        } else {
+            data.buffer = upload(cl_, voxels, "volume " + volume_->name);
+        }
     } else {
         // Prefilter on the device (the paper's Table 2), pad on the host, upload.
         t = Clock::now();
@@ -227,12 +240,12 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
 
     std::lock_guard frameLock(mutex_);
     RenderStats st;
-    st.buildOptions = buildOptions(quality, !clipPlanes.empty());
+    const bool cubic = quality.interpolation == Interpolation::Cubic;
+    DataSet &data = dataSet(quality.mipLevel, cubic, st);
+    st.buildOptions = buildOptions(quality, !clipPlanes.empty(), data.width.bytes);
     const auto built = cl_.program(kRaycastKernelSource, st.buildOptions);
     st.kernelBuildSeconds = built.buildSeconds;
 
-    const bool cubic = quality.interpolation == Interpolation::Cubic;
-    DataSet &data = dataSet(quality.mipLevel, cubic, st);
     if (quality.emptySpaceSkipping) classify(data, tf, st);
 
     const double smallest = minComponent(volume_->spacing);
@@ -326,6 +339,7 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
         p.bricks[a] = data.bricks ? int(data.bricks->bricks[a]) : 0;
     }
     p.levelScale = float(std::ldexp(1.0, -quality.mipLevel));
+    p.narrowOffset = data.width.offset;
     p.brickSize = options_.brickSize;
     p.tfMin = float(tfMin_);
     p.tfScale = float(tfScale_);

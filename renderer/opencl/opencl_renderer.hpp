@@ -10,6 +10,7 @@
 #include "renderer/image.hpp"
 #include "renderer/minmax_bricks.hpp"
 #include "renderer/mip_pyramid.hpp"
+#include "renderer/narrow_samples.hpp"
 #include "renderer/opencl/opencl_context.hpp"
 #include "renderer/scene.hpp"
 #include "renderer/volume.hpp"
@@ -30,6 +31,9 @@ enum class CubicFetch { Auto, Taps64, Trilinear8 };
 struct OpenClRendererOptions {
     CubicFetch cubicFetch = CubicFetch::Auto;
     int brickSize = 8; // level voxels per min-max brick edge
+    // Upload an 8- or 16-bit scan's levels in 1 or 2 bytes a sample for trilinear frames
+    // (narrow_samples.hpp). The image is the same bit for bit; off only to compare against.
+    bool narrowSamples = true;
 };
 
 class OpenClRenderer : public FrameRenderer {
@@ -50,7 +54,8 @@ class OpenClRenderer : public FrameRenderer {
     std::string description() const override;
 
     // The -D options a scene's program is built with: only the features it uses.
-    std::string buildOptions(const Quality &quality, bool hasClipPlanes) const;
+    // `voxelBytes`: how the sampled data holds a sample, 4 (float) or 1 or 2 (narrow).
+    std::string buildOptions(const Quality &quality, bool hasClipPlanes, int voxelBytes = 4) const;
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }
 
@@ -61,6 +66,7 @@ class OpenClRenderer : public FrameRenderer {
         bool cubic = false;
         Vec3i dims;
         cl::Buffer buffer;           // voxels, or coefficients padded for the 64-tap path
+        NarrowWidth width;           // trilinear voxels of an 8- or 16-bit scan: narrow in `buffer`
         cl::Image3D image;           // padded coefficients for the 8-fetch path
         std::optional<MinMaxBricks> bricks;
         std::optional<TransferFunction> classifiedFor;

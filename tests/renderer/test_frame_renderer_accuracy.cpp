@@ -22,6 +22,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
 namespace volcast {
 namespace {
@@ -627,9 +628,9 @@ TEST(CpuRenderer, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
     EXPECT_EQ(r.preprocessCounts().preintegrationTables, 2); // the table depends on the step
 }
 
-TEST(CpuRenderer, NarrowWidthTakesExactlyTheIntegersEightAndSixteenBitsHold) {
-    using W = CpuRenderer::NarrowWidth;
-    const auto width = [](std::vector<float> v) { return CpuRenderer::narrowWidth(v); };
+TEST(NarrowSamples, WidthTakesExactlyTheIntegersEightAndSixteenBitsHold) {
+    using W = NarrowWidth;
+    const auto width = [](std::vector<float> v) { return narrowWidth(v); };
     const auto is = [](W w, int bytes, float offset) { return w.bytes == bytes && w.offset == offset; };
     EXPECT_TRUE(is(width({0, 255, 17}), 1, 0));
     EXPECT_TRUE(is(width({-1024, -769}), 1, -1024)); // 256 values: 8 bits from the lowest
@@ -665,7 +666,7 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
         computeStatistics(v);
         TransferFunction tf = blobTf();
         for (auto &pt : tf.points) pt.value = pt.value * scan.scale + scan.offset;
-        ASSERT_EQ(CpuRenderer::narrowWidth(v.voxels).bytes, scan.bytes) << scan.what;
+        ASSERT_EQ(narrowWidth(v.voxels).bytes, scan.bytes) << scan.what;
         CpuRenderer narrow(v), wide(v, floatCopy);
         const uint64_t padded = uint64_t(25) * 25 * 25; // 24³ with one edge copy after
         EXPECT_EQ(narrow.memoryBytes(), padded * uint64_t(scan.bytes) + 4) << scan.what;
@@ -699,6 +700,42 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
                 EXPECT_GT(compareImages(a, Image(40, 40)).maxAbs, 0.05) << label << ": nothing drawn";
             }
         }
+    }
+}
+
+// The same on the OpenCL back end: its buffer of uchar or ushort samples (VOXEL_BYTES) draws
+// the float buffer's image bit for bit, and the native path's to float rounding.
+TEST(OpenClRenderer, EightAndSixteenBitSamplesDrawTheFloatBuffersImageBitForBit) {
+    const Camera cam = test::obliqueCamera(blob().volume, 30);
+    const std::vector<ClipPlane> clip{{blob().volume.center(), normalize(Vec3d{0.2, 1, -0.3})}};
+    OpenClRendererOptions floatBuffer;
+    floatBuffer.narrowSamples = false;
+    for (const auto &[what, scale, offset, bytes] :
+         {std::tuple{"8-bit", 1.0, 0.0, 1}, std::tuple{"16-bit CT-like", 40.0, -1024.0, 2}}) {
+        Volume v = blob().volume;
+        for (float &x : v.voxels) x = float(std::round(double(x) * scale) + offset);
+        computeStatistics(v);
+        TransferFunction tf = blobTf();
+        for (auto &pt : tf.points) pt.value = pt.value * scale + offset;
+        OpenClRenderer narrow(test::sharedOpenClContext(), v), wide(test::sharedOpenClContext(), v, floatBuffer);
+        CpuRenderer cpu(v);
+        Quality q = plain(0.5);
+        q.jitter = true;
+        q.seed = 3;
+        q.earlyTermination = 0.98;
+        q.emptySpaceSkipping = true;
+        q.shading = true;
+        RenderStats sn, sw, sc;
+        const Image a = narrow.render(tf, cam, 40, 40, q, clip, &sn);
+        const Image b = wide.render(tf, cam, 40, 40, q, clip, &sw);
+        EXPECT_NE(sn.buildOptions.find("-DVOXEL_BYTES=" + std::to_string(bytes)), std::string::npos)
+            << what << ": " << sn.buildOptions;
+        EXPECT_EQ(sw.buildOptions.find("VOXEL_BYTES"), std::string::npos) << what << ": " << sw.buildOptions;
+        EXPECT_EQ(compareImages(a, b).maxAbs, 0) << what;
+        EXPECT_EQ(sn.meanSamplesPerRay, sw.meanSamplesPerRay) << what;
+        EXPECT_GT(compareImages(a, Image(40, 40)).maxAbs, 0.05) << what << ": nothing drawn";
+        // As DrawsTheOpenClImageToFloatRounding: 2e-5.
+        EXPECT_LT(compareImages(a, cpu.render(tf, cam, 40, 40, q, clip, &sc)).maxAbs, 2e-5) << what;
     }
 }
 

@@ -97,7 +97,7 @@ TEST_F(VolumeRegistryTest, SwitchingSessionMayHaveItsOwnVolumeEvicted) {
 
 // The budget counts the bytes a volume really takes: a 16-bit scan is held as float32 voxels
 // (4 bytes each, twice its file's 2), and its renderer adds a padded copy (of level 0 in 16
-// bits: CpuRenderer::narrowWidth), mip levels, B-spline coefficients and brick grids as
+// bits: narrowWidth), mip levels, B-spline coefficients and brick grids as
 // frames ask for them. After frames that build all of them,
 // what the registry counted must cover what is held, and not by much more.
 TEST_F(VolumeRegistryTest, ASixteenBitVolumeCountsEveryByteItsRendererBuilds) {

@@ -14,16 +14,31 @@
  *   COMPOSITING_MAX      maximum intensity projection instead of emission–absorption
  *   COMPOSITING_MIN      minimum intensity projection (the host builds neither skipping,
  *                        early termination, pre-integration nor shading with these two)
+ *   VOXEL_BYTES=1 or 2   trilinear voxels held narrow, as uchar or ushort sample − narrowOffset
+ *                        (narrow_samples.hpp): widened exactly, so the image is the float one's
  */
 #ifndef VOLCAST_EMBEDDED
 #include "../../phong_constants.h"
 #include "raycast_shared.h"
 #endif
 
+/* KERNEL_VOLUME_ARG: the kernel's volume argument; VOLUME_ARG and VOLUME: how functions take
+ * and pass it on (narrow voxels carry their offset, read from the parameters once). */
 #if defined(CUBIC_IMAGE)
+#define KERNEL_VOLUME_ARG __read_only image3d_t volume
 #define VOLUME_ARG __read_only image3d_t volume
 #define VOLUME volume
+#elif defined(VOXEL_BYTES)
+#if VOXEL_BYTES == 1
+typedef uchar narrow_voxel;
 #else
+typedef ushort narrow_voxel;
+#endif
+#define KERNEL_VOLUME_ARG __global const narrow_voxel *volume
+#define VOLUME_ARG __global const narrow_voxel *volume, float narrowOffset
+#define VOLUME volume, narrowOffset
+#else
+#define KERNEL_VOLUME_ARG __global const float *volume
 #define VOLUME_ARG __global const float *volume
 #define VOLUME volume
 #endif
@@ -87,20 +102,24 @@ float sampleVolume(__read_only image3d_t c, int4 n, float3 p) {
            g1.z * (g0.y * (g0.x * v001 + g1.x * v101) + g1.y * (g0.x * v011 + g1.x * v111));
 }
 #else
-inline float voxel(__global const float *volume, int4 n, int i, int j, int k) {
+inline float voxel(VOLUME_ARG, int4 n, int i, int j, int k) {
+#ifdef VOXEL_BYTES
+    return (float)volume[((size_t)k * n.y + j) * n.x + i] + narrowOffset;
+#else
     return volume[((size_t)k * n.y + j) * n.x + i];
+#endif
 }
 
 /* Trilinear from a buffer: on CPUs several times faster than a 3-D image (docs/platform.md). */
-float sampleVolume(__global const float *volume, int4 n, float3 p) {
+float sampleVolume(VOLUME_ARG, int4 n, float3 p) {
     p = clamp(p, (float3)(0.0f), convert_float3(n.xyz - 1));
     const int3 i0 = min(convert_int3(p), max(n.xyz - 2, (int3)(0)));
     const float3 f = p - convert_float3(i0);
     const int3 i1 = min(i0 + 1, n.xyz - 1);
-    const float c000 = voxel(volume, n, i0.x, i0.y, i0.z), c100 = voxel(volume, n, i1.x, i0.y, i0.z);
-    const float c010 = voxel(volume, n, i0.x, i1.y, i0.z), c110 = voxel(volume, n, i1.x, i1.y, i0.z);
-    const float c001 = voxel(volume, n, i0.x, i0.y, i1.z), c101 = voxel(volume, n, i1.x, i0.y, i1.z);
-    const float c011 = voxel(volume, n, i0.x, i1.y, i1.z), c111 = voxel(volume, n, i1.x, i1.y, i1.z);
+    const float c000 = voxel(VOLUME, n, i0.x, i0.y, i0.z), c100 = voxel(VOLUME, n, i1.x, i0.y, i0.z);
+    const float c010 = voxel(VOLUME, n, i0.x, i1.y, i0.z), c110 = voxel(VOLUME, n, i1.x, i1.y, i0.z);
+    const float c001 = voxel(VOLUME, n, i0.x, i0.y, i1.z), c101 = voxel(VOLUME, n, i1.x, i0.y, i1.z);
+    const float c011 = voxel(VOLUME, n, i0.x, i1.y, i1.z), c111 = voxel(VOLUME, n, i1.x, i1.y, i1.z);
     const float c00 = mix(c000, c100, f.x), c10 = mix(c010, c110, f.x);
     const float c01 = mix(c001, c101, f.x), c11 = mix(c011, c111, f.x);
     return mix(mix(c00, c10, f.y), mix(c01, c11, f.y), f.z);
@@ -267,7 +286,7 @@ void brickWalkTo(__global const uchar *visible, __global const RayCastParams *P,
 }
 #endif
 
-__kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
+__kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #ifdef PREINTEGRATED
                       __global const float4 *preTable, __global const float *preNodes, __global const int *preLocator,
 #endif
@@ -277,6 +296,9 @@ __kernel void raycast(VOLUME_ARG, __global const float4 *tfTable,
                       __global const RayCastParams *P, __global float4 *image, __global volatile uint *stats) {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= P->width || y >= P->height) return;
+#ifdef VOXEL_BYTES
+    const float narrowOffset = P->narrowOffset;
+#endif
 
     /* Ray through the pixel centre (docs/design.md's camera), world space. */
     const float u = 2.0f * ((float)x + 0.5f) / (float)P->width - 1.0f;

@@ -43,7 +43,7 @@ typedef struct {
     vc_float step;                  /* segment length, world units */
     vc_float opacityUnit;           /* world units */
     vc_float terminationDepth;      /* early termination once the optical depth reaches it */
-    vc_float pad0;
+    vc_float narrowOffset;          /* VOXEL_BYTES 1 or 2: sample = stored value + narrowOffset */
     vc_uint seed;
     vc_uint pass;
     /* Pre-integration table: nodes over the value range, a uniform locator into them. */
