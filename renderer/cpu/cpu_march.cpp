@@ -113,9 +113,15 @@ PacketRays setUpPacket(const FrameParams &P, VF x, VF y, MF inside) {
 
 inline VF lerp(VF a, VF b, VF t) { return hn::MulAdd(hn::Sub(b, a), t, a); }
 
-// Trilinear at level coordinates q, clamped to the outermost samples; the padding after the
-// last sample makes the upper taps of a clamped position safe without a second clamp.
-VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
+// The cell a trilinear sample at level coordinates (x, y, z) reads, clamped to the outermost
+// samples: its lowest corner's index in the padded copy and the fractions along each axis.
+// The padding after the last sample makes the upper taps of a clamped position safe
+// without a second clamp.
+struct TrilinearCell {
+    VI corner;
+    VF fx, fy, fz;
+};
+HWY_INLINE TrilinearCell trilinearCell(const FrameParams &P, VF x, VF y, VF z) {
     const DF df;
     const DI di;
     const VF zero = hn::Zero(df);
@@ -123,38 +129,43 @@ VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
     y = hn::Min(hn::Max(y, zero), hn::Set(df, float(P.levelDims[1] - 1)));
     z = hn::Min(hn::Max(z, zero), hn::Set(df, float(P.levelDims[2] - 1)));
     const VI ix = hn::ConvertTo(di, x), iy = hn::ConvertTo(di, y), iz = hn::ConvertTo(di, z);
-    const VF fx = hn::Sub(x, hn::ConvertTo(df, ix)), fy = hn::Sub(y, hn::ConvertTo(df, iy)),
-             fz = hn::Sub(z, hn::ConvertTo(df, iz));
+    return {hn::Add(hn::Add(ix, hn::Mul(iy, hn::Set(di, P.rowStride))), hn::Mul(iz, hn::Set(di, P.sliceStride))),
+            hn::Sub(x, hn::ConvertTo(df, ix)), hn::Sub(y, hn::ConvertTo(df, iy)), hn::Sub(z, hn::ConvertTo(df, iz))};
+}
+
+// The cell's 8 taps, named c<x><y><z>, blended along x, then y, then z.
+HWY_INLINE VF blendTrilinear(const TrilinearCell &c, VF c000, VF c100, VF c010, VF c110, VF c001, VF c101, VF c011,
+                             VF c111) {
+    const VF c00 = lerp(c000, c100, c.fx), c10 = lerp(c010, c110, c.fx);
+    const VF c01 = lerp(c001, c101, c.fx), c11 = lerp(c011, c111, c.fx);
+    return lerp(lerp(c00, c10, c.fy), lerp(c01, c11, c.fy), c.fz);
+}
+
+// Trilinear from the float copy: 8 gathers.
+VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
+    const DF df;
+    const DI di;
+    const TrilinearCell c = trilinearCell(P, x, y, z);
     const VI sy = hn::Set(di, P.rowStride), sz = hn::Set(di, P.sliceStride), one = hn::Set(di, 1);
-    const VI i000 = hn::Add(hn::Add(ix, hn::Mul(iy, sy)), hn::Mul(iz, sz));
-    const VI i010 = hn::Add(i000, sy), i001 = hn::Add(i000, sz), i011 = hn::Add(i001, sy);
+    const VI i000 = c.corner, i010 = hn::Add(i000, sy), i001 = hn::Add(i000, sz), i011 = hn::Add(i001, sy);
     const float *v = P.voxels;
-    const VF c000 = hn::GatherIndex(df, v, i000), c100 = hn::GatherIndex(df, v, hn::Add(i000, one));
-    const VF c010 = hn::GatherIndex(df, v, i010), c110 = hn::GatherIndex(df, v, hn::Add(i010, one));
-    const VF c001 = hn::GatherIndex(df, v, i001), c101 = hn::GatherIndex(df, v, hn::Add(i001, one));
-    const VF c011 = hn::GatherIndex(df, v, i011), c111 = hn::GatherIndex(df, v, hn::Add(i011, one));
-    const VF c00 = lerp(c000, c100, fx), c10 = lerp(c010, c110, fx);
-    const VF c01 = lerp(c001, c101, fx), c11 = lerp(c011, c111, fx);
-    return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
+    return blendTrilinear(c, hn::GatherIndex(df, v, i000), hn::GatherIndex(df, v, hn::Add(i000, one)),
+                          hn::GatherIndex(df, v, i010), hn::GatherIndex(df, v, hn::Add(i010, one)),
+                          hn::GatherIndex(df, v, i001), hn::GatherIndex(df, v, hn::Add(i001, one)),
+                          hn::GatherIndex(df, v, i011), hn::GatherIndex(df, v, hn::Add(i011, one)));
 }
 
 // The same trilinear sample from the narrow copy (FrameParams::narrowVoxels): each 32-bit
 // gather at a sample's byte offset holds it and its +x neighbour in its low 2·Bytes bytes.
-// Widened to the same floats as the float copy holds and interpolated in the same order,
-// so the value is bit for bit the one sampleTrilinear returns.
+// Widened to the same floats as the float copy holds and blended in the same order, so the
+// value is bit for bit the one sampleTrilinear returns.
 template <int Bytes>
 VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
     const DF df;
     const DI di;
-    const VF zero = hn::Zero(df);
-    x = hn::Min(hn::Max(x, zero), hn::Set(df, float(P.levelDims[0] - 1)));
-    y = hn::Min(hn::Max(y, zero), hn::Set(df, float(P.levelDims[1] - 1)));
-    z = hn::Min(hn::Max(z, zero), hn::Set(df, float(P.levelDims[2] - 1)));
-    const VI ix = hn::ConvertTo(di, x), iy = hn::ConvertTo(di, y), iz = hn::ConvertTo(di, z);
-    const VF fx = hn::Sub(x, hn::ConvertTo(df, ix)), fy = hn::Sub(y, hn::ConvertTo(df, iy)),
-             fz = hn::Sub(z, hn::ConvertTo(df, iz));
+    const TrilinearCell c = trilinearCell(P, x, y, z);
     const VI sy = hn::Set(di, P.rowStride * Bytes), sz = hn::Set(di, P.sliceStride * Bytes);
-    VI o000 = hn::Add(hn::Add(ix, hn::Mul(iy, hn::Set(di, P.rowStride))), hn::Mul(iz, hn::Set(di, P.sliceStride)));
+    VI o000 = c.corner;
     if constexpr (Bytes == 2) o000 = hn::ShiftLeft<1>(o000);
     const int32_t *v = reinterpret_cast<const int32_t *>(P.narrowVoxels);
     const VI g00 = hn::GatherOffset(di, v, o000), g10 = hn::GatherOffset(di, v, hn::Add(o000, sy));
@@ -163,9 +174,7 @@ VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
     const VF offset = hn::Set(df, P.narrowOffset);
     const auto lo = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(g, mask)), offset); };
     const auto hi = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(hn::ShiftRight<8 * Bytes>(g), mask)), offset); };
-    const VF c00 = lerp(lo(g00), hi(g00), fx), c10 = lerp(lo(g10), hi(g10), fx);
-    const VF c01 = lerp(lo(g01), hi(g01), fx), c11 = lerp(lo(g11), hi(g11), fx);
-    return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz);
+    return blendTrilinear(c, lo(g00), hi(g00), lo(g10), hi(g10), lo(g01), hi(g01), lo(g11), hi(g11));
 }
 
 // Cubic B-spline weights of the four taps around fractional position f.
