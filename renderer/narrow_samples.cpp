@@ -22,13 +22,17 @@ NarrowWidth narrowWidth(const std::vector<float> &samples) {
     return {};
 }
 
+void packNarrow(const float *src, size_t count, NarrowWidth w, unsigned char *dst) {
+    for (size_t i = 0; i < count; ++i) {
+        const auto u = uint32_t(src[i] - w.offset);
+        dst[i * size_t(w.bytes)] = uint8_t(u);
+        if (w.bytes == 2) dst[i * 2 + 1] = uint8_t(u >> 8);
+    }
+}
+
 std::vector<unsigned char> narrowSamples(const std::vector<float> &samples, NarrowWidth w) {
     std::vector<unsigned char> out(samples.size() * size_t(w.bytes));
-    for (size_t i = 0; i < samples.size(); ++i) {
-        const auto u = uint32_t(samples[i] - w.offset);
-        out[i * size_t(w.bytes)] = uint8_t(u);
-        if (w.bytes == 2) out[i * 2 + 1] = uint8_t(u >> 8);
-    }
+    packNarrow(samples.data(), samples.size(), w, out.data());
     return out;
 }
 

@@ -4,6 +4,7 @@
 // values, both back ends sample a copy that stores sample − offset in 1 (2) bytes: a quarter
 // (half) of the bytes, and, widened back to float, exactly the same values.
 
+#include <cstddef>
 #include <vector>
 
 namespace volcast {
@@ -17,8 +18,12 @@ struct NarrowWidth {
 // most 2^8 or 2^16 values; else 4. Those are the samples float(u) + offset gives back exactly.
 NarrowWidth narrowWidth(const std::vector<float> &samples);
 
-// The samples as sample − w.offset, w.bytes (1 or 2) bytes each, little-endian: the layout a
-// 1-D array of uint8 or uint16 has on the hosts and devices we run on.
+// count samples from src into dst as sample − w.offset, w.bytes (1 or 2) bytes each,
+// little-endian: the layout a 1-D array of uint8 or uint16 has on the hosts and devices we
+// run on. dst holds count · w.bytes bytes.
+void packNarrow(const float *src, size_t count, NarrowWidth w, unsigned char *dst);
+
+// All the samples, packed.
 std::vector<unsigned char> narrowSamples(const std::vector<float> &samples, NarrowWidth w);
 
 } // namespace volcast

@@ -37,8 +37,9 @@ size_t nextRefinementLevel(size_t sent, const std::vector<double> &predictedMs);
 std::vector<Level> explicitLadder(const Quality &quality, int jitterPasses);
 
 // Geometric samples of a level: rays × the volume's diagonal in level-0 voxels divided by
-// the step (the step is in level-0 voxels on every mip level), × the taps' relative cost. A prediction, not a measurement (early termination and empty-space
-// skipping make real rays shorter); the measured cost per sample absorbs the difference.
+// the step (the step is in level-0 voxels on every mip level), × the taps' relative cost.
+// A prediction, not a measurement (early termination and empty-space skipping make real
+// rays shorter); the measured cost per sample absorbs the difference.
 double predictedSamples(const Volume &volume, const Quality &q, int width, int height);
 
 // Measured cost per sample, per level, for one session.

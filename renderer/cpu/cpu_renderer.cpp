@@ -60,11 +60,8 @@ std::vector<uint8_t> padAfterNarrow(const std::vector<float> &v, Vec3i n, Narrow
             const size_t sk = std::min(k, size_t(n.z) - 1), sj = std::min(j, size_t(n.y) - 1);
             const float *src = v.data() + (sk * size_t(n.y) + sj) * size_t(n.x);
             uint8_t *dst = out.data() + (k * py + j) * px * size_t(w.bytes);
-            for (size_t i = 0; i < px; ++i) {
-                const auto u = uint32_t(src[std::min(i, size_t(n.x) - 1)] - w.offset);
-                dst[i * size_t(w.bytes)] = uint8_t(u);
-                if (w.bytes == 2) dst[i * 2 + 1] = uint8_t(u >> 8);
-            }
+            packNarrow(src, size_t(n.x), w, dst);
+            packNarrow(src + n.x - 1, 1, w, dst + size_t(n.x) * size_t(w.bytes)); // the edge copy
         }
     return out;
 }
@@ -197,7 +194,8 @@ uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options
     for (int level = 0;; ++level) {
         const Vec3i d = mipLevelDims(dims, level);
         if (level > 0) bytes += count(d, 0) * sizeof(float);                  // the mip level
-        bytes += count(d, 1) * uint64_t(level == 0 ? level0Bytes : 4) + 4;  // trilinear copy (mips: float)
+        bytes += level == 0 && level0Bytes < 4 ? count(d, 1) * uint64_t(level0Bytes) + 4 // narrow, and its slack
+                                               : count(d, 1) * sizeof(float);            // trilinear copy
         bytes += count(d, 3) * sizeof(float);                                 // cubic copy
         const Vec3i bricks{(d.x + b - 1) / b, (d.y + b - 1) / b, (d.z + b - 1) / b};
         bytes += 2 * count(bricks, 0) * (2 * sizeof(float) + sizeof(int32_t)); // min-max and visible, both

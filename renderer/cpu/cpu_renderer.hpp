@@ -58,7 +58,6 @@ class CpuRenderer : public FrameRenderer {
     // `level0Bytes`: bytes per sample of level 0's trilinear copy (narrowWidth(voxels).bytes).
     static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {}, int level0Bytes = 4);
 
-
     // What description() says for a renderer with these options, before any volume exists
     // (the server's start-up log and hello).
     static std::string describe(const CpuRendererOptions &options = {});

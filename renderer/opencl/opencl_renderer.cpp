@@ -45,10 +45,11 @@ std::vector<float> padMirror(const std::vector<float> &c, Vec3i n) {
     return out;
 }
 
-cl::Buffer upload(OpenClContext &cl, const std::vector<float> &data, const std::string &what) {
+template <typename T>
+cl::Buffer upload(OpenClContext &cl, const std::vector<T> &data, const std::string &what) {
     try {
-        return cl::Buffer(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, data.size() * sizeof(float),
-                          const_cast<float *>(data.data()));
+        return cl::Buffer(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, data.size() * sizeof(T),
+                          const_cast<T *>(data.data()));
     } catch (const cl::Error &e) {
         throw OpenClError("cannot upload " + what + " to " + cl.deviceName() + ": " + describe(e));
     }
@@ -127,18 +128,8 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
     data.dims = dims;
     if (!cubic) {
         data.width = options_.narrowSamples ? narrowWidth(voxels) : NarrowWidth{};
-        if (data.width.bytes < 4) {
-            const std::vector<unsigned char> narrow = narrowSamples(voxels, data.width);
-            try {
-                data.buffer = cl::Buffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, narrow.size(),
-                                         const_cast<unsigned char *>(narrow.data()));
-            } catch (const cl::Error &e) {
-                throw OpenClError("cannot upload volume " + volume_->name + " to " + cl_.deviceName() + ": " +
-                                  describe(e));
-            }
-        } else {
-            data.buffer = upload(cl_, voxels, "volume " + volume_->name);
-        }
+        data.buffer = data.width.bytes < 4 ? upload(cl_, narrowSamples(voxels, data.width), "volume " + volume_->name)
+                                           : upload(cl_, voxels, "volume " + volume_->name);
     } else {
         // Prefilter on the device (the paper's Table 2), pad on the host, upload.
         t = Clock::now();
