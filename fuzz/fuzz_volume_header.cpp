@@ -93,8 +93,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     }
     fuzz::check(v.dims.x > 0 && v.dims.y > 0 && v.dims.z > 0, "a loaded volume has a non-positive dimension");
     fuzz::check(v.voxelCount() * sizeof(float) <= kMaxBytes, "a loaded volume is over maxBytes");
-    fuzz::check(v.voxels.size() == v.voxelCount(), "a loaded volume's voxel count differs from its dims");
-    for (const float x : v.voxels) fuzz::check(std::isfinite(x), "a loaded volume holds a non-finite voxel");
+    fuzz::check(v.hasSamples(), "a loaded volume's sample count differs from its dims");
+    const SampleGrid samples = v.samples();
+    for (size_t i = 0; i < samples.count(); ++i)
+        fuzz::check(std::isfinite(samples[i]), "a loaded volume holds a non-finite voxel");
     for (int a = 0; a < 3; ++a) {
         fuzz::check(std::isfinite(v.spacing[a]) && v.spacing[a] > 0, "a loaded volume has a bad spacing");
         fuzz::check(std::isfinite(v.origin[a]), "a loaded volume has a non-finite origin");

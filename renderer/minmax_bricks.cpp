@@ -52,7 +52,8 @@ Vec3i MinMaxBricks::brickOf(const Vec3d &p) const {
     return b;
 }
 
-MinMaxBricks buildMinMaxBricks(const float *data, Vec3i dims, int brickSize, int border, int threads) {
+MinMaxBricks buildMinMaxBricks(const SampleGrid &data, int brickSize, int border, int threads) {
+    const Vec3i dims = data.dims;
     if (dims.x < 1 || dims.y < 1 || dims.z < 1)
         throw std::invalid_argument("min-max bricks: dims must be at least 1 on every axis");
     if (brickSize < 1) throw std::invalid_argument("min-max bricks: brickSize must be at least 1");
@@ -66,16 +67,16 @@ MinMaxBricks buildMinMaxBricks(const float *data, Vec3i dims, int brickSize, int
     const int64_t B = brickSize;
     grid.bricks = {(dims.x + B - 1) / B, (dims.y + B - 1) / B, (dims.z + B - 1) / B};
     const Footprint fp{B, border};
-    const auto nx = size_t(dims.x), ny = size_t(dims.y), nz = size_t(dims.z);
+    const auto nx = size_t(dims.x), nz = size_t(dims.z);
     const auto nbx = size_t(grid.bricks.x), nby = size_t(grid.bricks.y), nbz = size_t(grid.bricks.z);
 
     // Min and max are separable: reduce over y, then x, within each slice, then over z.
     // Each sample is read from memory once; the overlapping footprints re-read cached rows.
     std::vector<float> sliceMin(nz * nby * nbx), sliceMax(nz * nby * nbx);
     parallelRanges(nz, threads, [&](size_t kBegin, size_t kEnd) {
-        std::vector<float> rowMin(nby * nx), rowMax(nby * nx);
+        std::vector<float> rowMin(nby * nx), rowMax(nby * nx), scratch;
         for (size_t k = kBegin; k < kEnd; ++k) {
-            const float *slice = data + k * ny * nx;
+            const float *slice = data.slice(int64_t(k), scratch);
             // Reduce rows over each brick row's y footprint (elementwise, vectorizable).
             std::fill(rowMin.begin(), rowMin.end(), kInf);
             std::fill(rowMax.begin(), rowMax.end(), -kInf);

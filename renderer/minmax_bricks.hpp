@@ -52,8 +52,12 @@ struct MinMaxBricks {
 // clamped to [0, n − 1], count for brick b. Needs dims ≥ 1, brickSize ≥ 1 and
 // 0 ≤ border ≤ brickSize (std::invalid_argument otherwise). NaN samples are ignored; a brick
 // of NaN only gets min = +inf, max = −inf and classifies as empty. threads = 0: all cores.
-MinMaxBricks buildMinMaxBricks(const float *data, Vec3i dims, int brickSize = 8,
-                               int border = kTrilinearBorder, int threads = 0);
+MinMaxBricks buildMinMaxBricks(const SampleGrid &data, int brickSize = 8, int border = kTrilinearBorder,
+                               int threads = 0);
+inline MinMaxBricks buildMinMaxBricks(const float *data, Vec3i dims, int brickSize = 8,
+                                      int border = kTrilinearBorder, int threads = 0) {
+    return buildMinMaxBricks(SampleGrid::ofFloats(dims, data), brickSize, border, threads);
+}
 
 // True where the transfer function's opacity is > 0 somewhere in [lo, hi]: exact for a
 // piecewise-linear function, whose maximum on an interval lies at an end or a control point.

@@ -14,18 +14,19 @@ Vec3i mipLevelDims(Vec3i dims0, int level) {
     return d;
 }
 
-std::vector<float> downsampleMip(const std::vector<float> &fine, Vec3i fineDims) {
-    const Vec3i n = fineDims;
+std::vector<float> downsampleMip(const SampleGrid &fine) {
+    const Vec3i n = fine.dims;
     const Vec3i m = mipLevelDims(n, 1);
     std::vector<float> coarse(size_t(m.x) * size_t(m.y) * size_t(m.z));
-    auto row = [&](int64_t j, int64_t k) { return &fine[size_t((k * n.y + j) * n.x)]; };
     // Average the 2×2×2 block of each coarse sample; an odd axis repeats its edge sample.
     auto slices = [&](int64_t kBegin, int64_t kEnd) {
+        std::vector<float> s00, s10, s01, s11; // a narrow level's rows, widened
         for (int64_t K = kBegin; K < kEnd; ++K) {
             const int64_t k0 = 2 * K, k1 = std::min(2 * K + 1, n.z - 1);
             for (int64_t J = 0; J < m.y; ++J) {
                 const int64_t j0 = 2 * J, j1 = std::min(2 * J + 1, n.y - 1);
-                const float *r00 = row(j0, k0), *r10 = row(j1, k0), *r01 = row(j0, k1), *r11 = row(j1, k1);
+                const float *r00 = fine.row(j0, k0, s00), *r10 = fine.row(j1, k0, s10);
+                const float *r01 = fine.row(j0, k1, s01), *r11 = fine.row(j1, k1, s11);
                 float *out = &coarse[size_t((K * m.y + J) * m.x)];
                 for (int64_t I = 0; I < m.x; ++I) {
                     const int64_t i0 = 2 * I, i1 = std::min(2 * I + 1, n.x - 1);
@@ -49,7 +50,7 @@ std::vector<float> downsampleMip(const std::vector<float> &fine, Vec3i fineDims)
 }
 
 MipPyramid::MipPyramid(const Volume &level0) : volume_(level0) {
-    if (level0.dims.x < 1 || level0.dims.y < 1 || level0.dims.z < 1 || level0.voxels.size() != level0.voxelCount())
+    if (level0.dims.x < 1 || level0.dims.y < 1 || level0.dims.z < 1 || !level0.hasSamples())
         throw std::invalid_argument("mip pyramid: volume '" + level0.name + "' has no samples or mismatched dims");
     for (Vec3i d = level0.dims; d.x > 1 || d.y > 1 || d.z > 1; d = mipLevelDims(d, 1)) ++maxLevel_;
     levels_.resize(size_t(maxLevel_) + 1);
@@ -61,16 +62,17 @@ void MipPyramid::check(int L) const {
                                  "] for volume '" + volume_.name + "'");
 }
 
-const std::vector<float> &MipPyramid::level(int L) {
+SampleGrid MipPyramid::level(int L) {
     check(L);
-    if (L == 0) return volume_.voxels;
+    if (L == 0) return volume_.samples();
     std::lock_guard lock(mutex_);
     // Build the missing levels in order, each from the one below; levels_ never reallocates.
     for (int l = built_ + 1; l <= L; ++l) {
-        levels_[size_t(l)] = downsampleMip(l == 1 ? volume_.voxels : levels_[size_t(l) - 1], dims(l - 1));
+        const SampleGrid below = l == 1 ? volume_.samples() : SampleGrid::ofFloats(dims(l - 1), levels_[size_t(l) - 1].data());
+        levels_[size_t(l)] = downsampleMip(below);
         built_ = l;
     }
-    return levels_[size_t(L)];
+    return SampleGrid::ofFloats(dims(L), levels_[size_t(L)].data());
 }
 
 Vec3i MipPyramid::dims(int L) const {
@@ -84,7 +86,7 @@ int MipPyramid::levelsBuilt() const {
 }
 
 Volume MipPyramid::levelVolume(int L) {
-    const std::vector<float> &samples = level(L);
+    const SampleGrid samples = level(L);
     Volume v;
     v.name = volume_.name + " (mip level " + std::to_string(L) + ")";
     v.dims = dims(L);
@@ -94,7 +96,7 @@ Volume MipPyramid::levelVolume(int L) {
     v.origin = volume_.worldFromIndex({first, first, first});
     v.direction = volume_.direction;
     v.sourceType = volume_.sourceType;
-    v.voxels = samples;
+    v.voxels = samples.toFloats();
     computeStatistics(v);
     return v;
 }

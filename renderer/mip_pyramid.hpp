@@ -29,18 +29,22 @@ inline Vec3d mipIndexFromIndex(const Vec3d &p, int level) {
 Vec3i mipLevelDims(Vec3i dims0, int level);
 
 // One averaging step: level L + 1 from level L's samples (dims x fastest).
-std::vector<float> downsampleMip(const std::vector<float> &fine, Vec3i fineDims);
+std::vector<float> downsampleMip(const SampleGrid &fine);
+inline std::vector<float> downsampleMip(const std::vector<float> &fine, Vec3i fineDims) {
+    return downsampleMip(SampleGrid::ofFloats(fineDims, fine.data()));
+}
 
 class MipPyramid {
   public:
-    // Level 0 is `level0`'s voxels, not copied: the volume must outlive the pyramid.
+    // Level 0 is `level0`'s samples as it holds them (float or narrow), not copied: the
+    // volume must outlive the pyramid. Coarser levels are averages, held as float.
     // Throws std::invalid_argument for a volume without samples or with mismatched dims.
     explicit MipPyramid(const Volume &level0);
 
     // Samples of level L (dims(L) x fastest), building any missing levels up to L once.
-    // Thread-safe; the returned reference stays valid for the pyramid's lifetime.
+    // Thread-safe; what the view points at stays valid for the pyramid's lifetime.
     // Throws std::out_of_range for L < 0 or L > maxLevel().
-    const std::vector<float> &level(int L);
+    SampleGrid level(int L);
     Vec3i dims(int L) const;
     // Coarser levels built so far (level 0 is not counted: it is the volume's own voxels).
     int levelsBuilt() const;
@@ -55,7 +59,7 @@ class MipPyramid {
 
     const Volume &volume_;
     int maxLevel_ = 0;
-    std::vector<std::vector<float>> levels_; // [0] unused: level 0 is volume_.voxels
+    std::vector<std::vector<float>> levels_; // [0] unused: level 0 is the volume's samples
     int built_ = 0;                          // levels 1 … built_ are in levels_
     mutable std::mutex mutex_;
 };

@@ -6,10 +6,11 @@
 
 namespace volcast {
 
-NarrowWidth narrowWidth(const std::vector<float> &samples) {
-    if (samples.empty()) return {};
+NarrowWidth narrowWidth(const float *samples, size_t count) {
+    if (count == 0) return {};
     float lo = samples[0], hi = samples[0];
-    for (const float v : samples) {
+    for (size_t i = 0; i < count; ++i) {
+        const float v = samples[i];
         // An integer of magnitude ≤ 2^24 survives float(v − offset) + offset exactly; −0
         // would come back as +0, NaN and ±inf not at all.
         if (!(std::fabs(v) <= 16777216.0f) || v != std::trunc(v) || (v == 0 && std::signbit(v))) return {};
@@ -30,9 +31,37 @@ void packNarrow(const float *src, size_t count, NarrowWidth w, unsigned char *ds
     }
 }
 
-std::vector<unsigned char> narrowSamples(const std::vector<float> &samples, NarrowWidth w) {
-    std::vector<unsigned char> out(samples.size() * size_t(w.bytes));
-    packNarrow(samples.data(), samples.size(), w, out.data());
+void SampleGrid::read(size_t first, size_t n, float *out) const {
+    if (width.bytes == 4) {
+        std::copy(floats + first, floats + first + n, out);
+    } else if (width.bytes == 1) {
+        const unsigned char *p = narrow + first;
+        for (size_t i = 0; i < n; ++i) out[i] = float(p[i]) + width.offset;
+    } else {
+        const unsigned char *p = narrow + 2 * first;
+        for (size_t i = 0; i < n; ++i) out[i] = float(unsigned(p[2 * i]) | unsigned(p[2 * i + 1]) << 8) + width.offset;
+    }
+}
+
+const float *SampleGrid::row(int64_t j, int64_t k, std::vector<float> &scratch) const {
+    const size_t first = (size_t(k) * size_t(dims.y) + size_t(j)) * size_t(dims.x);
+    if (width.bytes == 4) return floats + first;
+    scratch.resize(size_t(dims.x));
+    read(first, size_t(dims.x), scratch.data());
+    return scratch.data();
+}
+
+const float *SampleGrid::slice(int64_t k, std::vector<float> &scratch) const {
+    const size_t n = size_t(dims.x) * size_t(dims.y), first = size_t(k) * n;
+    if (width.bytes == 4) return floats + first;
+    scratch.resize(n);
+    read(first, n, scratch.data());
+    return scratch.data();
+}
+
+std::vector<float> SampleGrid::toFloats() const {
+    std::vector<float> out(count());
+    read(0, out.size(), out.data());
     return out;
 }
 

@@ -33,7 +33,9 @@ double TrilinearField::operator()(const Vec3d &q) const {
 }
 
 CubicBSplineField::CubicBSplineField(const Volume &v)
-    : dims_(v.dims), coeffs_(v.voxels.begin(), v.voxels.end()) {
+    : dims_(v.dims), coeffs_(v.voxelCount()) {
+    const SampleGrid samples = v.samples();
+    for (size_t i = 0; i < coeffs_.size(); ++i) coeffs_[i] = samples[i];
     bsplinePrefilterSimple(coeffs_.data(), dims_);
 }
 

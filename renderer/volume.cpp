@@ -35,12 +35,18 @@ size_t voxelTypeSize(VoxelType t) {
 }
 
 void computeStatistics(Volume &v) {
+    const SampleGrid g = v.samples();
+    std::vector<float> scratch;
     float lo = std::numeric_limits<float>::max();
     float hi = std::numeric_limits<float>::lowest();
-    for (float x : v.voxels) {
-        if (!std::isfinite(x)) continue;
-        lo = std::min(lo, x);
-        hi = std::max(hi, x);
+    for (int64_t k = 0; k < v.dims.z; ++k) {
+        const float *slice = g.slice(k, scratch);
+        for (size_t i = 0, n = size_t(v.dims.x) * size_t(v.dims.y); i < n; ++i) {
+            const float x = slice[i];
+            if (!std::isfinite(x)) continue;
+            lo = std::min(lo, x);
+            hi = std::max(hi, x);
+        }
     }
     if (lo > hi) lo = hi = 0; // no finite voxel (callers reject such volumes)
     v.range = {lo, hi};
@@ -48,11 +54,27 @@ void computeStatistics(Volume &v) {
     v.histogram.range = v.range;
     v.histogram.counts.assign(Histogram::kBins, 0);
     const double width = double(hi) - double(lo);
-    for (float x : v.voxels) {
-        if (!std::isfinite(x)) continue;
-        int bin = width > 0 ? int((double(x) - lo) / width * Histogram::kBins) : 0;
-        v.histogram.counts[size_t(std::clamp(bin, 0, Histogram::kBins - 1))]++;
+    for (int64_t k = 0; k < v.dims.z; ++k) {
+        const float *slice = g.slice(k, scratch);
+        for (size_t i = 0, n = size_t(v.dims.x) * size_t(v.dims.y); i < n; ++i) {
+            const float x = slice[i];
+            if (!std::isfinite(x)) continue;
+            int bin = width > 0 ? int((double(x) - lo) / width * Histogram::kBins) : 0;
+            v.histogram.counts[size_t(std::clamp(bin, 0, Histogram::kBins - 1))]++;
+        }
     }
+}
+
+bool holdNarrow(Volume &v) {
+    if (v.narrow.bytes < 4) return true;
+    if (v.voxels.size() != v.voxelCount()) return false;
+    const NarrowWidth w = narrowWidth(v.voxels);
+    if (w.bytes == 4) return false;
+    v.narrowVoxels.assign(v.voxels.size() * size_t(w.bytes) + kNarrowSlack, 0);
+    packNarrow(v.voxels.data(), v.voxels.size(), w, v.narrowVoxels.data());
+    v.narrow = w;
+    std::vector<float>().swap(v.voxels); // give the float store's memory back
+    return true;
 }
 
 } // namespace volcast

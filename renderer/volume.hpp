@@ -3,6 +3,7 @@
 // sample at world = origin + D·(i·sx, j·sy, k·sz), and owns the cell of size s around it.
 
 #include "renderer/math.hpp"
+#include "renderer/narrow_samples.hpp"
 
 #include <cstddef>
 #include <cstdint>
@@ -12,7 +13,8 @@
 
 namespace volcast {
 
-// The type the voxels had in their file; in memory every volume is float32.
+// The type the voxels had in their file. In memory a volume holds float32, or the narrow
+// store an 8- or 16-bit scan's integer samples fit (narrow_samples.hpp).
 enum class VoxelType { UInt8, Int8, UInt16, Int16, UInt32, Int32, Float32, Float64 };
 
 std::string_view voxelTypeName(VoxelType t);
@@ -36,7 +38,12 @@ struct Volume {
     Vec3d origin{0, 0, 0};          // world position of voxel (0, 0, 0)
     Mat3d direction;                // unit index axes in world space (columns)
     VoxelType sourceType = VoxelType::Float32;
-    std::vector<float> voxels;      // dims.x * dims.y * dims.z samples
+    // The samples, x fastest, held in one of two stores: float32 in `voxels`, or (holdNarrow)
+    // sample − narrow.offset in narrow.bytes (1 or 2) bytes each in `narrowVoxels`, followed by
+    // kNarrowSlack bytes, with `voxels` empty. Read them through samples() or at().
+    std::vector<float> voxels;
+    NarrowWidth narrow;                     // bytes 4: the samples are in `voxels`
+    std::vector<unsigned char> narrowVoxels;
     ValueRange range;               // of the finite voxels
     Histogram histogram;
     size_t nonFiniteReplaced = 0;   // NaN/Inf voxels replaced under the loader's policy
@@ -50,7 +57,15 @@ struct Volume {
     size_t index(int64_t i, int64_t j, int64_t k) const {
         return size_t((k * dims.y + j) * dims.x + i);
     }
-    float at(int64_t i, int64_t j, int64_t k) const { return voxels[index(i, j, k)]; }
+    SampleGrid samples() const { return {dims, voxels.data(), narrowVoxels.data(), narrow}; }
+    float at(int64_t i, int64_t j, int64_t k) const { return samples()[index(i, j, k)]; }
+    // Whether the store holds one sample per voxel (loaders and tests build `voxels` by hand).
+    bool hasSamples() const {
+        return narrow.bytes == 4 ? voxels.size() == voxelCount()
+                                 : narrowVoxels.size() == voxelCount() * size_t(narrow.bytes) + kNarrowSlack;
+    }
+    // Bytes the samples take in memory.
+    size_t sampleBytes() const { return voxels.size() * sizeof(float) + narrowVoxels.size(); }
 
     // Index space: continuous voxel coordinates; the volume is [-1/2, n - 1/2] on each axis.
     Vec3d indexFromWorld(const Vec3d &p) const {
@@ -69,7 +84,11 @@ struct Volume {
     double smallestSpacing() const { return minComponent(spacing); }
 };
 
-// Recompute range and histogram from the voxels (finite values only).
+// Recompute range and histogram from the samples (finite values only).
 void computeStatistics(Volume &v);
+
+// Moves float samples into the narrow store when every one fits it (narrowWidth); returns
+// whether the volume is held narrow now. Loaders call it; so may anyone building a volume.
+bool holdNarrow(Volume &v);
 
 } // namespace volcast

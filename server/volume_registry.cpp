@@ -30,20 +30,18 @@ std::string lower(std::string s) {
     std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
     return s;
 }
-// The in-memory cost of a volume: its voxels (float32 in memory, whatever the file's type),
-// and what its renderer builds from them at most: every mip level, a padded copy of each
-// for trilinear sampling and one of B-spline coefficients for cubic, brick grids
-// (CpuRenderer::plannedBytes; the OpenCL back end holds about the same, as host or device
-// buffers). Counted in full at load, so that frames asking for coarse levels or cubic later
-// never take the server past its budget. Both back ends sample level 0 of an 8- or 16-bit
-// scan from a copy in 1 or 2 bytes a sample (narrow_samples.hpp).
+// The in-memory cost of a volume: its samples (an 8- or 16-bit scan in 1 or 2 bytes a sample,
+// narrow_samples.hpp; other types as float32), and what its renderer builds from them at
+// most: every mip level (float), a padded copy of B-spline coefficients of each for cubic,
+// brick grids (trilinear frames sample each level where it lies) (CpuRenderer::plannedBytes; the OpenCL back end holds about the same, as host or
+// device buffers). Counted in full at load, so that frames asking for coarse levels or
+// cubic later never take the server past its budget.
 uint64_t memoryOf(const Volume &v) {
-    return uint64_t(v.voxels.size()) * sizeof(float) + CpuRenderer::plannedBytes(v.dims, {}, narrowWidth(v.voxels).bytes);
+    return uint64_t(v.sampleBytes()) + CpuRenderer::plannedBytes(v.dims, {}, v.narrow.bytes);
 }
-// The least memoryOf() / float32 voxel bytes, for refusing a file from its header: 1 (the
-// voxels) + 1/7 (mips) + 1/4 + 1/7 (trilinear copies, level 0's in 8 bits) + 8/7
-// (coefficients), less rounding.
-constexpr double kMemoryFactor = 2.6;
+// The least memoryOf() / float32 voxel bytes, for refusing a file from its header: 1/4 (an
+// 8-bit scan's samples) + 1/7 (mips) + 8/7 (coefficients), less rounding.
+constexpr double kMemoryFactor = 1.5;
 uint64_t mib(uint64_t bytes) { return (bytes + (uint64_t(1) << 20) - 1) >> 20; }
 
 // What a session holds: every copy of the returned pointer (the session's, its render jobs')
@@ -310,6 +308,7 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
             progress(p.name, ProgressStage::Loading, sentTask, fraction);
         };
         LoadedVolume loaded = p.path.empty() ? loadSceneVolume(p.name, options) : loadSceneVolume(p.path.string(), options);
+        holdNarrow(loaded.volume); // files already are; a built-in volume of integers too
         progress(p.name, ProgressStage::Loading, "", 1.0);
         auto entry = std::make_shared<VolumeEntry>();
         entry->name = p.name;
@@ -343,8 +342,8 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
 }
 
 std::string VolumeRegistry::tooLargeMessage(const std::string &name, uint64_t bytes) const {
-    return fmt::format("{}: needs {} MiB (float32 voxels, mip levels, the renderer's padded copies and B-spline "
-                       "coefficients), more than the whole memory "
+    return fmt::format("{}: needs {} MiB (its samples, mip levels, B-spline coefficients and brick "
+                       "grids), more than the whole memory "
                        "budget of {} MiB (--memory-budget-mib); it cannot be loaded on this server",
                        name, mib(bytes), budgetBytes_ >> 20);
 }

@@ -114,12 +114,14 @@ PacketRays setUpPacket(const FrameParams &P, VF x, VF y, MF inside) {
 inline VF lerp(VF a, VF b, VF t) { return hn::MulAdd(hn::Sub(b, a), t, a); }
 
 // The cell a trilinear sample at level coordinates (x, y, z) reads, clamped to the outermost
-// samples: its lowest corner's index in the padded copy and the fractions along each axis.
-// The padding after the last sample makes the upper taps of a clamped position safe
-// without a second clamp.
+// samples: its lowest corner's index, the fractions along each axis, and its integer
+// position. The level is sampled where it lies, without edge copies: on the last sample of
+// an axis (where the fraction is exactly 0) the upper tap along it is the sample itself, as
+// an edge copy would have been (upperStep).
 struct TrilinearCell {
     VI corner;
     VF fx, fy, fz;
+    VI ix, iy, iz;
 };
 HWY_INLINE TrilinearCell trilinearCell(const FrameParams &P, VF x, VF y, VF z) {
     const DF df;
@@ -130,7 +132,8 @@ HWY_INLINE TrilinearCell trilinearCell(const FrameParams &P, VF x, VF y, VF z) {
     z = hn::Min(hn::Max(z, zero), hn::Set(df, float(P.levelDims[2] - 1)));
     const VI ix = hn::ConvertTo(di, x), iy = hn::ConvertTo(di, y), iz = hn::ConvertTo(di, z);
     return {hn::Add(hn::Add(ix, hn::Mul(iy, hn::Set(di, P.rowStride))), hn::Mul(iz, hn::Set(di, P.sliceStride))),
-            hn::Sub(x, hn::ConvertTo(df, ix)), hn::Sub(y, hn::ConvertTo(df, iy)), hn::Sub(z, hn::ConvertTo(df, iz))};
+            hn::Sub(x, hn::ConvertTo(df, ix)), hn::Sub(y, hn::ConvertTo(df, iy)), hn::Sub(z, hn::ConvertTo(df, iz)),
+            ix, iy, iz};
 }
 
 // The cell's 8 taps, named c<x><y><z>, blended along x, then y, then z.
@@ -141,12 +144,18 @@ HWY_INLINE VF blendTrilinear(const TrilinearCell &c, VF c000, VF c100, VF c010, 
     return lerp(lerp(c00, c10, c.fy), lerp(c01, c11, c.fy), c.fz);
 }
 
-// Trilinear from the float copy: 8 gathers.
+// The step to the upper tap along an axis of n samples: `stride`, or 0 on the last sample.
+HWY_INLINE VI upperStep(VI i, int n, int stride) {
+    const DI di;
+    return hn::IfThenElseZero(hn::Lt(i, hn::Set(di, n - 1)), hn::Set(di, stride));
+}
+
+// Trilinear from a float level: 8 gathers.
 VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
     const DF df;
-    const DI di;
     const TrilinearCell c = trilinearCell(P, x, y, z);
-    const VI sy = hn::Set(di, P.rowStride), sz = hn::Set(di, P.sliceStride), one = hn::Set(di, 1);
+    const VI one = upperStep(c.ix, P.levelDims[0], 1), sy = upperStep(c.iy, P.levelDims[1], P.rowStride);
+    const VI sz = upperStep(c.iz, P.levelDims[2], P.sliceStride);
     const VI i000 = c.corner, i010 = hn::Add(i000, sy), i001 = hn::Add(i000, sz), i011 = hn::Add(i001, sy);
     const float *v = P.voxels;
     return blendTrilinear(c, hn::GatherIndex(df, v, i000), hn::GatherIndex(df, v, hn::Add(i000, one)),
@@ -155,16 +164,20 @@ VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
                           hn::GatherIndex(df, v, i011), hn::GatherIndex(df, v, hn::Add(i011, one)));
 }
 
-// The same trilinear sample from the narrow copy (FrameParams::narrowVoxels): each 32-bit
-// gather at a sample's byte offset holds it and its +x neighbour in its low 2·Bytes bytes.
-// Widened to the same floats as the float copy holds and blended in the same order, so the
-// value is bit for bit the one sampleTrilinear returns.
+// The same trilinear sample from the volume's narrow store (FrameParams::narrowVoxels): each
+// 32-bit gather at a sample's byte offset holds it and its +x neighbour in its low 2·Bytes
+// bytes. On the last column that +x tap is the next row's first sample (or the store's
+// slack), with weight fx = 0: (b − a)·0 + a is a for any b below 2^24, as narrow samples are
+// (a float level keeps upperStep there, since b − a may overflow). Widened to the same floats
+// as a float level holds and blended in the same order, so the value is bit for bit the one
+// sampleTrilinear returns for the same samples held as float.
 template <int Bytes>
 VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
     const DF df;
     const DI di;
     const TrilinearCell c = trilinearCell(P, x, y, z);
-    const VI sy = hn::Set(di, P.rowStride * Bytes), sz = hn::Set(di, P.sliceStride * Bytes);
+    const VI sy = upperStep(c.iy, P.levelDims[1], P.rowStride * Bytes);
+    const VI sz = upperStep(c.iz, P.levelDims[2], P.sliceStride * Bytes);
     VI o000 = c.corner;
     if constexpr (Bytes == 2) o000 = hn::ShiftLeft<1>(o000);
     const int32_t *v = reinterpret_cast<const int32_t *>(P.narrowVoxels);

@@ -45,22 +45,21 @@ struct FrameParams {
     uint32_t seed = 0, pass = 0;
     int maxSamples = 0;
 
-    // The sampled level, padded so that the taps of any clamped position need no further
-    // clamps: trilinear, voxels with one edge copy after the last on each axis; cubic, its
-    // B-spline coefficients with one mirrored before and two after (as the kernel's buffer).
-    // Index with int32.
+    // The sampled level. Trilinear: its float samples where they lie (the volume's or the mip
+    // pyramid's), unpadded; the sampler steps to no upper tap past the last sample. Cubic: its
+    // B-spline coefficients with one mirrored before and two after on each axis (as the
+    // kernel's buffer), so the 4×4×4 taps need no clamps. Index with int32.
     const float *voxels = nullptr;
-    // Trilinear only: the same padded samples stored narrow, as sample − narrowOffset in
-    // narrowBytes (1 or 2) bytes each, when every sample of the level is an integer spanning
-    // at most 2^8 (2^16) values (narrowWidth). Exact: the taps widen to the same
-    // floats. One 32-bit gather then fetches both x taps, so a sample takes 4 gathers, not 8,
-    // from a copy a quarter (half) the size. 4 bytes of slack follow the last sample.
-    // Null: `voxels` holds the level.
+    // Trilinear from an 8- or 16-bit scan's level 0: the volume's own narrow store
+    // (Volume::narrowVoxels), unpadded, sample − narrowOffset in narrowBytes (1 or 2) bytes
+    // each, kNarrowSlack bytes after the last. Exact: the taps widen to the same floats. One
+    // 32-bit gather fetches both x taps, so a sample takes 4 gathers, not 8, from a quarter
+    // (half) of the bytes. Null: `voxels` holds the level.
     const uint8_t *narrowVoxels = nullptr;
     int narrowBytes = 0;
     float narrowOffset = 0;
     int levelDims[3];               // samples per axis of the level (unpadded)
-    int rowStride = 0, sliceStride = 0; // of the padded array
+    int rowStride = 0, sliceStride = 0; // in samples, of what is sampled
 
     // Transfer-function table (tf_table.hpp): entries × (r, g, b, sigma).
     const float *tf = nullptr;

@@ -24,46 +24,13 @@ double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(
 // is concentrated where the volume is, large enough that a tile's rays share cache lines.
 constexpr int kTileEdge = 16;
 
-// Samples with one edge copy after the last on each axis: the trilinear taps of a position
-// clamped to [0, n − 1] then stay inside without a second clamp.
+// The march indexes a level's samples (padded by `pad` on each axis) with int32.
 void checkIndexable(Vec3i n, int pad) {
     const size_t count = size_t(n.x + pad) * size_t(n.y + pad) * size_t(n.z + pad);
     if (count > size_t(std::numeric_limits<int32_t>::max()))
         throw std::invalid_argument("volume of " + std::to_string(n.x) + "×" + std::to_string(n.y) + "×" +
                                     std::to_string(n.z) + " samples is too large for the cpu device's 32-bit "
                                     "voxel indices (at most 2^31 padded samples)");
-}
-
-std::vector<float> padAfter(const std::vector<float> &v, Vec3i n) {
-    checkIndexable(n, 1);
-    const size_t px = size_t(n.x) + 1, py = size_t(n.y) + 1, pz = size_t(n.z) + 1;
-    std::vector<float> out(px * py * pz);
-    for (size_t k = 0; k < pz; ++k)
-        for (size_t j = 0; j < py; ++j) {
-            const size_t sk = std::min(k, size_t(n.z) - 1), sj = std::min(j, size_t(n.y) - 1);
-            const float *src = v.data() + (sk * size_t(n.y) + sj) * size_t(n.x);
-            float *dst = out.data() + (k * py + j) * px;
-            std::copy(src, src + n.x, dst);
-            dst[n.x] = src[n.x - 1];
-        }
-    return out;
-}
-
-// padAfter's layout stored as sample − offset in `bytes` (1 or 2) bytes each, little-endian,
-// with 4 bytes of slack after the last: the march reads 32 bits at every sample's offset.
-// Indexing that copy by byte offsets needs them to fit int32 too.
-std::vector<uint8_t> padAfterNarrow(const std::vector<float> &v, Vec3i n, NarrowWidth w) {
-    const size_t px = size_t(n.x) + 1, py = size_t(n.y) + 1, pz = size_t(n.z) + 1;
-    std::vector<uint8_t> out(px * py * pz * size_t(w.bytes) + 4, 0);
-    for (size_t k = 0; k < pz; ++k)
-        for (size_t j = 0; j < py; ++j) {
-            const size_t sk = std::min(k, size_t(n.z) - 1), sj = std::min(j, size_t(n.y) - 1);
-            const float *src = v.data() + (sk * size_t(n.y) + sj) * size_t(n.x);
-            uint8_t *dst = out.data() + (k * py + j) * px * size_t(w.bytes);
-            packNarrow(src, size_t(n.x), w, dst);
-            packNarrow(src + n.x - 1, 1, w, dst + size_t(n.x) * size_t(w.bytes)); // the edge copy
-        }
-    return out;
 }
 
 // B-spline coefficients padded by one before and two after on each axis with the mirror
@@ -106,7 +73,8 @@ CpuRenderer::CpuRenderer(std::shared_ptr<const Volume> volume, CpuRendererOption
     if (options_.brickSize < 1) throw std::invalid_argument("brick size must be at least 1");
     if (options_.threads < 0) throw std::invalid_argument("threads must be 0 (one per core) or more");
     threads_ = options_.threads > 0 ? options_.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-    // Level 0's padded copy now: every frame but a coarser level's needs it.
+    // Level 0 now (nothing to copy for trilinear frames, but a float level is checked to fit
+    // int32 indices): every frame but a coarser level's needs it.
     RenderStats unused;
     dataSet(0, false, unused);
 }
@@ -153,10 +121,10 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
     if (auto it = dataSets_.find(key); it != dataSets_.end()) return it->second;
     const auto t = Clock::now();
     const int levelsBefore = pyramid_.levelsBuilt();
-    const std::vector<float> &voxels = pyramid_.level(level);
+    const SampleGrid samples = pyramid_.level(level);
     if (pyramid_.levelsBuilt() != levelsBefore) {
         for (int l = levelsBefore + 1; l <= pyramid_.levelsBuilt(); ++l)
-            heldBytes_ += uint64_t(pyramid_.level(l).size()) * sizeof(float);
+            heldBytes_ += uint64_t(pyramid_.level(l).count()) * sizeof(float);
         st.mipSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
         counts_.mipLevels += pyramid_.levelsBuilt() - levelsBefore;
@@ -165,37 +133,41 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
     data.dims = pyramid_.dims(level);
     data.cubic = cubic;
     if (!cubic) {
-        data.width = options_.narrowSamples ? narrowWidth(voxels) : NarrowWidth{};
-        const Vec3i n = data.dims;
-        const uint64_t paddedCount = uint64_t(n.x + 1) * uint64_t(n.y + 1) * uint64_t(n.z + 1);
-        if (data.width.bytes < 4 && paddedCount * uint64_t(data.width.bytes) + 4 <= uint64_t(INT32_MAX))
-            data.narrow = padAfterNarrow(voxels, n, data.width);
-        else {
-            data.width = {};
-            data.padded = padAfter(voxels, n);
+        // Sampled where it lies, float or narrow: no copy. Narrow samples are gathered at
+        // byte offsets, which must fit int32 too; past that they are widened into a float copy.
+        const uint64_t lastOffset = uint64_t(samples.count()) * uint64_t(samples.width.bytes) + kNarrowSlack;
+        if (samples.isNarrow() && lastOffset <= uint64_t(INT32_MAX)) {
+            data.narrow = samples.narrow;
+            data.width = samples.width;
+        } else {
+            checkIndexable(data.dims, 0);
+            if (samples.isNarrow()) data.widened = samples.toFloats();
+            data.floats = samples.isNarrow() ? data.widened.data() : samples.floats;
         }
     } else {
         const auto tc = Clock::now();
-        std::vector<float> coefficients = voxels;
+        std::vector<float> coefficients = samples.toFloats();
         bsplinePrefilterMultithreaded(coefficients.data(), data.dims, threads_);
         data.padded = padMirror(coefficients, data.dims);
         st.coefficientSeconds = secondsSince(tc);
         std::lock_guard lock(countsMutex_);
         ++counts_.coefficientVolumes;
     }
-    heldBytes_ += uint64_t(data.padded.size()) * sizeof(float) + uint64_t(data.narrow.size());
+    heldBytes_ += uint64_t(data.padded.size() + data.widened.size()) * sizeof(float);
     return dataSets_.emplace(key, std::move(data)).first->second;
 }
 
 uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options, int level0Bytes) {
     const auto count = [](Vec3i d, int pad) { return uint64_t(d.x + pad) * uint64_t(d.y + pad) * uint64_t(d.z + pad); };
     const int b = std::max(1, options.brickSize);
-    uint64_t bytes = 0;
+    // Trilinear frames sample every level where it lies; only a narrow level 0 too large for
+    // int32 byte offsets is widened into a float copy (dataSet).
+    uint64_t bytes = level0Bytes < 4 && count(dims, 0) * uint64_t(level0Bytes) + kNarrowSlack > uint64_t(INT32_MAX)
+                         ? count(dims, 0) * sizeof(float)
+                         : 0;
     for (int level = 0;; ++level) {
         const Vec3i d = mipLevelDims(dims, level);
         if (level > 0) bytes += count(d, 0) * sizeof(float);                  // the mip level
-        bytes += level == 0 && level0Bytes < 4 ? count(d, 1) * uint64_t(level0Bytes) + 4 // narrow, and its slack
-                                               : count(d, 1) * sizeof(float);            // trilinear copy
         bytes += count(d, 3) * sizeof(float);                                 // cubic copy
         const Vec3i bricks{(d.x + b - 1) / b, (d.y + b - 1) / b, (d.z + b - 1) / b};
         bytes += 2 * count(bricks, 0) * (2 * sizeof(float) + sizeof(int32_t)); // min-max and visible, both
@@ -211,7 +183,7 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
         // (minmax_bricks.hpp); only the padded copy is kept, so its interior is taken out.
         if (data.cubic) data.bricks = buildMinMaxBricks(unpadMirror(data.padded, data.dims).data(), data.dims,
                                                         options_.brickSize, 2);
-        else data.bricks = buildMinMaxBricks(pyramid_.level(level).data(), data.dims, options_.brickSize, 1);
+        else data.bricks = buildMinMaxBricks(pyramid_.level(level), options_.brickSize, 1);
         heldBytes_ += uint64_t(data.bricks->minmax.size()) * sizeof(float) +
                       uint64_t(data.bricks->brickCount()) * sizeof(int32_t); // and the visible flags below
         st.brickGridSeconds = secondsSince(t);
@@ -369,13 +341,15 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
                                                       : std::numeric_limits<float>::infinity();
     p.seed = uint32_t(quality.seed ^ (quality.seed >> 32));
     p.maxSamples = kMaxSamplesPerRay;
-    p.voxels = data.padded.data();
-    if (!data.narrow.empty()) {
-        p.narrowVoxels = data.narrow.data();
+    // Cubic: the padded coefficients; trilinear: the level where it lies. dataSet and
+    // padMirror checked that the indices (byte offsets, narrow) fit int32.
+    p.voxels = cubic ? data.padded.data() : data.floats;
+    const int pad = cubic ? 3 : 0;
+    if (data.narrow) {
+        p.narrowVoxels = data.narrow;
         p.narrowBytes = data.width.bytes;
         p.narrowOffset = data.width.offset;
     }
-    const int pad = cubic ? 3 : 1; // padMirror and padAfter checked that the padded count fits int32
     p.rowStride = int(data.dims.x + pad);
     p.sliceStride = int((data.dims.x + pad) * (data.dims.y + pad));
     p.tf = tfTable_.data();

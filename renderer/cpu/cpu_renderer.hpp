@@ -25,9 +25,6 @@ namespace volcast {
 struct CpuRendererOptions {
     int threads = 0;   // 0: one per core
     int brickSize = 8; // level voxels per min-max brick edge
-    // Hold an 8- or 16-bit scan's level 0 in 1 or 2 bytes a sample for trilinear frames
-    // (narrowWidth). The image is the same bit for bit; off only to compare against.
-    bool narrowSamples = true;
 };
 
 class CpuRenderer : public FrameRenderer {
@@ -48,14 +45,16 @@ class CpuRenderer : public FrameRenderer {
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }
 
-    // Bytes of volume-sized data the renderer holds now, beyond the volume's own voxels:
-    // padded copies of the sampled levels, mip levels, B-spline coefficients, brick grids.
+    // Bytes of volume-sized data the renderer holds now, beyond the volume's own samples: mip
+    // levels, B-spline coefficients, brick grids. Trilinear frames sample every level where
+    // it lies, with no copy.
     // (The transfer-function and pre-integration tables, at most ~17 MiB per renderer
     // whatever the volume, are not counted.) Never waits for a frame.
     uint64_t memoryBytes() const { return heldBytes_.load(); }
     // What memoryBytes() reaches at most for a volume of `dims`: every mip level sampled,
     // trilinear and cubic, with empty-space skipping. The server's memory budget counts it.
-    // `level0Bytes`: bytes per sample of level 0's trilinear copy (narrowWidth(voxels).bytes).
+    // `level0Bytes`: the volume's bytes per sample (Volume::narrow.bytes). Trilinear frames
+    // copy no level, unless a narrow level 0's byte offsets pass int32 (then it is widened).
     static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {}, int level0Bytes = 4);
 
     // What description() says for a renderer with these options, before any volume exists
@@ -70,11 +69,13 @@ class CpuRenderer : public FrameRenderer {
     struct DataSet {
         Vec3i dims;
         bool cubic = false;
-        std::vector<float> padded; // voxels: one edge copy after; coefficients: mirrored 1 before, 2 after
-        // Trilinear data whose samples fit 8 or 16 bits (narrowWidth): held instead of
-        // `padded`, same layout, as sample − narrowOffset, plus 4 bytes of slack.
-        std::vector<uint8_t> narrow;
+        // Trilinear: the level's samples where they lie (the volume's or the pyramid's), float
+        // or narrow. A narrow store too large for int32 byte offsets is widened into `widened`.
+        const float *floats = nullptr;
+        const unsigned char *narrow = nullptr;
         NarrowWidth width;
+        std::vector<float> widened;
+        std::vector<float> padded; // cubic: coefficients, mirrored 1 before and 2 after each axis
         std::optional<MinMaxBricks> bricks;
         std::optional<TransferFunction> classifiedFor;
         std::vector<int32_t> brickVisible;

@@ -24,6 +24,7 @@
 #include <gdcmReader.h>
 #include <zlib.h>
 
+#include <bit>
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
@@ -941,23 +942,37 @@ std::string displayName(const fs::path &path) {
     return p.filename().string();
 }
 
-// Reads all voxels of an IO whose header is read and validated, converting to float32.
-std::vector<float> readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelType type, size_t count,
-                              LoadProgress &progress) {
+// Reads all voxels of an IO whose header is read and validated into v: an 8- or 16-bit
+// file's straight into the narrow store (unsigned as they are, signed with the sign bit
+// flipped, which is adding 2^7 or 2^15: offset −2^7 or −2^15), so that a 16-bit scan never
+// takes float32's bytes, even while loading; every other type converted to float32.
+void readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelType type, Volume &v, LoadProgress &progress) {
+    static_assert(std::endian::native == std::endian::little, "the narrow store is little-endian (narrow_samples.hpp)");
     itk::ImageIORegion region(io.GetNumberOfDimensions());
     for (unsigned d = 0; d < io.GetNumberOfDimensions(); ++d) {
         region.SetIndex(d, 0);
         region.SetSize(d, io.GetDimensions(d));
     }
     io.SetIORegion(region);
-    std::vector<float> voxels(count);
+    const size_t count = v.voxelCount();
     size_t clamped = 0;
     try {
         withVoxelType(type, [&](auto tag) {
             using T = decltype(tag);
             if constexpr (std::is_same_v<T, float>) {
-                io.Read(voxels.data());
+                v.voxels.resize(count);
+                io.Read(v.voxels.data());
+            } else if constexpr (std::is_integral_v<T> && sizeof(T) <= 2) {
+                v.narrowVoxels.assign(count * sizeof(T) + kNarrowSlack, 0);
+                io.Read(v.narrowVoxels.data());
+                progress(0.8, "converting");
+                if constexpr (std::is_signed_v<T>) {
+                    // Little-endian: the sign bit is in each sample's last byte.
+                    for (size_t i = sizeof(T) - 1; i < count * sizeof(T); i += sizeof(T)) v.narrowVoxels[i] ^= 0x80;
+                }
+                v.narrow = {int(sizeof(T)), std::is_signed_v<T> ? -std::ldexp(1.0f, 8 * int(sizeof(T)) - 1) : 0.0f};
             } else {
+                v.voxels.resize(count);
                 std::vector<T> native(count);
                 io.Read(native.data());
                 const size_t chunk = std::max<size_t>(count / 16, 1);
@@ -968,13 +983,13 @@ std::vector<float> readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelT
                         constexpr double kMax = std::numeric_limits<float>::max();
                         const double x = native[i];
                         if (std::isfinite(x) && std::abs(x) > kMax) {
-                            voxels[i] = float(std::clamp(x, -kMax, kMax));
+                            v.voxels[i] = float(std::clamp(x, -kMax, kMax));
                             ++clamped;
                         } else {
-                            voxels[i] = float(x);
+                            v.voxels[i] = float(x);
                         }
                     } else {
-                        voxels[i] = float(native[i]);
+                        v.voxels[i] = float(native[i]);
                     }
                 }
             }
@@ -987,7 +1002,6 @@ std::vector<float> readVoxels(const fs::path &path, itk::ImageIOBase &io, VoxelT
     }
     if (clamped > 0)
         spdlog::warn("{}: clamped {} float64 voxels beyond the float32 range", path.string(), clamped);
-    return voxels;
 }
 
 // A private temporary folder holding a link to the file being read; removed on scope exit.
@@ -1199,7 +1213,7 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
     if (nifti) checkNiftiData(path, *nifti);
 
     progress(0.35, "reading voxels");
-    v.voxels = readVoxels(path, *io, type, v.voxelCount(), progress);
+    readVoxels(path, *io, type, v, progress);
     return v;
 }
 
@@ -1283,13 +1297,14 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
 // --- writing
 
 template <typename T>
-std::vector<T> convertForWriting(const float *src, size_t count) {
+std::vector<T> convertForWriting(const SampleGrid &samples, size_t first, size_t count) {
     std::vector<T> out(count);
     for (size_t i = 0; i < count; ++i) {
+        const float s = samples[first + i];
         if constexpr (std::is_floating_point_v<T>) {
-            out[i] = T(src[i]);
+            out[i] = T(s);
         } else {
-            const double x = std::isnan(src[i]) ? 0.0 : std::nearbyint(double(src[i]));
+            const double x = std::isnan(s) ? 0.0 : std::nearbyint(double(s));
             out[i] = T(std::clamp(x, double(std::numeric_limits<T>::lowest()), double(std::numeric_limits<T>::max())));
         }
     }
@@ -1535,8 +1550,9 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
                                             : loadImageFile(path, options, progress);
         v.name = displayName(path);
         progress(0.9, "statistics");
-        v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
+        if (!v.voxels.empty()) v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
         computeStatistics(v);
+        holdNarrow(v); // a float file (or a DICOM series, rescaled) whose samples are 8- or 16-bit integers
         progress(1, "statistics");
         spdlog::debug("{}: loaded {} x {} x {} {} voxels, spacing {} {} {}, range {} .. {}", path.string(), v.dims.x,
                       v.dims.y, v.dims.z, voxelTypeName(v.sourceType), v.spacing.x, v.spacing.y, v.spacing.z,
@@ -1611,7 +1627,7 @@ void saveVolume(const Volume &v, const fs::path &path, const SaveOptions &option
     const auto saveFail = [&](const std::string &problem) {
         throw VolumeSaveError(path.string() + ": " + problem);
     };
-    if (v.voxelCount() == 0 || v.voxels.size() != v.voxelCount())
+    if (v.voxelCount() == 0 || !v.hasSamples())
         saveFail("volume has no voxels, or fewer voxels than its dims say");
     const std::string name = lower(path.filename().string());
     const bool known = name.ends_with(".nrrd") || name.ends_with(".nhdr") || name.ends_with(".mha") ||
@@ -1639,7 +1655,7 @@ void saveVolume(const Volume &v, const fs::path &path, const SaveOptions &option
         io->SetFileName(path.string());
         io->SetIORegion(region);
         withVoxelType(options.type, [&](auto tag) {
-            const auto buffer = convertForWriting<decltype(tag)>(v.voxels.data(), v.voxels.size());
+            const auto buffer = convertForWriting<decltype(tag)>(v.samples(), 0, v.voxelCount());
             io->WriteImageInformation();
             io->Write(buffer.data());
         });
@@ -1659,7 +1675,7 @@ void saveDicomSeries(const Volume &v, const fs::path &folder, VoxelType type) {
     };
     if (type == VoxelType::Float32 || type == VoxelType::Float64)
         saveFail("DICOM series are written with integer voxels; choose an integer type");
-    if (v.voxelCount() == 0 || v.voxels.size() != v.voxelCount())
+    if (v.voxelCount() == 0 || !v.hasSamples())
         saveFail("volume has no voxels, or fewer voxels than its dims say");
     try {
         fs::create_directories(folder);
@@ -1701,7 +1717,7 @@ void saveDicomSeries(const Volume &v, const fs::path &folder, VoxelType type) {
             io->SetFileName((folder / fmt::format("slice_{:04d}.dcm", k)).string());
             withVoxelType(type, [&](auto tag) {
                 const auto buffer =
-                    convertForWriting<decltype(tag)>(v.voxels.data() + size_t(k) * sliceCount, sliceCount);
+                    convertForWriting<decltype(tag)>(v.samples(), size_t(k) * sliceCount, sliceCount);
                 io->WriteImageInformation();
                 io->Write(buffer.data());
             });

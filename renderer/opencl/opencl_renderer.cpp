@@ -45,14 +45,17 @@ std::vector<float> padMirror(const std::vector<float> &c, Vec3i n) {
     return out;
 }
 
-template <typename T>
-cl::Buffer upload(OpenClContext &cl, const std::vector<T> &data, const std::string &what) {
+cl::Buffer upload(OpenClContext &cl, const void *data, size_t bytes, const std::string &what) {
     try {
-        return cl::Buffer(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, data.size() * sizeof(T),
-                          const_cast<T *>(data.data()));
+        return cl::Buffer(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, const_cast<void *>(data));
     } catch (const cl::Error &e) {
         throw OpenClError("cannot upload " + what + " to " + cl.deviceName() + ": " + describe(e));
     }
+}
+
+template <typename T>
+cl::Buffer upload(OpenClContext &cl, const std::vector<T> &data, const std::string &what) {
+    return upload(cl, data.data(), data.size() * sizeof(T), what);
 }
 
 } // namespace
@@ -114,7 +117,7 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
 
     auto t = Clock::now();
     const int levelsBefore = pyramid_.levelsBuilt();
-    const std::vector<float> &voxels = pyramid_.level(level);
+    const SampleGrid samples = pyramid_.level(level);
     const Vec3i dims = pyramid_.dims(level);
     if (pyramid_.levelsBuilt() != levelsBefore) {
         st.mipSeconds = secondsSince(t);
@@ -127,13 +130,15 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
     data.cubic = cubic;
     data.dims = dims;
     if (!cubic) {
-        data.width = options_.narrowSamples ? narrowWidth(voxels) : NarrowWidth{};
-        data.buffer = data.width.bytes < 4 ? upload(cl_, narrowSamples(voxels, data.width), "volume " + volume_->name)
-                                           : upload(cl_, voxels, "volume " + volume_->name);
+        // As the volume holds it: a narrow store goes up as uchar or ushort, without its slack.
+        data.width = samples.width;
+        data.buffer = samples.isNarrow()
+                          ? upload(cl_, samples.narrow, samples.count() * size_t(samples.width.bytes), "volume " + volume_->name)
+                          : upload(cl_, samples.floats, samples.count() * sizeof(float), "volume " + volume_->name);
     } else {
         // Prefilter on the device (the paper's Table 2), pad on the host, upload.
         t = Clock::now();
-        const std::vector<float> coefficients = bsplinePrefilterOpenCl(cl_, voxels.data(), dims);
+        const std::vector<float> coefficients = bsplinePrefilterOpenCl(cl_, samples.toFloats().data(), dims);
         const std::vector<float> padded = padMirror(coefficients, dims);
         if (cubicFromImage()) {
             try {
@@ -184,7 +189,7 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
         if (data.cubic)
             data.bricks = buildMinMaxBricks(readBackCoefficients(data).data(), data.dims, options_.brickSize, 2);
         else
-            data.bricks = buildMinMaxBricks(pyramid_.level(data.level).data(), data.dims, options_.brickSize, 1);
+            data.bricks = buildMinMaxBricks(pyramid_.level(data.level), options_.brickSize, 1);
         st.brickGridSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
         ++counts_.brickGrids;

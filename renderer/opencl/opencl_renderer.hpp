@@ -31,9 +31,6 @@ enum class CubicFetch { Auto, Taps64, Trilinear8 };
 struct OpenClRendererOptions {
     CubicFetch cubicFetch = CubicFetch::Auto;
     int brickSize = 8; // level voxels per min-max brick edge
-    // Upload an 8- or 16-bit scan's levels in 1 or 2 bytes a sample for trilinear frames
-    // (narrow_samples.hpp). The image is the same bit for bit; off only to compare against.
-    bool narrowSamples = true;
 };
 
 class OpenClRenderer : public FrameRenderer {

@@ -60,6 +60,7 @@ Volume makePeerPhantom(Vec3i dims, VoxelType sourceType, unsigned seed) {
         }
     });
     computeStatistics(v);
+    holdNarrow(v); // as the loader holds an 8- or 16-bit file
     return v;
 }
 

@@ -67,7 +67,7 @@ void prefilter(OpenClContext &cl, const StudyOptions &options) {
     for (const int64_t n : sides) {
         const Vec3i dims{n, n, n};
         std::cerr << "prefilter: " << n << "³\n";
-        const std::vector<float> input = makePeerPhantom(dims, VoxelType::UInt8).voxels;
+        const std::vector<float> input = makePeerPhantom(dims, VoxelType::UInt8).samples().toFloats();
         const double mvox = double(input.size()) / 1e6;
         std::vector<float> work, simpleResult, mtResult, clResult;
 

@@ -46,6 +46,12 @@ std::unique_ptr<FrameRenderer> makeStudyRenderer(OpenClContext &cl, const std::s
                                                  std::shared_ptr<const Volume> volume);
 void peerMode(OpenClContext &cl, const PeerModeOptions &options);
 
+// A CT-like int16 NRRD (detached .raw beside the header) of `dims`, written slice by slice.
+void writeSyntheticCt(const std::filesystem::path &header, Vec3i dims);
+// Loads `file` and draws a trilinear frame at mip levels 0 and 1 on the native path; prints
+// one JSON line: the samples' bytes, the renderer's, resident and peak memory after each step.
+void memoryStudy(const std::filesystem::path &file, int size);
+
 // "512x512,800x600" → {{512, 512}, {800, 600}}; throws std::invalid_argument naming the part.
 std::vector<std::pair<int, int>> parseSizes(const std::string &text);
 

@@ -10,6 +10,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include <cstdio>
 #include <iostream>
 
 int main(int argc, char **argv) {
@@ -73,7 +74,35 @@ int main(int argc, char **argv) {
         ->check(CLI::IsMember({"opencl", "cpu"}))
         ->capture_default_str();
 
+    std::filesystem::path memoryVolume;
+    std::string writeCt;
+    int memorySize = 512;
+    auto *memory = app.add_subcommand("memory", "Memory a scan takes on the native path: samples, copies, RSS");
+    memory->add_option("--volume", memoryVolume, "Volume file to load (with --write-ct: the NRRD header to write)")
+        ->required();
+    memory->add_option("--write-ct", writeCt, "Write a CT-like int16 NRRD of WxHxD to --volume instead, and stop");
+    memory->add_option("--size", memorySize, "Square frame size")->check(CLI::Range(1, 8192))->capture_default_str();
+
     CLI11_PARSE(app, argc, argv);
+    if (memory->parsed()) {
+        // No OpenCL: the memory study is the native path's.
+        spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
+        try {
+            if (!writeCt.empty()) {
+                int x = 0, y = 0, z = 0;
+                char tail = 0;
+                if (std::sscanf(writeCt.c_str(), "%dx%dx%d%c", &x, &y, &z, &tail) != 3 || x < 1 || y < 1 || z < 1)
+                    throw std::invalid_argument("--write-ct '" + writeCt + "': expected WxHxD, each at least 1");
+                writeSyntheticCt(memoryVolume, volcast::Vec3i{x, y, z});
+            } else {
+                memoryStudy(memoryVolume, memorySize);
+            }
+            return 0;
+        } catch (const std::exception &e) {
+            std::cerr << "volcast-bench: " << e.what() << std::endl;
+            return 1;
+        }
+    }
     // stdout carries the tables (and the peers' JSON lines); progress and warnings go to stderr.
     spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
     try {

@@ -22,6 +22,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <random>
 #include <tuple>
 
 namespace volcast {
@@ -647,14 +648,13 @@ TEST(NarrowSamples, WidthTakesExactlyTheIntegersEightAndSixteenBitsHold) {
     EXPECT_EQ(width({}).bytes, 4);
 }
 
-// An 8- or 16-bit scan sampled from its narrow copy draws the float copy's image bit for bit,
-// in every switch that samples trilinearly (and with the same samples), from a quarter or half
-// of the bytes. Only the widening differs, and it is exact.
+// An 8- or 16-bit scan held in the narrow store and sampled there, in place, draws the image
+// of the same samples held as float bit for bit, in every switch that samples trilinearly
+// (and with the same samples), with no copy of level 0 at all. Only the widening differs,
+// and it is exact.
 TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
     const Camera cam = test::obliqueCamera(blob().volume, 30);
     const std::vector<ClipPlane> clip{{blob().volume.center(), normalize(Vec3d{0.2, 1, -0.3})}};
-    CpuRendererOptions floatCopy;
-    floatCopy.narrowSamples = false;
     struct Scan {
         const char *what;
         double scale, offset; // value = round(blob·scale) + offset, and the tf's points alike
@@ -666,11 +666,14 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
         computeStatistics(v);
         TransferFunction tf = blobTf();
         for (auto &pt : tf.points) pt.value = pt.value * scan.scale + scan.offset;
-        ASSERT_EQ(narrowWidth(v.voxels).bytes, scan.bytes) << scan.what;
-        CpuRenderer narrow(v), wide(v, floatCopy);
-        const uint64_t padded = uint64_t(25) * 25 * 25; // 24³ with one edge copy after
-        EXPECT_EQ(narrow.memoryBytes(), padded * uint64_t(scan.bytes) + 4) << scan.what;
-        EXPECT_EQ(wide.memoryBytes(), padded * 4) << scan.what;
+        Volume held = v;
+        ASSERT_TRUE(holdNarrow(held)) << scan.what;
+        ASSERT_EQ(held.narrow.bytes, scan.bytes) << scan.what;
+        EXPECT_TRUE(held.voxels.empty()) << scan.what << ": the float store is given up";
+        EXPECT_EQ(held.sampleBytes(), uint64_t(24 * 24 * 24) * uint64_t(scan.bytes) + kNarrowSlack) << scan.what;
+        CpuRenderer narrow(held), wide(v);
+        EXPECT_EQ(narrow.memoryBytes(), 0) << scan.what << ": level 0 is sampled in place";
+        EXPECT_EQ(wide.memoryBytes(), 0) << scan.what << ": so is a float level 0";
         Quality q = plain(0.5);
         std::vector<std::pair<std::string, Quality>> cases{{"plain", q}};
         q.jitter = true;
@@ -703,13 +706,55 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
     }
 }
 
+// Levels are sampled where they lie, float or narrow, with no edge copies: on the last column,
+// row and slice the sampler must take the sample itself as the upper tap. Random integer
+// samples, non-zero up to every face, seen through the high faces and the low ones, with
+// boundary segments reaching half a voxel past the outermost samples, at mip levels 0 and 1;
+// flat axes (one sample) too. The judge is the OpenCL kernel, which clamps every tap on its
+// own (2e-5: DrawsTheOpenClImageToFloatRounding); narrow and float agree bit for bit. A wrong
+// edge tap changes pixels here; a blob that fades to zero before the faces would hide it.
+TEST(CpuRenderer, LevelsSampledInPlaceDrawTheOpenClImageAtEveryFace) {
+    std::mt19937 rng(11);
+    for (const auto &[dims, lo, hi] : {std::tuple{Vec3i{13, 11, 9}, 0, 255}, std::tuple{Vec3i{13, 11, 9}, -1024, 3071},
+                                       std::tuple{Vec3i{7, 1, 5}, 0, 255}, std::tuple{Vec3i{6, 5, 1}, -1024, 3071},
+                                       std::tuple{Vec3i{1, 4, 3}, 0, 255}}) {
+        Volume v;
+        v.name = "random integers";
+        v.dims = dims;
+        v.voxels.resize(v.voxelCount());
+        std::uniform_int_distribution<int> value(lo, hi);
+        for (float &x : v.voxels) x = float(value(rng));
+        computeStatistics(v);
+        Volume held = v;
+        ASSERT_TRUE(holdNarrow(held));
+        TransferFunction tf;
+        tf.points = {{double(lo), 0.2, 0.5, 1, 0.05}, {double(hi), 1, 0.6, 0.2, 0.6}};
+        tf.opacityUnit = 1;
+        CpuRenderer narrow(held), wide(v);
+        OpenClRenderer judge(test::sharedOpenClContext(), v);
+        Camera high = test::obliqueCamera(v, 40), low = high;
+        low.eye = v.center() - (high.eye - v.center());
+        for (const auto &[cam, side] : {std::pair{high, ", high faces"}, std::pair{low, ", low faces"}})
+            for (const int mip : {0, 1}) {
+                Quality q = plain(0.37);
+                q.mipLevel = mip;
+                const std::string label = std::to_string(dims.x) + "×" + std::to_string(dims.y) + "×" +
+                                          std::to_string(dims.z) + (held.narrow.bytes == 1 ? " 8-bit" : " 16-bit") +
+                                          side + ", mip " + std::to_string(mip);
+                const Image a = narrow.render(tf, cam, 48, 48, q, {});
+                const Image b = wide.render(tf, cam, 48, 48, q, {});
+                EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label;
+                EXPECT_LT(compareImages(b, judge.render(tf, cam, 48, 48, q, {})).maxAbs, 2e-5) << label;
+                EXPECT_GT(compareImages(a, Image(48, 48)).maxAbs, 0.05) << label << ": nothing drawn";
+            }
+    }
+}
+
 // The same on the OpenCL back end: its buffer of uchar or ushort samples (VOXEL_BYTES) draws
 // the float buffer's image bit for bit, and the native path's to float rounding.
 TEST(OpenClRenderer, EightAndSixteenBitSamplesDrawTheFloatBuffersImageBitForBit) {
     const Camera cam = test::obliqueCamera(blob().volume, 30);
     const std::vector<ClipPlane> clip{{blob().volume.center(), normalize(Vec3d{0.2, 1, -0.3})}};
-    OpenClRendererOptions floatBuffer;
-    floatBuffer.narrowSamples = false;
     for (const auto &[what, scale, offset, bytes] :
          {std::tuple{"8-bit", 1.0, 0.0, 1}, std::tuple{"16-bit CT-like", 40.0, -1024.0, 2}}) {
         Volume v = blob().volume;
@@ -717,8 +762,10 @@ TEST(OpenClRenderer, EightAndSixteenBitSamplesDrawTheFloatBuffersImageBitForBit)
         computeStatistics(v);
         TransferFunction tf = blobTf();
         for (auto &pt : tf.points) pt.value = pt.value * scale + offset;
-        OpenClRenderer narrow(test::sharedOpenClContext(), v), wide(test::sharedOpenClContext(), v, floatBuffer);
-        CpuRenderer cpu(v);
+        Volume held = v;
+        ASSERT_TRUE(holdNarrow(held)) << what;
+        OpenClRenderer narrow(test::sharedOpenClContext(), held), wide(test::sharedOpenClContext(), v);
+        CpuRenderer cpu(held);
         Quality q = plain(0.5);
         q.jitter = true;
         q.seed = 3;

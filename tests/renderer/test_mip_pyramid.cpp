@@ -52,9 +52,9 @@ TEST(MipPyramid, AveragesBlocksAndRepeatsTheEdgeOnOddAxes) {
     // Voxel 0: x {0, 1}, y {0, 1}, z {0, 0 (repeated)}: (1 + 2 + 4 + 5)·2 / 8 = 3.
     // Voxel 1: x {2, 2 (repeated)}, y {0, 1}, z repeated: (3 + 3 + 6 + 6)·2 / 8 = 4.5.
     // Quarters and halves of small integers: exact in float, hence EXPECT_EQ.
-    EXPECT_EQ(pyramid.level(1), (std::vector<float>{3, 4.5f}));
+    EXPECT_EQ(pyramid.level(1).toFloats(), (std::vector<float>{3, 4.5f}));
     // Level 2 averages the two (every other axis repeats its one sample): 3.75.
-    EXPECT_EQ(pyramid.level(2), (std::vector<float>{3.75f}));
+    EXPECT_EQ(pyramid.level(2).toFloats(), (std::vector<float>{3.75f}));
     EXPECT_EQ(pyramid.maxLevel(), 2);
 }
 
@@ -63,9 +63,9 @@ TEST(MipPyramid, AOneSampleAxisRepeatsItsSample) {
     MipPyramid pyramid(v);
     ASSERT_EQ(pyramid.dims(1), (Vec3i{1, 1, 3}));
     // Along z: (1 + 2) / 2, (3 + 10) / 2, (7 + 7) / 2; x and y repeat their one sample.
-    EXPECT_EQ(pyramid.level(1), (std::vector<float>{1.5f, 6.5f, 7}));
-    EXPECT_EQ(pyramid.level(2), (std::vector<float>{4, 7}));
-    EXPECT_EQ(pyramid.level(3), (std::vector<float>{5.5f}));
+    EXPECT_EQ(pyramid.level(1).toFloats(), (std::vector<float>{1.5f, 6.5f, 7}));
+    EXPECT_EQ(pyramid.level(2).toFloats(), (std::vector<float>{4, 7}));
+    EXPECT_EQ(pyramid.level(3).toFloats(), (std::vector<float>{5.5f}));
 }
 
 TEST(MipPyramid, MatchesTheBlockAverageDefinitionOnALargeOddVolume) {
@@ -79,7 +79,7 @@ TEST(MipPyramid, MatchesTheBlockAverageDefinitionOnALargeOddVolume) {
     MipPyramid pyramid(v);
     const Vec3i m = pyramid.dims(1);
     ASSERT_EQ(m, (Vec3i{65, 64, 18}));
-    const std::vector<float> &level1 = pyramid.level(1);
+    const std::vector<float> level1 = pyramid.level(1).toFloats();
     for (int64_t K = 0; K < m.z; ++K)
         for (int64_t J = 0; J < m.y; ++J)
             for (int64_t I = 0; I < m.x; ++I) {
@@ -106,7 +106,7 @@ TEST(MipPyramid, EvenDimsPreserveTheMean) {
     for (int L = 1; L <= pyramid.maxLevel(); ++L)
         // Each level rounds each average to float (≤ 2^-24 relative, values ≤ 1000), so after
         // L ≤ 4 levels the mean moves by < 4·1000·2^-24 ≈ 2.4e-4; 1e-3 leaves margin.
-        EXPECT_NEAR(mean(pyramid.level(L)), m0, 1e-3) << "level " << L;
+        EXPECT_NEAR(mean(pyramid.level(L).toFloats()), m0, 1e-3) << "level " << L;
 }
 
 TEST(MipPyramid, AConstantVolumeStaysConstantAtEveryLevel) {
@@ -114,7 +114,7 @@ TEST(MipPyramid, AConstantVolumeStaysConstantAtEveryLevel) {
     const Volume v = makeVolume({7, 5, 3}, std::vector<float>(7 * 5 * 3, c));
     MipPyramid pyramid(v);
     for (int L = 0; L <= pyramid.maxLevel(); ++L) {
-        const std::vector<float> &level = pyramid.level(L);
+        const std::vector<float> level = pyramid.level(L).toFloats();
         ASSERT_EQ(level.size(), size_t(pyramid.dims(L).x * pyramid.dims(L).y * pyramid.dims(L).z));
         // The pairwise double sum of eight equal floats is 8c exactly, and /8 is exact.
         for (float x : level) ASSERT_EQ(x, c) << "level " << L;
@@ -126,32 +126,50 @@ TEST(MipPyramid, BuildsLevelsOnFirstRequestOnly) {
     MipPyramid pyramid(v);
     EXPECT_EQ(pyramid.maxLevel(), 5);
     EXPECT_EQ(pyramid.levelsBuilt(), 0);
-    EXPECT_EQ(&pyramid.level(0), &v.voxels); // level 0 is the volume's own voxels, not a copy
+    EXPECT_EQ(pyramid.level(0).floats, v.voxels.data()); // level 0 is the volume's own samples, not a copy
     EXPECT_EQ(pyramid.dims(4), (Vec3i{2, 1, 1}));
     EXPECT_EQ(pyramid.levelsBuilt(), 0);     // neither level 0 nor dims builds anything
-    const std::vector<float> *level3 = &pyramid.level(3);
+    const float *level3 = pyramid.level(3).floats;
     EXPECT_EQ(pyramid.levelsBuilt(), 3);     // 1, 2 and 3, once
-    const std::vector<float> *level1 = &pyramid.level(1);
-    EXPECT_EQ(&pyramid.level(3), level3);    // cached: the same storage again
-    EXPECT_EQ(&pyramid.level(1), level1);
+    const float *level1 = pyramid.level(1).floats;
+    EXPECT_EQ(pyramid.level(3).floats, level3); // cached: the same storage again
+    EXPECT_EQ(pyramid.level(1).floats, level1);
     EXPECT_EQ(pyramid.levelsBuilt(), 3);
     pyramid.level(5);
     EXPECT_EQ(pyramid.levelsBuilt(), 5);
-    EXPECT_EQ(&pyramid.level(3), level3);    // building further levels moves none
+    EXPECT_EQ(pyramid.level(3).floats, level3); // building further levels moves none
+}
+
+// A volume held narrow (an 8- or 16-bit scan) is level 0 as it is, and its coarser levels
+// are the float averages the same samples held as float give, to the bit.
+TEST(MipPyramid, ANarrowLevelZeroBuildsTheLevelsItsFloatCopyBuilds) {
+    Volume v = makeVolume({21, 14, 9}, std::vector<float>(21 * 14 * 9));
+    std::mt19937 rng(5);
+    std::uniform_int_distribution<int> u(-1024, 3071);
+    for (float &x : v.voxels) x = float(u(rng));
+    Volume held = v;
+    ASSERT_TRUE(holdNarrow(held));
+    MipPyramid narrow(held), wide(v);
+    EXPECT_EQ(narrow.level(0).narrow, held.narrowVoxels.data()); // not a copy
+    EXPECT_EQ(narrow.level(0).toFloats(), v.voxels);
+    for (int L = 1; L <= narrow.maxLevel(); ++L) {
+        EXPECT_FALSE(narrow.level(L).isNarrow()) << "level " << L << ": averages are held as float";
+        EXPECT_EQ(narrow.level(L).toFloats(), wide.level(L).toFloats()) << "level " << L;
+    }
 }
 
 TEST(MipPyramid, ConcurrentRequestsBuildOnce) {
     const Volume v = makeGaussianBlob({33, 30, 31}, {1, 1, 1}, 6, 100).volume;
     MipPyramid pyramid(v);
-    std::vector<const std::vector<float> *> got(4);
+    std::vector<const float *> got(4);
     std::vector<std::thread> threads;
     for (size_t t = 0; t < got.size(); ++t)
-        threads.emplace_back([&, t] { got[t] = &pyramid.level(pyramid.maxLevel() - int(t % 2)); });
+        threads.emplace_back([&, t] { got[t] = pyramid.level(pyramid.maxLevel() - int(t % 2)).floats; });
     for (std::thread &th : threads) th.join();
     EXPECT_EQ(pyramid.levelsBuilt(), pyramid.maxLevel());
     EXPECT_EQ(got[0], got[2]);
     EXPECT_EQ(got[1], got[3]);
-    EXPECT_EQ(got[0], &pyramid.level(pyramid.maxLevel()));
+    EXPECT_EQ(got[0], pyramid.level(pyramid.maxLevel()).floats);
 }
 
 TEST(MipPyramid, LevelsOutOfRangeThrowNamingTheRange) {

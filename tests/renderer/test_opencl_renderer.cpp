@@ -47,8 +47,8 @@ TEST(OpenClRenderer, ProgramsHoldOnlyTheFeaturesInUseAndAreBuiltOnce) {
     r.render(constantTf(0.5), obliqueCamera(box.volume), 8, 8, plain(0.5), {}, &first);
     const size_t built = sharedContext().programsBuilt();
     r.render(constantTf(0.2), obliqueCamera(box.volume), 8, 8, plain(0.25), {}, &second);
-    // The box's samples are all 1: an integer volume, held narrow in 8 bits.
-    EXPECT_EQ(first.buildOptions, "-DVOXEL_BYTES=1 -DBOUNDARY_SEGMENT");
+    // The box is built as float32 and not held narrow (only loaders and holdNarrow do that).
+    EXPECT_EQ(first.buildOptions, "-DBOUNDARY_SEGMENT");
     EXPECT_EQ(sharedContext().programsBuilt(), built); // same feature set: no new program
     EXPECT_EQ(second.kernelBuildSeconds, 0);
 }

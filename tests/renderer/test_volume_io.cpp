@@ -129,7 +129,8 @@ std::string encode(VoxelType t, const std::vector<double> &values, bool bigEndia
 
 // Loaded float voxels converted back to their native type, in the given byte order.
 std::string nativeBytes(const Volume &v, bool bigEndian) {
-    return encode(v.sourceType, {v.voxels.begin(), v.voxels.end()}, bigEndian);
+    const std::vector<float> samples = v.samples().toFloats();
+    return encode(v.sourceType, {samples.begin(), samples.end()}, bigEndian);
 }
 
 const char *nrrdTypeName(VoxelType t) {
@@ -290,7 +291,8 @@ Volume checkScan(const ScanExpectation &e) {
     EXPECT_EQ(v.range.min, e.min);
     EXPECT_EQ(v.range.max, e.max);
     EXPECT_EQ(v.nonFiniteReplaced, 0u);
-    EXPECT_EQ(v.voxels.size(), size_t(e.dims.x * e.dims.y * e.dims.z));
+    EXPECT_TRUE(v.hasSamples());
+    EXPECT_EQ(v.voxelCount(), size_t(e.dims.x * e.dims.y * e.dims.z));
     // Voxels back in their native type, little-endian: the exact decoded bytes.
     EXPECT_EQ(sha256(nativeBytes(v, false)), e.littleEndianSha256);
     return v;
@@ -371,15 +373,16 @@ TEST(VolumeIoRealScans, HeadMrVolume) {
 template <typename T>
 void checkBigEndianScan(const Volume &v, const char *dataFile, const char *fileSha256) {
     const std::string raw = readFile(kDataDir / dataFile);
-    ASSERT_EQ(raw.size(), v.voxels.size() * sizeof(T));
+    const std::vector<float> samples = v.samples().toFloats();
+    ASSERT_EQ(raw.size(), samples.size() * sizeof(T));
     size_t mismatches = 0;
-    for (size_t i = 0; i < v.voxels.size(); ++i) {
+    for (size_t i = 0; i < samples.size(); ++i) {
         char b[sizeof(T)];
         std::memcpy(b, raw.data() + i * sizeof(T), sizeof(T));
         std::reverse(b, b + sizeof(T));
         T value;
         std::memcpy(&value, b, sizeof(T));
-        if (float(value) != v.voxels[i]) ++mismatches;
+        if (float(value) != samples[i]) ++mismatches;
     }
     EXPECT_EQ(mismatches, 0u);
     EXPECT_EQ(sha256(nativeBytes(v, true)), fileSha256);
@@ -409,10 +412,12 @@ constexpr size_t kCount = 5 * 4 * 3;
 void expectVoxels(const Volume &v, VoxelType type, const std::vector<double> &values) {
     ASSERT_EQ(v.dims, kDims);
     EXPECT_EQ(v.sourceType, type) << voxelTypeName(v.sourceType);
-    ASSERT_EQ(v.voxels.size(), values.size());
-    // The loader converts each native value with a plain float cast, so the expectation is
-    // the same cast of the written value: exact equality.
-    for (size_t i = 0; i < values.size(); ++i) EXPECT_EQ(v.voxels[i], float(values[i])) << "voxel " << i;
+    const std::vector<float> samples = v.samples().toFloats();
+    ASSERT_EQ(samples.size(), values.size());
+    // The loader converts each native value with a plain float cast (or, 8 and 16 bits, holds
+    // it narrow, which widens to the same float), so the expectation is the same cast of the
+    // written value: exact equality.
+    for (size_t i = 0; i < values.size(); ++i) EXPECT_EQ(samples[i], float(values[i])) << "voxel " << i;
 }
 
 class VolumeIoNrrdTypes : public VolumeIoTest, public ::testing::WithParamInterface<VoxelType> {};
@@ -532,7 +537,7 @@ TEST_F(VolumeIoTest, Nrrd2DImageIsOneSlice) {
     const Volume v = loadVolume(dir / "slice.nrrd");
     EXPECT_EQ(v.dims, Vec3i(3, 2, 1));
     EXPECT_EQ(v.spacing, Vec3d(0.5, 0.25, 1));  // z spacing 1 by the documented convention
-    EXPECT_EQ(v.voxels, std::vector<float>({1, 2, 3, 4, 5, 6}));
+    EXPECT_EQ(v.samples().toFloats(), std::vector<float>({1, 2, 3, 4, 5, 6}));
 }
 
 TEST_F(VolumeIoTest, MetaImageDetachedMhdAndAttachedMha) {
@@ -661,7 +666,8 @@ TEST_F(VolumeIoTest, DicomSeriesFolder) {
     EXPECT_EQ(v.name, "series");
     EXPECT_EQ(v.dims, src.dims);
     EXPECT_EQ(v.sourceType, VoxelType::Int16);
-    EXPECT_EQ(v.voxels, src.voxels);  // int16 values, exact
+    EXPECT_EQ(v.samples().toFloats(), src.voxels);  // int16 values, exact
+    EXPECT_EQ(v.narrow.bytes, 2) << "held in 16 bits";
     // DICOM stores decimal strings (10 significant digits here), the z spacing is the
     // distance between slice positions: 1e-6 covers both.
     expectGeometry(v, src.spacing, src.origin, Mat3d::identity(), 1e-6);
@@ -669,7 +675,7 @@ TEST_F(VolumeIoTest, DicomSeriesFolder) {
     // One file of the series on its own is a one-slice volume at that slice's position.
     const Volume slice = loadVolume(dir / "series" / "slice_0002.dcm");
     EXPECT_EQ(slice.dims, Vec3i(6, 5, 1));
-    EXPECT_EQ(std::vector<float>(slice.voxels.begin(), slice.voxels.end()),
+    EXPECT_EQ(slice.samples().toFloats(),
               std::vector<float>(src.voxels.begin() + 60, src.voxels.begin() + 90));
     EXPECT_NEAR(slice.origin.z, 50 + 2 * 2.5, 1e-6);  // decimal string in the file, as above
 }
@@ -698,13 +704,15 @@ TEST_F(VolumeIoTest, ProgressOfAFileRunsFromZeroToOneThroughItsSteps) {
     Volume src;
     src.dims = {40, 30, 20};
     src.voxels.assign(src.voxelCount(), 7.0f);
-    saveVolume(src, dir / "p.nrrd", {VoxelType::Int16, true});
+    saveVolume(src, dir / "p.nrrd", {VoxelType::Int32, true});
     ProgressLog log;
     loadVolume(dir / "p.nrrd", log.options());
     log.expectWellFormed();
     for (const char *task : {"reading header", "checking data", "reading voxels", "statistics"})
         EXPECT_GE(log.count(task), 1u) << task;
-    EXPECT_GE(log.count("converting"), 16u); // int16 to float in 16 chunks or more
+    // int32 to float in 16 chunks or more (8- and 16-bit files are read straight into the
+    // narrow store and say "converting" once).
+    EXPECT_GE(log.count("converting"), 16u);
 }
 
 TEST_F(VolumeIoTest, ProgressOfADicomSeriesAdvancesSliceBySlice) {
@@ -739,7 +747,7 @@ TEST_F(VolumeIoTest, DicomFolderWithTwoSeriesLoadsOne) {
     const Volume v = loadVolume(dir / "both");
     const Volume &expected = v.dims == a.dims ? a : b;
     EXPECT_EQ(v.dims, expected.dims);
-    EXPECT_EQ(v.voxels, expected.voxels);
+    EXPECT_EQ(v.samples().toFloats(), expected.voxels);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1094,7 +1102,7 @@ class VolumeIoDataFiles : public VolumeIoTest {
 TEST_F(VolumeIoDataFiles, ValidDetachedDataFileLoads) {  // the baseline the others break
     writeFile(dir / "sub" / "in.raw", std::string(8, '\2'));
     const fs::path p = header("ok.nhdr", "in.raw");
-    EXPECT_EQ(loadVolume(p).voxels, std::vector<float>(8, 2.0f));
+    EXPECT_EQ(loadVolume(p).samples().toFloats(), std::vector<float>(8, 2.0f));
 }
 TEST_F(VolumeIoDataFiles, NrrdDataFileWithDotDotIsRefused) {
     const fs::path p = header("dotdot.nhdr", "../x.raw");
@@ -1134,8 +1142,8 @@ TEST_F(VolumeIoDataFiles, NrrdListAndPatternInsideTheFolderLoad) {
     writeFile(dir / "sub" / "s01.raw", std::string(4, '\1'));
     writeFile(dir / "sub" / "s02.raw", std::string(4, '\2'));
     const std::vector<float> expected = {1, 1, 1, 1, 2, 2, 2, 2};
-    EXPECT_EQ(loadVolume(header("list_ok.nhdr", "LIST\ns01.raw\ns02.raw")).voxels, expected);
-    EXPECT_EQ(loadVolume(header("pattern_ok.nhdr", "s%02d.raw 1 2 1")).voxels, expected);
+    EXPECT_EQ(loadVolume(header("list_ok.nhdr", "LIST\ns01.raw\ns02.raw")).samples().toFloats(), expected);
+    EXPECT_EQ(loadVolume(header("pattern_ok.nhdr", "s%02d.raw 1 2 1")).samples().toFloats(), expected);
 }
 TEST_F(VolumeIoDataFiles, MetaImageDataFileOutsideOrAbsoluteOrFifoIsRefused) {
     expectLoadError(metaHeader("dotdot.mhd", "../x.raw"), {"../x.raw", "outside"});
@@ -1196,7 +1204,7 @@ TEST_F(VolumeIoTest, NonFiniteVoxelsAreReplaced) {
         writeNrrd("nan.nrrd", "float", {2, 2, 2}, encode(VoxelType::Float32, values, false), false, false);
     const Volume v = loadVolume(p);
     // NaN and -Inf take the smallest finite value (-5), +Inf the largest (7).
-    EXPECT_EQ(v.voxels, std::vector<float>({-5, 7, -5, 1, 2, 3, -5, 7}));
+    EXPECT_EQ(v.samples().toFloats(), std::vector<float>({-5, 7, -5, 1, 2, 3, -5, 7}));
     EXPECT_EQ(v.nonFiniteReplaced, 3u);
     EXPECT_EQ(v.range.min, -5.0f);
     EXPECT_EQ(v.range.max, 7.0f);

@@ -1091,7 +1091,7 @@ std::vector<Row> nonFiniteData(const Backend &be) {
         policy.error(loaded.at(4, 4, 4) != loaded.range.max);
         policy.error(loaded.at(0, 0, 5) != loaded.range.min);
         size_t bad = 0;
-        for (float x : loaded.voxels) bad += !std::isfinite(x);
+        for (const float x : loaded.samples().toFloats()) bad += !std::isfinite(x);
         policy.error(double(bad));
         policy.outcome(std::to_string(loaded.nonFiniteReplaced) + " voxels replaced, range " + format(loaded.range.min) +
                        "…" + format(loaded.range.max));
