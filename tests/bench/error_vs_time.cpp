@@ -3,7 +3,6 @@
 // real scans, with the Pareto front (no other point both faster and more accurate) marked.
 
 #include "renderer/error_metrics.hpp"
-#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/reference_renderer.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "tests/bench/configurations.hpp"
@@ -22,7 +21,7 @@ namespace volcast::bench {
 namespace {
 
 struct Point {
-    std::string scan, config, label;
+    std::string scan, backEnd, config, label;
     double step = 0;
     Timing timing;
     ImageError error;
@@ -57,7 +56,12 @@ void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, c
         const TransferFunction tf = options.quick ? peerTransferFunction(nominalRange(*volume), 1)
                                                   : scanByName(name, *volume).tf;
         const Camera camera = peerCamera(*volume, 0);
-        OpenClRenderer renderer(cl, volume);
+        // Every configuration is timed on each back end in turn (the same machine load).
+        std::map<std::string, std::unique_ptr<FrameRenderer>> renderers;
+        for (const std::string &b : options.backEnds) {
+            renderers[b] = makeStudyRenderer(cl, b, volume);
+            j["devices"][b] = renderers[b]->description();
+        }
 
         // One reference per reconstruction and lighting, shared by the configurations using it.
         std::map<std::pair<bool, bool>, Image> references;
@@ -84,24 +88,27 @@ void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, c
 
         std::vector<Point> points;
         for (const auto &c : configs)
-            for (const double step : steps) {
-                // Skipping on (it leaves the image as it is), early termination off: at 0.99 it
-                // leaves up to 1 % of the light behind, an error floor (~2e-3 RMSE here) that
-                // would hide every remedy's own error below it.
-                Quality q = configurationQuality(c, step, true);
-                q.earlyTermination = 1.0;
-                Image image = renderer.render(tf, camera, viewport, viewport, q, {}); // warm-up, and the image
-                Point p;
-                p.scan = name;
-                p.config = c.key;
-                p.label = c.label;
-                p.step = step;
-                p.timing = bench::repeat(options.repeat, [&](int) { renderer.render(tf, camera, viewport, viewport, q, {}); });
-                p.error = compareImages(image, reference(c.cubic, c.shading));
-                std::cerr << "error_vs_time: " << name << " " << c.key << " step " << step << ": "
-                          << fmt(p.timing.median) << " ms, RMSE " << p.error.rmse << "\n";
-                points.push_back(p);
-            }
+            for (const double step : steps)
+                for (const std::string &b : options.backEnds) {
+                    FrameRenderer &renderer = *renderers[b];
+                    // Skipping on (it leaves the image as it is), early termination off: at 0.99 it
+                    // leaves up to 1 % of the light behind, an error floor (~2e-3 RMSE here) that
+                    // would hide every remedy's own error below it.
+                    Quality q = configurationQuality(c, step, true);
+                    q.earlyTermination = 1.0;
+                    Image image = renderer.render(tf, camera, viewport, viewport, q, {}); // warm-up, and the image
+                    Point p;
+                    p.scan = name;
+                    p.backEnd = b;
+                    p.config = c.key;
+                    p.label = c.label;
+                    p.step = step;
+                    p.timing = bench::repeat(options.repeat, [&](int) { renderer.render(tf, camera, viewport, viewport, q, {}); });
+                    p.error = compareImages(image, reference(c.cubic, c.shading));
+                    std::cerr << "error_vs_time: " << name << " " << b << " " << c.key << " step " << step << ": "
+                              << fmt(p.timing.median) << " ms, RMSE " << p.error.rmse << "\n";
+                    points.push_back(p);
+                }
         std::vector<double> t, e;
         for (const Point &p : points) {
             t.push_back(p.timing.median);
@@ -110,20 +117,24 @@ void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, c
         const std::vector<bool> front = paretoFront(t, e);
         for (size_t i = 0; i < points.size(); ++i) points[i].pareto = front[i];
 
-        md << "\n**" << name << "** (" << volume->dims.x << "×" << volume->dims.y << "×" << volume->dims.z << ", "
-           << viewport << "²): median ms / RMSE (PSNR dB); ★ = on the Pareto front\n\n| step |";
-        for (const auto &c : configs) md << " " << c.key << " " << c.label << " |";
-        md << "\n|---|";
-        for (size_t i = 0; i < configs.size(); ++i) md << "---|";
-        md << "\n";
-        for (const double step : steps) {
-            md << "| " << step << " |";
-            for (const auto &c : configs)
-                for (const Point &p : points)
-                    if (p.config == c.key && p.step == step)
-                        md << " " << fmt(p.timing.median, 0) << " ms / " << fmt(p.error.rmse * 1e3, 2) << "e-3 ("
-                           << fmt(p.error.psnr, 1) << ")" << (p.pareto ? " ★" : "") << " |";
+        // One table per back end; the front is over both: what a server holding either could choose.
+        for (const std::string &b : options.backEnds) {
+            md << "\n**" << name << "** (" << volume->dims.x << "×" << volume->dims.y << "×" << volume->dims.z
+               << ", " << viewport << "², " << b << ": " << renderers[b]->description()
+               << "): median ms / RMSE (PSNR dB); ★ = on the Pareto front of all back ends\n\n| step |";
+            for (const auto &c : configs) md << " " << c.key << " " << c.label << " |";
+            md << "\n|---|";
+            for (size_t i = 0; i < configs.size(); ++i) md << "---|";
             md << "\n";
+            for (const double step : steps) {
+                md << "| " << step << " |";
+                for (const auto &c : configs)
+                    for (const Point &p : points)
+                        if (p.backEnd == b && p.config == c.key && p.step == step)
+                            md << " " << fmt(p.timing.median, 0) << " ms / " << fmt(p.error.rmse * 1e3, 2) << "e-3 ("
+                               << fmt(p.error.psnr, 1) << ")" << (p.pareto ? " ★" : "") << " |";
+                md << "\n";
+            }
         }
 
         Plot plot;
@@ -131,15 +142,16 @@ void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, c
         plot.xLabel = "median frame time, ms";
         plot.yLabel = "RMSE against the exact reference";
         plot.logX = plot.logY = true;
-        for (const auto &c : configs) {
-            Series s{c.key + " " + c.label};
-            for (const Point &p : points)
-                if (p.config == c.key) {
-                    s.x.push_back(p.timing.median);
-                    s.y.push_back(p.error.rmse);
-                }
-            plot.series.push_back(s);
-        }
+        for (const std::string &b : options.backEnds)
+            for (const auto &c : configs) {
+                Series s{c.key + " " + c.label + (options.backEnds.size() > 1 ? " (" + b + ")" : "")};
+                for (const Point &p : points)
+                    if (p.backEnd == b && p.config == c.key) {
+                        s.x.push_back(p.timing.median);
+                        s.y.push_back(p.error.rmse);
+                    }
+                plot.series.push_back(s);
+            }
         std::vector<const Point *> frontPoints;
         for (const Point &p : points)
             if (p.pareto) frontPoints.push_back(&p);
@@ -160,6 +172,7 @@ void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, c
     std::vector<std::vector<std::string>> rows;
     for (const Point &p : all) {
         j["points"].push_back({{"scan", p.scan},
+                               {"backend", p.backEnd},
                                {"configuration", p.config},
                                {"label", p.label},
                                {"step", p.step},
@@ -168,12 +181,12 @@ void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, c
                                {"psnr", std::isfinite(p.error.psnr) ? nlohmann::json(p.error.psnr) : nlohmann::json(nullptr)},
                                {"max_abs", p.error.maxAbs},
                                {"pareto", p.pareto}});
-        rows.push_back({p.scan, p.config, fmt(p.step, 2), fmt(p.timing.median, 2), fmt(p.timing.min, 2),
+        rows.push_back({p.scan, p.backEnd, p.config, fmt(p.step, 2), fmt(p.timing.median, 2), fmt(p.timing.min, 2),
                         fmt(p.timing.max, 2), fmt(p.error.rmse, 6), fmt(p.error.psnr, 2), p.pareto ? "1" : "0"});
     }
     StudyOutput out(options.out, "error_vs_time");
     out.writeJson(j);
-    out.writeCsv({"scan", "configuration", "step", "median_ms", "min_ms", "max_ms", "rmse", "psnr", "pareto"}, rows);
+    out.writeCsv({"scan", "backend", "configuration", "step", "median_ms", "min_ms", "max_ms", "rmse", "psnr", "pareto"}, rows);
     out.writeMarkdown(md.str());
     std::cout << md.str();
 }

@@ -1,7 +1,6 @@
 // Figure 5: frame rate against samples per voxel for the paper's configurations A–F, first
 // as the paper measured (no empty-space skipping, no early termination), then with both.
 
-#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "tests/bench/configurations.hpp"
 #include "tests/bench/phantom.hpp"
@@ -39,67 +38,92 @@ void figure5(OpenClContext &cl, const StudyOptions &options, int viewport) {
     j["camera"] = "peers' framing (bounding sphere fits a 30° view, 20° elevation), frame 0";
     std::vector<std::vector<std::string>> rows;
     std::ostringstream md;
-    OpenClRenderer baseRenderer(cl, base), doubledRenderer(cl, doubled);
+    // Each back end's renderers of the base and the doubled volume; every cell is timed on
+    // each back end in turn, so that both see the same machine load.
+    std::map<std::string, std::pair<std::unique_ptr<FrameRenderer>, std::unique_ptr<FrameRenderer>>> renderers;
+    for (const std::string &b : options.backEnds) {
+        renderers[b] = {makeStudyRenderer(cl, b, base), makeStudyRenderer(cl, b, doubled)};
+        j["devices"][b] = renderers[b].first->description();
+    }
     const Camera camera = peerCamera(*base, 0);
     for (const bool accelerated : {false, true}) {
         const std::string variant = accelerated ? "accelerated" : "paper";
-        md << "\n" << (accelerated ? "With empty-space skipping and early termination (0.99)" :
-                                     "As in the paper: no empty-space skipping, no early termination")
-           << ", " << viewport << "² viewport, frames per second (median frame time in ms):\n\n| samples per voxel |";
-        for (const auto &c : paperConfigurations()) md << " " << c.key << " " << c.label << " |";
-        md << "\n|---|";
-        for (size_t i = 0; i < paperConfigurations().size(); ++i) md << "---|";
-        md << "\n";
         Plot plot;
         plot.title = std::string("Figure 5: frame rate against samples per voxel (") +
                      (accelerated ? "skipping + early termination" : "as the paper: neither") + ")";
         plot.xLabel = "samples per voxel";
         plot.yLabel = "frames per second";
         plot.logX = plot.logY = true;
-        std::map<std::string, std::map<double, Timing>> cells;
+        std::map<std::string, std::map<std::string, std::map<double, Timing>>> cells; // [back end][config][spv]
         for (const auto &c : paperConfigurations()) {
-            OpenClRenderer &renderer = c.doubledVolume ? doubledRenderer : baseRenderer;
-            Series s{c.key + " " + c.label};
-            for (const double spv : spvs) {
-                const Quality q = configurationQuality(c, 1 / spv, accelerated);
-                // A small frame first builds the program and this step's tables.
-                renderer.render(tf, camera, 32, 32, q, {});
-                RenderStats stats;
-                const Timing t = bench::repeat(options.repeat, [&](int) {
-                    renderer.render(tf, camera, viewport, viewport, q, {}, &stats);
-                });
-                cells[c.key][spv] = t;
-                std::cerr << "figure5: " << variant << " " << c.key << " spv " << spv << ": " << fmt(t.median) << " ms\n";
-                s.x.push_back(spv);
-                s.y.push_back(1e3 / t.median);
-                j["cells"].push_back({{"variant", variant},
-                                      {"configuration", c.key},
-                                      {"label", c.label},
-                                      {"samples_per_voxel", spv},
-                                      {"step", 1 / spv},
-                                      {"frame_ms", toJson(t)},
-                                      {"fps", 1e3 / t.median},
-                                      {"mean_samples_per_ray", stats.meanSamplesPerRay},
-                                      {"volume_dims", {renderer.volume().dims.x, renderer.volume().dims.y,
-                                                       renderer.volume().dims.z}}});
-                rows.push_back({variant, c.key, fmt(spv, 2), fmt(t.median, 2), fmt(t.min, 2), fmt(t.max, 2),
-                                fmt(1e3 / t.median, 3), fmt(stats.meanSamplesPerRay, 1)});
-            }
-            plot.series.push_back(s);
+            std::map<std::string, Series> series;
+            for (const std::string &b : options.backEnds)
+                series[b].label = c.key + " " + c.label + (options.backEnds.size() > 1 ? " (" + b + ")" : "");
+            for (const double spv : spvs)
+                for (const std::string &b : options.backEnds) {
+                    FrameRenderer &renderer = c.doubledVolume ? *renderers[b].second : *renderers[b].first;
+                    const Quality q = configurationQuality(c, 1 / spv, accelerated);
+                    // A small frame first builds the program and this step's tables.
+                    renderer.render(tf, camera, 32, 32, q, {});
+                    RenderStats stats;
+                    const Timing t = bench::repeat(options.repeat, [&](int) {
+                        renderer.render(tf, camera, viewport, viewport, q, {}, &stats);
+                    });
+                    cells[b][c.key][spv] = t;
+                    std::cerr << "figure5: " << variant << " " << b << " " << c.key << " spv " << spv << ": "
+                              << fmt(t.median) << " ms\n";
+                    series[b].x.push_back(spv);
+                    series[b].y.push_back(1e3 / t.median);
+                    j["cells"].push_back({{"variant", variant},
+                                          {"backend", b},
+                                          {"configuration", c.key},
+                                          {"label", c.label},
+                                          {"samples_per_voxel", spv},
+                                          {"step", 1 / spv},
+                                          {"frame_ms", toJson(t)},
+                                          {"fps", 1e3 / t.median},
+                                          {"mean_samples_per_ray", stats.meanSamplesPerRay},
+                                          {"volume_dims", {renderer.volume().dims.x, renderer.volume().dims.y,
+                                                           renderer.volume().dims.z}}});
+                    rows.push_back({variant, b, c.key, fmt(spv, 2), fmt(t.median, 2), fmt(t.min, 2), fmt(t.max, 2),
+                                    fmt(1e3 / t.median, 3), fmt(stats.meanSamplesPerRay, 1)});
+                }
+            for (const std::string &b : options.backEnds) plot.series.push_back(series[b]);
         }
-        for (const double spv : spvs) {
-            md << "| " << spv << " |";
-            for (const auto &c : paperConfigurations()) {
-                const Timing &t = cells[c.key][spv];
-                md << " " << fmt(1e3 / t.median, 2) << " (" << fmt(t.median, 0) << " ms) |";
-            }
+        const auto header = [&](const std::string &what) {
+            md << "\n" << (accelerated ? "With empty-space skipping and early termination (0.99)" :
+                                         "As in the paper: no empty-space skipping, no early termination")
+               << ", " << viewport << "² viewport, " << what << ":\n\n| samples per voxel |";
+            for (const auto &c : paperConfigurations()) md << " " << c.key << " " << c.label << " |";
+            md << "\n|---|";
+            for (size_t i = 0; i < paperConfigurations().size(); ++i) md << "---|";
             md << "\n";
+        };
+        for (const std::string &b : options.backEnds) {
+            header(b + " (" + renderers[b].first->description() + "), frames per second (median frame time in ms)");
+            for (const double spv : spvs) {
+                md << "| " << spv << " |";
+                for (const auto &c : paperConfigurations()) {
+                    const Timing &t = cells[b][c.key][spv];
+                    md << " " << fmt(1e3 / t.median, 2) << " (" << fmt(t.median, 0) << " ms) |";
+                }
+                md << "\n";
+            }
+        }
+        if (cells.count("cpu") && cells.count("opencl")) {
+            header("native CPU frame time ÷ OpenCL frame time, same cell, timed in turn");
+            for (const double spv : spvs) {
+                md << "| " << spv << " |";
+                for (const auto &c : paperConfigurations())
+                    md << " " << fmt(cells["cpu"][c.key][spv].median / cells["opencl"][c.key][spv].median, 2) << " |";
+                md << "\n";
+            }
         }
         StudyOutput(options.out, "figure5").writeSvg(renderSvg(plot), "_" + variant);
     }
     StudyOutput out(options.out, "figure5");
     out.writeJson(j);
-    out.writeCsv({"variant", "configuration", "samples_per_voxel", "median_ms", "min_ms", "max_ms", "fps",
+    out.writeCsv({"variant", "backend", "configuration", "samples_per_voxel", "median_ms", "min_ms", "max_ms", "fps",
                   "mean_samples_per_ray"},
                  rows);
     out.writeMarkdown(md.str());

@@ -22,6 +22,8 @@ struct StudyOptions {
     std::vector<std::string> volumes = {"small", "tooth", "large"}; // Table 1's volumes
     std::string sizes = "512x512,800x600,1024x768,1280x1024,1920x1080";
     std::string backEnd = "opencl";    // Table 1's ray caster: opencl (the context's device) or cpu (native)
+    // Figure 5's and the error study's ray casters, timed in turn cell by cell (interleaved).
+    std::vector<std::string> backEnds = {"opencl"};
 };
 
 void table1(OpenClContext &cl, const StudyOptions &options);

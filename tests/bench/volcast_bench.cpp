@@ -53,6 +53,12 @@ int main(int argc, char **argv) {
     }
     for (auto *sub : {f5, all})
         sub->add_option("--viewport", viewportFigure5, "Figure 5's square viewport")->capture_default_str();
+    for (auto *sub : {f5, ev, all})
+        sub->add_option("--backends", options.backEnds,
+                        "Figure 5's and the error study's ray casters, timed in turn cell by cell: opencl, cpu")
+            ->delimiter(',')
+            ->check(CLI::IsMember({"opencl", "cpu"}))
+            ->capture_default_str();
     for (auto *sub : {ev, all}) {
         sub->add_option("--error-viewport", viewportError, "The error study's square viewport")->capture_default_str();
         sub->add_option("--scans", scans, "Scans of the error study")->delimiter(',')->capture_default_str();
