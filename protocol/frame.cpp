@@ -76,6 +76,14 @@ std::string shownBytes(std::span<const uint8_t> bytes) {
     return out;
 }
 
+// A time or an error estimate: finite (number) and not negative, as headerToJson requires,
+// so that every header a client accepts is one a server could have sent.
+double nonNegative(const json &j, const std::string &path) {
+    const double v = detail::number(j, path);
+    if (v < 0) detail::badField(path, "must not be negative, got " + json(v).dump());
+    return v;
+}
+
 FrameHeader readHeader(const json &root, uint64_t &imageBytes) {
     // Clients ignore header fields they do not know: a newer server may add some.
     const Fields f(root, "", {}, Fields::Unknown::Ignore);
@@ -91,12 +99,13 @@ FrameHeader readHeader(const json &root, uint64_t &imageBytes) {
     for (const auto &[c, name] : kCodecs)
         if (name == codec) h.codec = c, known = true;
     if (!known) detail::badField("codec", "unknown codec " + json(codec).dump() + " (known: jpeg, png)");
-    h.renderMs = detail::number(f.require("render_ms"), "render_ms");
-    h.encodeMs = detail::number(f.require("encode_ms"), "encode_ms");
+    h.renderMs = nonNegative(f.require("render_ms"), "render_ms");
+    h.encodeMs = nonNegative(f.require("encode_ms"), "encode_ms");
     if (const json *e = f.find("error"); e && !e->is_null()) {
         const Fields ef(*e, "error", {}, Fields::Unknown::Ignore);
-        h.error = ErrorEstimate{detail::number(ef.require("value"), ef.pathOf("value")),
+        h.error = ErrorEstimate{nonNegative(ef.require("value"), ef.pathOf("value")),
                                 detail::string(ef.require("method"), ef.pathOf("method"), 256)};
+        if (h.error->method.empty()) detail::badField(ef.pathOf("method"), "must not be empty");
     }
     h.final = detail::boolean(f.require("final"), "final");
     if (const json *c = f.find("camera"); c && !c->is_null()) h.camera = detail::object(*c, "camera");

@@ -188,6 +188,13 @@ TEST(Frame, HeaderFieldsAreChecked) {
     EXPECT_EQ(withField("final", "yes"), "frame header: final: must be true or false, got a string");
     EXPECT_EQ(withField("render_ms", "fast"), "frame header: render_ms: must be a number, got a string");
     EXPECT_EQ(withField("error", {{"value", 0.1}}), "frame header: error.method: is required");
+    // What the encoder refuses, the decoder refuses too (fuzz_frame found a negative
+    // render_ms that decoded but could not be encoded again).
+    EXPECT_EQ(withField("render_ms", -2.5), "frame header: render_ms: must not be negative, got -2.5");
+    EXPECT_EQ(withField("encode_ms", -1), "frame header: encode_ms: must not be negative, got -1.0");
+    EXPECT_EQ(withField("error", {{"value", -0.5}, {"method", "rmse"}}),
+              "frame header: error.value: must not be negative, got -0.5");
+    EXPECT_EQ(withField("error", {{"value", 0.5}, {"method", ""}}), "frame header: error.method: must not be empty");
     EXPECT_EQ(withField("camera", 3), "frame header: camera: must be a JSON object, got an integer");
     EXPECT_EQ(decodeErrorOf(frameWith(json::array())), "frame header: must be a JSON object, got an array");
 }
