@@ -33,9 +33,10 @@ std::string lower(std::string s) {
 // The in-memory cost of a volume: its samples (an 8- or 16-bit scan in 1 or 2 bytes a sample,
 // narrow_samples.hpp; other types as float32), and what its renderer builds from them at
 // most: every mip level (float), a padded copy of B-spline coefficients of each for cubic,
-// brick grids (trilinear frames sample each level where it lies) (CpuRenderer::plannedBytes; the OpenCL back end holds about the same, as host or
-// device buffers). Counted in full at load, so that frames asking for coarse levels or
-// cubic later never take the server past its budget.
+// and brick grids; trilinear frames sample each level where it lies (CpuRenderer::
+// plannedBytes; the OpenCL back end holds about the same, as host or device buffers).
+// Counted in full at load, so that frames asking for coarse levels or cubic later never take
+// the server past its budget.
 uint64_t memoryOf(const Volume &v) {
     return uint64_t(v.sampleBytes()) + CpuRenderer::plannedBytes(v.dims, {}, v.narrow.bytes);
 }
