@@ -177,7 +177,13 @@ def main() -> int:
         result = asyncio.run(run(args, server.host, server.port))
     finally:
         server.stop()
-    result["server"] = args.server
+    # Which build ran, without this machine's folders: the path inside the repository, or
+    # the binary's folder and name.
+    server = os.path.abspath(args.server)
+    repo = os.path.abspath(os.path.join(HERE, "..", ".."))
+    inside = os.path.commonpath([server, repo]) == repo
+    result["server"] = os.path.relpath(server, repo) if inside else os.path.join(
+        os.path.basename(os.path.dirname(server)), os.path.basename(server))
     m = result["motion_to_frame_ms"]
     print(f"{args.volume} {args.size}²: {result['cameras']} cameras, {result['drag_frames']} drag frames; "
           f"motion-to-frame p50 {m['p50']:.1f} ms, p95 {m['p95']:.1f} ms; "

@@ -272,7 +272,8 @@ void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
             {"per_frame_render_ms", r.timing.samples},
             {"threads", {{"cpu_count", std::thread::hardware_concurrency()},
                          {"cpus_busy_with_other_processes", r.otherCpus}}},
-            {"volume", {{"file", std::filesystem::absolute(options.volume).string()},
+            // The file's name only: recorded results must not name this machine's folders.
+            {"volume", {{"file", options.volume.filename().string()},
                         {"dims", {volume->dims.x, volume->dims.y, volume->dims.z}},
                         {"dtype", std::string(voxelTypeName(volume->sourceType))},
                         {"bytes", volume->voxelCount() * voxelTypeSize(volume->sourceType)},
@@ -288,7 +289,7 @@ void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
             auto file = options.png;
             file.replace_filename(file.stem().string() + "_" + sizeName(s) + ".png");
             writeImage(file, r.last);
-            line["png"] = std::filesystem::absolute(file).string();
+            line["png"] = file.filename().string();
         }
         std::cout << line.dump() << std::endl;
     }

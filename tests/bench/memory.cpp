@@ -36,9 +36,10 @@ void writeSyntheticCt(const std::filesystem::path &header, Vec3i dims) {
     if (dims.x < 1 || dims.y < 1 || dims.z < 1) throw std::invalid_argument("CT dims must be at least 1 each");
     std::filesystem::path raw = header;
     raw.replace_extension(".raw");
-    std::ofstream(header) << "NRRD0004\ntype: int16\ndimension: 3\nsizes: " << dims.x << " " << dims.y << " "
-                          << dims.z << "\nspacings: 0.7 0.7 0.5\nendian: little\nencoding: raw\ndata file: "
-                          << raw.filename().string() << "\n";
+    std::ofstream nhdr(header);
+    nhdr << "NRRD0004\ntype: int16\ndimension: 3\nsizes: " << dims.x << " " << dims.y << " " << dims.z
+         << "\nspacings: 0.7 0.7 0.5\nendian: little\nencoding: raw\ndata file: " << raw.filename().string() << "\n";
+    if (!nhdr) throw std::runtime_error("cannot write " + header.string());
     // Air (−1024 HU) around a water cylinder (0 HU, with noise-like texture) in a bone ring
     // (1200 HU), slice by slice: the file is written without ever holding the volume.
     std::ofstream out(raw, std::ios::binary);
@@ -62,7 +63,7 @@ void memoryStudy(const std::filesystem::path &file, int size) {
     nlohmann::json j;
     j["before_load"] = residentMemory();
     auto volume = std::make_shared<const Volume>(loadVolume(file));
-    j["volume"] = {{"file", std::filesystem::absolute(file).string()},
+    j["volume"] = {{"file", file.filename().string()}, // no machine folders in recorded results
                    {"dims", {volume->dims.x, volume->dims.y, volume->dims.z}},
                    {"dtype", std::string(voxelTypeName(volume->sourceType))},
                    {"bytes_per_sample_held", volume->narrow.bytes},
