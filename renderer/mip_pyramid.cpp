@@ -68,8 +68,8 @@ SampleGrid MipPyramid::level(int L) {
     std::lock_guard lock(mutex_);
     // Build the missing levels in order, each from the one below; levels_ never reallocates.
     for (int l = built_ + 1; l <= L; ++l) {
-        const SampleGrid below = l == 1 ? volume_.samples() : SampleGrid::ofFloats(dims(l - 1), levels_[size_t(l) - 1].data());
-        levels_[size_t(l)] = downsampleMip(below);
+        levels_[size_t(l)] = downsampleMip(l == 1 ? volume_.samples()
+                                                  : SampleGrid::ofFloats(dims(l - 1), levels_[size_t(l) - 1].data()));
         built_ = l;
     }
     return SampleGrid::ofFloats(dims(L), levels_[size_t(L)].data());

@@ -132,9 +132,9 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
     if (!cubic) {
         // As the volume holds it: a narrow store goes up as uchar or ushort, without its slack.
         data.width = samples.width;
-        data.buffer = samples.isNarrow()
-                          ? upload(cl_, samples.narrow, samples.count() * size_t(samples.width.bytes), "volume " + volume_->name)
-                          : upload(cl_, samples.floats, samples.count() * sizeof(float), "volume " + volume_->name);
+        const size_t bytes = samples.count() * size_t(samples.width.bytes); // 4 for float
+        data.buffer = upload(cl_, samples.isNarrow() ? static_cast<const void *>(samples.narrow) : samples.floats, bytes,
+                             "volume " + volume_->name);
     } else {
         // Prefilter on the device (the paper's Table 2), pad on the host, upload.
         t = Clock::now();
