@@ -2,6 +2,7 @@
 
 #include "renderer/camera.hpp"
 #include "renderer/reference_renderer.hpp"
+#include "server/frame_encoder.hpp"
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -78,14 +79,33 @@ void ErrorCalibrator::record(const std::string &key, int level, double rmse, siz
     ++m.count[size_t(level)];
 }
 
+ErrorCalibrator::LevelsMeasured ErrorCalibrator::levels(const std::string &key, size_t levels) const {
+    LevelsMeasured out{std::vector<std::optional<double>>(levels), std::vector<double>(levels, 0)};
+    std::lock_guard lock(mutex_);
+    auto it = measured_.find(key);
+    if (it == measured_.end()) return out;
+    const Measured &m = it->second;
+    for (size_t l = 0; l < levels && l < m.count.size(); ++l)
+        if (m.count[l] > 0) out.errors[l] = m.sum[l] / m.count[l];
+    for (size_t l = 0; l < levels && l < m.backgroundMsPerSample.size(); ++l)
+        out.backgroundMsPerSample[l] = m.backgroundMsPerSample[l];
+    return out;
+}
+
 void ErrorCalibrator::finalRendered(std::shared_ptr<const CalibrationView> view,
                                     std::vector<std::pair<int, std::vector<uint8_t>>> levels, Rgb8 final,
                                     uint64_t viewSerial) {
     if (!enabled_) return;
     const size_t ladderSize = view->ladder.size();
-    if (!levels.empty()) {
-        using Levels = std::vector<std::pair<int, std::vector<uint8_t>>>;
-        auto shared = std::make_shared<std::pair<Levels, Rgb8>>(std::move(levels), std::move(final));
+    using Levels = std::vector<std::pair<int, std::vector<uint8_t>>>;
+    auto shared = std::make_shared<std::pair<Levels, Rgb8>>(std::move(levels), std::move(final));
+    // Once per kind of view (the worker runs a key once): every level, before the delivered ones.
+    if (ladderSize > 1)
+        worker_.request("levels of " + view->key, PreprocessWorker::Priority::Calibration,
+                        [this, view, shared](const std::atomic<bool> &cancelled) {
+                            calibrateLevels(*view, shared->second, cancelled);
+                        });
+    if (!shared->first.empty()) {
         worker_.request("levels " + std::to_string(viewSerial), PreprocessWorker::Priority::Calibration,
                         [this, key = view->key, shared, ladderSize](const std::atomic<bool> &) {
                             for (const auto &[level, jpeg] : shared->first) {
@@ -100,6 +120,40 @@ void ErrorCalibrator::finalRendered(std::shared_ptr<const CalibrationView> view,
     }
     worker_.request("final " + view->key, PreprocessWorker::Priority::Calibration,
                     [this, view](const std::atomic<bool> &cancelled) { calibrateFinal(*view, cancelled); });
+}
+
+void ErrorCalibrator::calibrateLevels(const CalibrationView &view, const Rgb8 &final,
+                                      const std::atomic<bool> &cancelled) {
+    const auto t0 = Clock::now();
+    const size_t count = view.ladder.size();
+    std::vector<double> costs(count, 0);
+    size_t done = 0;
+    for (size_t l = 0; l + 1 < count; ++l) {
+        if (cancelled || std::chrono::duration<double>(Clock::now() - t0).count() > kLevelsBudgetSeconds) break;
+        const Level &level = view.ladder[l];
+        try {
+            const auto t = Clock::now();
+            const Image image = view.renderer->render(view.transferFunction, view.camera, view.width, view.height,
+                                                      level.quality, view.clipPlanes);
+            const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+            const double rmse = rmseRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), final);
+            record(view.key, int(l), rmse, count);
+            costs[l] = ms / std::max(1.0, predictedSamples(view.renderer->volume(), level.quality, view.width,
+                                                           view.height));
+            spdlog::debug("error calibration: level {} ({}): RMSE {:.4f}, {:.1f} ms in the background", l,
+                          qualityToJson(level.quality).dump(), rmse, ms);
+            ++done;
+        } catch (const std::exception &e) {
+            spdlog::warn("error calibration: level {} not rendered: {}", l, e.what());
+        }
+    }
+    {
+        std::lock_guard lock(mutex_);
+        if (!measured_.count(view.key) && measured_.size() >= kMaxKeys) measured_.clear();
+        measured_[view.key].backgroundMsPerSample = std::move(costs);
+    }
+    spdlog::debug("calibrated {} of {} levels in {:.0f} ms", done, count - 1,
+                  std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
 }
 
 void ErrorCalibrator::calibrateFinal(const CalibrationView &view, const std::atomic<bool> &cancelled) {

@@ -9,6 +9,12 @@
 //    rendered 0.001 from the final frame and arrived 0.010 from it). Each level's estimate (per volume, transfer function, clip planes,
 //    ladder and frame size) is the running mean of those measurements: method
 //    "rmse_rgb8_vs_final". Until a view of that kind has reached its final frame: none.
+//  - Every level below the final, once per kind of view: when a view of that kind first
+//    reaches its final frame, each level is rendered in the background at the same camera
+//    and size, JPEG-coded at its own quality, decoded and compared with the final frame: the
+//    first measurement of every level, so that the ladder's choice (quality_ladder.hpp) sees
+//    the whole error-against-time front before any of those levels was shown. Each render's
+//    time per predicted sample is kept as that level's background cost.
 //  - The final level: compared, on the background worker, with the double-precision
 //    reference integrator on a small image (kSide pixels on the long side) at the same
 //    camera, within a time budget of one core; where the reference would take longer, with
@@ -59,6 +65,15 @@ class ErrorCalibrator {
     static constexpr double kReferenceBudgetSeconds = 2; // of one core, then the quarter-step fallback
     static constexpr double kReferenceTolerance = 1e-3;  // per channel: below an 8-bit step (1/255)
     static constexpr size_t kMaxKeys = 256;              // remembered kinds of view before clearing
+    static constexpr double kLevelsBudgetSeconds = 4;    // of the level renders of one kind of view
+
+    // What is measured of each of a view's `levels` levels: the error (none if not measured)
+    // and the background cost in ms per predicted sample (0 if not measured).
+    struct LevelsMeasured {
+        std::vector<std::optional<double>> errors;
+        std::vector<double> backgroundMsPerSample;
+    };
+    LevelsMeasured levels(const std::string &key, size_t levels) const;
 
     ErrorCalibrator(PreprocessWorker &worker, bool enabled) : worker_(worker), enabled_(enabled) {}
 
@@ -74,9 +89,11 @@ class ErrorCalibrator {
         std::vector<double> sum;
         std::vector<int> count;
         std::optional<protocol::ErrorEstimate> final;
+        std::vector<double> backgroundMsPerSample;
     };
     void record(const std::string &key, int level, double rmse, size_t levels);
     void calibrateFinal(const CalibrationView &view, const std::atomic<bool> &cancelled);
+    void calibrateLevels(const CalibrationView &view, const Rgb8 &final, const std::atomic<bool> &cancelled);
 
     PreprocessWorker &worker_;
     bool enabled_;

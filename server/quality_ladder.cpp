@@ -6,62 +6,89 @@
 namespace volcast::server {
 
 namespace {
-// The non-final levels, cheapest first, as server/README.md's table shows them. Each is
-// derived from the final quality f: step max(stepAtLeast, stepTimesFinal · f.step), mip level
-// at least mipAtLeast, image scale and early termination at most the given values; linear
-// and unshaded-as-f, pre-integration only where keepsPreintegration, jittered where jittered
-// (unless pre-integrated: the table already removes the rings jitter would hide).
-struct LevelRule {
-    double stepAtLeast;
-    double stepTimesFinal;
-    int mipAtLeast;
-    double imageScaleAtMost;
-    double earlyTerminationAtMost;
-    bool keepsPreintegration;
-    bool jittered;
-    int jpegQuality;
-};
-constexpr double kNoLimit = 1e300;
-constexpr LevelRule kLadder[] = {
-    // 1/16 of the rays on the quarter-resolution mip, for big viewports on slow devices.
-    {4, 8, 2, 0.25, 0.9, false, false, 50},
-    {2, 4, 1, 0.5, 0.95, false, false, 60},
-    {1, 2, 0, 0.5, 0.98, false, false, 70},
-    // Full size at twice the final step; jitter hides its onion rings until the final replaces it.
-    {0, 2, 0, kNoLimit, kNoLimit, true, true, 80},
-};
+constexpr double kImageScales[] = {0.25, 0.5, 1};
+constexpr int kMipLevels[] = {0, 1, 2};
+constexpr double kStepFactors[] = {1, 2, 4};
+constexpr double kInteractiveEarlyTermination = 0.98; // leaves at most 2 % of the light behind
 constexpr int kFinalJpegQuality = 90;   // the final level's frames sent before it is final (the final itself is PNG)
+
+int jpegQualityFor(double imageScale) { return imageScale <= 0.25 ? 50 : imageScale <= 0.5 ? 70 : 80; }
+
+// Rays ÷ step: a level's predicted samples up to the volume's diagonal, the same for every mip level.
+double relativeCost(const Quality &q) { return q.imageScale * q.imageScale / q.step; }
 } // namespace
 
 std::vector<Level> automaticLadder(const Quality &f, int jitterPasses) {
-    std::vector<Level> ladder;
-    for (const LevelRule &r : kLadder) {
-        Quality q = f;
-        q.jitter = false;
-        q.preintegrated = false;
-        q.interpolation = Interpolation::Linear;
-        q.step = std::max(r.stepAtLeast, r.stepTimesFinal * f.step);
-        q.mipLevel = std::max(r.mipAtLeast, f.mipLevel);
-        q.imageScale = std::min(r.imageScaleAtMost, f.imageScale);
-        q.earlyTermination = std::min(r.earlyTerminationAtMost, f.earlyTermination);
-        if (r.keepsPreintegration) q.preintegrated = f.preintegrated;
-        if (r.jittered) q.jitter = !q.preintegrated;
-        ladder.push_back({q, 1, r.jpegQuality});
-    }
-    ladder.push_back({f, f.jitter ? jitterPasses : 1, kFinalJpegQuality});
+    std::vector<Level> candidates;
+    const auto add = [&](const Quality &q, int jpegQuality) {
+        for (const Level &c : candidates)
+            if (c.quality == q) return;
+        if (q == f) return;
+        candidates.push_back({q, 1, jpegQuality});
+    };
+    Quality plain = f;
+    plain.jitter = false;
+    plain.preintegrated = false;
+    plain.interpolation = Interpolation::Linear;
+    plain.earlyTermination = std::min(kInteractiveEarlyTermination, f.earlyTermination);
+    for (double scale : kImageScales)
+        for (int mip : kMipLevels)
+            for (double factor : kStepFactors) {
+                Quality q = plain;
+                q.imageScale = std::min(scale, f.imageScale);
+                q.mipLevel = std::max(mip, f.mipLevel);
+                q.step = factor * std::max(1.0, f.step);
+                if (q.mipLevel > f.mipLevel && q.step < double(1 << q.mipLevel)) continue;
+                add(q, jpegQualityFor(q.imageScale));
+            }
+    // Full size at twice the final step; jitter hides its onion rings until the final replaces it.
+    Quality jittered = f;
+    jittered.interpolation = Interpolation::Linear;
+    jittered.step = 2 * f.step;
+    jittered.jitter = !f.preintegrated;   // the table already removes the rings jitter would hide
+    add(jittered, 80);
 
-    // Leave out a level identical to the next one (a coarse final quality).
-    std::vector<Level> unique;
-    for (size_t i = 0; i < ladder.size(); ++i)
-        if (i + 1 == ladder.size() || !(ladder[i].quality == ladder[i + 1].quality)) unique.push_back(ladder[i]);
-    return unique;
+    std::stable_sort(candidates.begin(), candidates.end(), [](const Level &a, const Level &b) {
+        const double ca = relativeCost(a.quality), cb = relativeCost(b.quality);
+        if (ca != cb) return ca < cb;
+        return a.quality.mipLevel > b.quality.mipLevel;
+    });
+    candidates.push_back({f, f.jitter ? jitterPasses : 1, kFinalJpegQuality});
+    return candidates;
 }
 
-size_t nextRefinementLevel(size_t sent, const std::vector<double> &predictedMs) {
-    if (predictedMs.empty()) return 0;
-    const size_t last = predictedMs.size() - 1;
-    const size_t next = std::min(sent + 1, last);
-    return next < last && 2 * predictedMs[next] > predictedMs[last] ? last : next;
+namespace {
+// The best of `levels` (indices, ascending): the lowest measured error, the cheaper on a tie;
+// the costliest while any of them is unmeasured.
+std::optional<size_t> bestOf(const std::vector<LevelOutlook> &outlook, const std::vector<size_t> &levels) {
+    if (levels.empty()) return std::nullopt;
+    for (size_t i : levels)
+        if (!outlook[i].error) return levels.back();
+    size_t best = levels.front();
+    for (size_t i : levels)
+        if (*outlook[i].error < *outlook[best].error) best = i;
+    return best;
+}
+} // namespace
+
+size_t chooseInteractiveLevel(const std::vector<LevelOutlook> &levels, double targetMs) {
+    std::vector<size_t> fitting;
+    for (size_t i = 0; i + 1 < levels.size(); ++i)
+        if (levels[i].predictedMs <= targetMs) fitting.push_back(i);
+    return bestOf(levels, fitting).value_or(0);
+}
+
+size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels) {
+    if (levels.empty()) return 0;
+    const size_t last = levels.size() - 1;
+    if (sent >= last) return last;
+    std::vector<size_t> better;
+    for (size_t i = 0; i < last; ++i) {
+        if (i == sent || 2 * levels[i].predictedMs > levels[last].predictedMs) continue;
+        const bool measured = levels[i].error && levels[sent].error;
+        if (measured ? *levels[i].error < *levels[sent].error : i > sent) better.push_back(i);
+    }
+    return bestOf(levels, better).value_or(last);
 }
 
 std::vector<Level> explicitLadder(const Quality &quality, int jitterPasses) {
@@ -85,22 +112,38 @@ void LevelTimer::record(size_t level, double ms, double samples) {
     const double measured = ms / samples;
     double &ema = msPerSample_[level];
     ema = ema == 0 ? measured : (1 - kSmoothing) * ema + kSmoothing * measured;
+    lastRecorded_ = level;
 }
 
 double LevelTimer::predictMs(size_t level, double samples) const {
+    if (measured(level)) return msPerSample_[level] * samples;
+    // Its background render's cost, scaled as the levels measured both ways compare.
+    if (level < backgroundMsPerSample_.size() && backgroundMsPerSample_[level] > 0) {
+        const auto bothWays = [&](size_t i) {
+            return i < msPerSample_.size() && i < backgroundMsPerSample_.size() && msPerSample_[i] > 0 &&
+                   backgroundMsPerSample_[i] > 0;
+        };
+        double ratio = 1;
+        if (bothWays(lastRecorded_)) {
+            ratio = msPerSample_[lastRecorded_] / backgroundMsPerSample_[lastRecorded_];
+        } else {
+            double logRatio = 0;
+            int both = 0;
+            for (size_t i = 0; i < msPerSample_.size(); ++i)
+                if (bothWays(i)) {
+                    logRatio += std::log(msPerSample_[i] / backgroundMsPerSample_[i]);
+                    ++both;
+                }
+            if (both) ratio = std::exp(logRatio / both);
+        }
+        return backgroundMsPerSample_[level] * ratio * samples;
+    }
     // The nearest measured level's cost, else the initial guess.
     for (size_t d = 0; d < msPerSample_.size(); ++d) {
         if (level >= d && msPerSample_[level - d] > 0) return msPerSample_[level - d] * samples;
         if (level + d < msPerSample_.size() && msPerSample_[level + d] > 0) return msPerSample_[level + d] * samples;
     }
     return kInitialMsPerSample * samples;
-}
-
-size_t LevelTimer::choose(size_t count, double targetMs, const std::vector<double> &samplesPerLevel) const {
-    size_t best = 0;
-    for (size_t l = 0; l < count && l < samplesPerLevel.size(); ++l)
-        if (predictMs(l, samplesPerLevel[l]) <= targetMs) best = l;
-    return best;
 }
 
 } // namespace volcast::server

@@ -1,23 +1,36 @@
 #pragma once
-// The ladder of quality levels a view is refined through, cheapest first, and the policy
-// that picks the interactive level. Kept deliberately simple and explicit:
+// The ladder of quality levels a view is shown at, cheapest first, the final one last, and
+// the choice among them. Every level below the final is a candidate, both for the frame shown
+// while interacting and for the one refinement step before the final:
 //
-//   level 0  step max(4, 8·s_f), mip level 2, image scale 0.25, linear, ET ≤ 0.9   JPEG q50
-//   level 1  step max(2, 4·s_f), mip level 1, image scale 0.5, linear, ET ≤ 0.95   JPEG q60
-//   level 2  step max(1, 2·s_f), mip level 0, image scale 0.5, linear, ET ≤ 0.98   JPEG q70
-//   level 3  step 2·s_f, full size, linear, pre-integration as final, jittered     JPEG q80
-//   level 4  the final quality exactly; jittered → several passes accumulated      PNG
+//   image scale {1/4, 1/2, 1} × mip level {0, 1, 2} × step {1, 2, 4}·max(1, s_f): linear,
+//     unjittered, shading as the final, early termination ≤ 0.98, JPEG q50 / q70 / q80 by
+//     image scale; mip level m only with steps of at least 2^m level-0 voxels (a finer step
+//     on a coarser level costs what level 0 costs and has more error);
+//   full size at step 2·s_f, pre-integration as the final, jittered, JPEG q80;
+//   the final quality exactly; jittered → several passes accumulated, PNG.
 //
-// (s_f is the final step; a level equal to the one after it is left out). An explicit
-// policy has one level, its own quality. While interacting, the policy picks the finest
-// non-final level whose predicted time fits the target; the prediction is
-// rays × samples per ray × cost per sample, with the cost per sample an exponential moving
-// average measured per level (unmeasured levels borrow the nearest measured one's cost,
-// and a device-independent guess before any measurement).
+// (s_f is the final step; image scale, mip level and step never finer than the final's; a
+// level equal to another is left out), ordered by predicted cost: rays ÷ step, then coarser
+// mip level first. An explicit policy has one level, its own quality.
+//
+// The choice is made on the error-against-time front of the view: each level's error is its
+// measured RMSE against the final frame of the same camera (ErrorCalibrator renders every
+// level once in the background when a view of its kind first reaches its final frame, and
+// adds each frame delivered afterwards), its time the prediction below (LevelTimer). While
+// interacting: the level with the lowest error of those predicted to fit the target frame
+// time. At rest: the level with the lowest error below the shown one's of those predicted to
+// take at most half the final's time, then the final. Until the errors are measured, the
+// costliest level stands for the lowest error. The prediction is rays × samples per ray ×
+// cost per sample, with the cost per sample an exponential moving average measured per level
+// (unmeasured levels take their background calibration render's cost, scaled by how the
+// levels measured both ways compare; else the nearest measured level's; else a
+// device-independent guess).
 
 #include "renderer/scene.hpp"
 #include "renderer/volume.hpp"
 
+#include <optional>
 #include <vector>
 
 namespace volcast::server {
@@ -29,12 +42,26 @@ struct Level {
 };
 
 std::vector<Level> automaticLadder(const Quality &finalQuality, int jitterPasses);
-
-// The level to refine to after level `sent`, given each level's predicted ms: the next one,
-// unless it is predicted to cost more than half the final one, which would then show little
-// sooner than the final itself (bonsai at 512²: level 3 took 804 ms, the final 938).
-size_t nextRefinementLevel(size_t sent, const std::vector<double> &predictedMs);
 std::vector<Level> explicitLadder(const Quality &quality, int jitterPasses);
+
+// What is known of a level when one is chosen: its predicted time (ms, all passes) and its
+// measured error against the final frame (RMSE, 8-bit RGB in [0, 1]; none until measured).
+struct LevelOutlook {
+    double predictedMs = 0;
+    std::optional<double> error;
+};
+
+// The level to show while interacting: of the non-final levels predicted to fit targetMs,
+// the one with the lowest error (the cheaper on a tie), or the costliest while any of them
+// has no measured error; 0 (the cheapest) if none fits.
+size_t chooseInteractiveLevel(const std::vector<LevelOutlook> &levels, double targetMs);
+
+// The level to refine to after level `sent`: of the non-final levels with a lower error than
+// `sent` (while either is unmeasured: a costlier one) predicted to take at most half the
+// final's time, the one with the lowest error (the costliest while any is unmeasured); else
+// the final. A level costing more than half the final would show little sooner than the
+// final itself (bonsai at 512² on PoCL: the jittered level took 804 ms, the final 938).
+size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels);
 
 // Geometric samples of a level: rays × the volume's diagonal in level-0 voxels divided by
 // the step (the step is in level-0 voxels on every mip level), × the taps' relative cost.
@@ -47,19 +74,32 @@ class LevelTimer {
   public:
     static constexpr double kInitialMsPerSample = 1.0 / 50e3;   // 50 M samples/s (docs/platform.md: 30-150 M)
     static constexpr double kSmoothing = 0.3;                   // weight of the newest frame in the EMA
-    void reset(size_t levels) { msPerSample_.assign(levels, 0); }
+    void reset(size_t levels) {
+        msPerSample_.assign(levels, 0);
+        lastRecorded_ = 0;
+    }
     void forget(size_t level) {
         if (level < msPerSample_.size()) msPerSample_[level] = 0;
     }
     void record(size_t level, double ms, double samples);
+    // Each level's cost per sample as its background calibration render measured it (0: not
+    // rendered there); it stands in for a level not measured here, scaled by how the level
+    // measured last compares both ways (else all levels measured both ways): the calibration
+    // renders ran at a lower priority beside other work, this session's frames on the render
+    // thread, and the level in use is measured at the machine's load of the moment.
+    void setBackgroundCosts(std::vector<double> msPerSample) { backgroundMsPerSample_ = std::move(msPerSample); }
     double predictMs(size_t level, double samples) const;
     // Whether this level itself was measured (not borrowed from another, not the guess).
     bool measured(size_t level) const { return level < msPerSample_.size() && msPerSample_[level] > 0; }
-    // The finest of levels [0, count) whose predicted time fits targetMs; 0 if none does.
-    size_t choose(size_t count, double targetMs, const std::vector<double> &samplesPerLevel) const;
+    // Whether this level's cost is known from a measurement of it, here or in the background.
+    bool known(size_t level) const {
+        return measured(level) || (level < backgroundMsPerSample_.size() && backgroundMsPerSample_[level] > 0);
+    }
 
   private:
     std::vector<double> msPerSample_;   // 0: not measured yet
+    std::vector<double> backgroundMsPerSample_;
+    size_t lastRecorded_ = 0;
 };
 
 } // namespace volcast::server

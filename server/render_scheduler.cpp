@@ -276,6 +276,18 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
             s.timerLadder[i] = job.ladder[i].quality;
         }
     const auto samplesOf = [&](const Quality &q) { return predictedSamples(job.renderer->volume(), q, job.width, job.height); };
+    // The view's error-against-time front: each level's predicted time and measured error.
+    const auto outlook = [&] {
+        ErrorCalibrator::LevelsMeasured measured;
+        if (s.calibration) measured = calibrator_.levels(s.calibration->key, job.ladder.size());
+        s.timer.setBackgroundCosts(measured.backgroundMsPerSample);
+        std::vector<LevelOutlook> levels(job.ladder.size());
+        for (size_t i = 0; i < job.ladder.size(); ++i) {
+            levels[i].predictedMs = s.timer.predictMs(i, samplesOf(job.ladder[i].quality)) * job.ladder[i].passes;
+            if (i < measured.errors.size()) levels[i].error = measured.errors[i];
+        }
+        return levels;
+    };
 
     if (!s.refining) {
         const auto refineAt = s.lastInput + std::chrono::duration_cast<Clock::duration>(Ms(options_.idleMs));
@@ -287,20 +299,20 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
             if (last == 0 && still) {
                 level = 0;   // an explicit policy, already still: straight to the final frame
             } else {
-                // The interactive level: the finest non-final one predicted to fit the target.
-                std::vector<double> samples;
-                for (const Level &l : job.ladder) samples.push_back(samplesOf(l.quality));
-                level = last == 0 ? 0 : int(s.timer.choose(size_t(last), job.targetFrameMs, samples));
+                // The interactive level: the lowest error predicted to fit the render budget.
+                // Interactive frames are shared by count, so a dragging session's next frame
+                // waits for one frame of every other dragging session: each gets its share of
+                // the target, less the encoding every frame takes at its full size whatever
+                // the level.
+                const double renderBudgetMs = job.targetFrameMs / double(sessionsDragging()) - s.encodeMs;
+                level = last == 0 ? 0 : int(chooseInteractiveLevel(outlook(), renderBudgetMs));
             }
         } else {
             if (!still) {
                 wakeAt = std::min(wakeAt, refineAt);
                 return false;
             }
-            std::vector<double> predictedMs;
-            for (size_t i = 0; i < job.ladder.size(); ++i)
-                predictedMs.push_back(s.timer.predictMs(i, samplesOf(job.ladder[i].quality)) * job.ladder[i].passes);
-            level = int(nextRefinementLevel(size_t(std::max({s.sentLevel, s.substituteSent, 0})), predictedMs));
+            level = int(nextRefinementLevel(size_t(std::max({s.sentLevel, s.substituteSent, 0})), outlook()));
             if (s.substituteSent >= level) {
                 // Shown already without its preparation: wait for it (its completion wakes us).
                 const std::string key = preparationKey(job.volumeId, job.transferFunction, job.ladder[size_t(level)].quality);
@@ -329,15 +341,16 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     work.quality = frame.quality();
     work.frame = s.refining;
     // As many cells as fit the unit at the cost measured by this frame's own units, else by
-    // this level's earlier frames; a level never measured starts with one cell (a guess of
-    // the cost could be off a hundredfold, and a unit must not overrun). A frame planned from
+    // this level's earlier frames or its background calibration render; a level never
+    // measured starts with one cell (a guess of the cost could be off a hundredfold, and a
+    // unit must not overrun). A frame planned from
     // earlier frames' average that will not fit one unit starts with half the unit: its first
     // cells are the centre's, which cost more than the average. A renderer that cannot render
     // part of a frame cheaply renders each pass whole.
     const double rays = double(frame.gridWidth()) * frame.gridHeight();
     double msPerRay = frame.msPerRayEstimate();
     double budgetMs = options_.unitMs;
-    if (msPerRay == 0 && s.timer.measured(size_t(work.level)) && !work.substitute) {
+    if (msPerRay == 0 && s.timer.known(size_t(work.level)) && !work.substitute) {
         msPerRay = s.timer.predictMs(size_t(work.level), predictedSamples(underWay.renderer->volume(), frame.quality(),
                                                                            underWay.width, underWay.height)) /
                    std::max(rays, 1.0);
@@ -349,6 +362,16 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
         work.cells = std::min(frame.cellsLeftInPass(),
                               cellsForBudget(budgetMs, msPerRay, frame.cellRays(), frame.lastUnitCells()));
     return true;
+}
+
+size_t RenderScheduler::sessionsDragging() const {
+    size_t n = 0;
+    for (const auto &[id, s] : slots_) {
+        const bool awaitingInteractive = s.job && !s.job->stillOnly && s.sentLevel < 0 && s.substituteSent < 0 &&
+                                         !s.finalSent && !s.failed_;
+        if (s.interacting || awaitingInteractive) ++n;
+    }
+    return std::max<size_t>(n, 1);
 }
 
 bool RenderScheduler::pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt) {
@@ -494,6 +517,7 @@ void RenderScheduler::runUnit(Work &work) {
         if (it == slots_.end()) return;
         Slot &s = it->second;
         if (!work.substitute && s.calibration) h.error = calibrator_.estimate(s.calibration->key, work.level, work.final);
+        if (!work.final) s.encodeMs = s.encodeMs == 0 ? h.encodeMs : 0.7 * s.encodeMs + 0.3 * h.encodeMs;
         if (s.generation == work.generation) {
             if (work.substitute)
                 s.substituteSent = std::max(s.substituteSent, work.level);

@@ -126,6 +126,7 @@ class RenderScheduler {
         double serviceMs = 0;         // render time received: the least served refines next
         double interactiveFrames = 0; // interactive frames received: the fewest goes next
         LevelTimer timer;
+        double encodeMs = 0;          // JPEG coding of this session's frames (EMA; 0: none yet)
         std::vector<Quality> timerLadder;   // the qualities the timer's levels were measured at
         uint64_t timerVolumeId = 0;
         std::shared_ptr<TiledFrame> refining;   // the frame under way, unit by unit
@@ -161,6 +162,7 @@ class RenderScheduler {
     void workerLoop();
     double leastServiceMs() const;   // over sessions with a view; under the lock
     double leastInteractiveFrames() const;
+    size_t sessionsDragging() const;   // interacting or awaiting an interactive frame (at least 1); under the lock
     bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
     // What slot s should do now of this kind; false with wakeAt set when it waits for its idle time.
     bool nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);

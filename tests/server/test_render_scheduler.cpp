@@ -300,6 +300,59 @@ TEST(RenderScheduler, DraggingSessionsShareTheRendererFairly) {
     EXPECT_GT(mean, 5) << "too few frames to judge fairness";
 }
 
+// Interactive frames are shared by count, so a dragging session's next frame waits for one
+// frame of each other dragging session: the interactive level is chosen to fit the session's
+// share of the target, not the whole target. At 0.03 ms a ray on a 64² view the quarter-size
+// levels take 7.7 ms and the half-size ones 31 ms: a session alone can afford half size
+// within 40 ms, four sessions at once only quarter size (4 × 31 ms would keep each waiting
+// 120 ms for its next frame).
+TEST(RenderScheduler, EachDraggingSessionChoosesItsLevelFromItsShareOfTheTarget) {
+    const auto drag = [](int sessionCount, std::vector<double> &scales, std::vector<double> &waits) {
+        Metrics metrics;
+        RenderScheduler scheduler(metrics, options(20));
+        std::vector<std::unique_ptr<Session>> sessions;
+        for (int i = 0; i < sessionCount; ++i) {
+            sessions.push_back(std::make_unique<Session>(
+                scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.03), uint64_t(i + 1)));
+            scheduler.setInteracting(sessions.back()->slot, true);
+        }
+        std::mutex mutex;
+        std::vector<std::thread> threads;
+        const auto begin = Clock::now();
+        const auto until = begin + std::chrono::milliseconds(2500);
+        for (int i = 0; i < sessionCount; ++i)
+            threads.emplace_back([&, i] {
+                Session &s = *sessions[size_t(i)];
+                for (int k = 0; Clock::now() < until; ++k) {
+                    const size_t from = s.count();
+                    const int id = i * 100000 + k;
+                    const auto sent = Clock::now();
+                    s.scheduler.submit(s.slot, s.view(id, 0.05 * k, 64, ladderFor(1)));
+                    const auto got =
+                        s.waitFor(from, [id](const protocol::FrameHeader &h) { return h.request == id; }, 5000);
+                    // After the first second: the levels' costs have been measured by then.
+                    if (!got || got->at < begin + std::chrono::milliseconds(1000)) continue;
+                    std::lock_guard lock(mutex);
+                    scales.push_back(got->header.quality.value("image_scale", 1.0));
+                    waits.push_back(Ms(got->at - sent).count());
+                }
+            });
+        for (auto &t : threads) t.join();
+    };
+    std::vector<double> aloneScales, aloneWaits, fourScales, fourWaits;
+    drag(1, aloneScales, aloneWaits);
+    drag(4, fourScales, fourWaits);
+    ASSERT_GT(aloneScales.size(), 5u);
+    ASSERT_GT(fourScales.size(), 5u);
+    const auto share = [](const std::vector<double> &v, double scale) {
+        return double(std::count(v.begin(), v.end(), scale)) / double(v.size());
+    };
+    EXPECT_GE(share(aloneScales, 0.5), 0.5) << "a session alone did not afford half size within 40 ms";
+    EXPECT_GE(share(fourScales, 0.25), 0.9) << "four dragging sessions each chose levels beyond their share";
+    // Four frames of 7.7 ms and their scheduling, against 4 × 31 ms had each taken the whole target.
+    EXPECT_LT(percentile(fourWaits, 0.5), 80) << "four sessions waited as long as for four half-size frames";
+}
+
 TEST(RenderScheduler, PreparationRunsInTheBackgroundWithProgressAndOtherSessionsCarryOn) {
     Metrics metrics;
     RenderScheduler scheduler(metrics, options(20));

@@ -3,18 +3,24 @@
 
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/synthetic.hpp"
+#include "server/error_calibrator.hpp"
+#include "server/frame_encoder.hpp"
+#include "server/preprocess_worker.hpp"
 #include "server/quality_ladder.hpp"
 #include "server/static_files.hpp"
 #include "server/volume_registry.hpp"
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <thread>
+
 namespace {
 
 using namespace volcast;
 using namespace volcast::server;
 
-TEST(QualityLadder, RisesFromCheapToTheFinalQualityExactly) {
+TEST(QualityLadder, CandidatesAreCheaperThanTheFinalOrderedByCostAndEndInItExactly) {
     Quality final;
     final.step = 0.25;
     final.interpolation = Interpolation::Cubic;
@@ -23,31 +29,101 @@ TEST(QualityLadder, RisesFromCheapToTheFinalQualityExactly) {
     ASSERT_GE(ladder.size(), 2u);
     EXPECT_EQ(ladder.back().quality, final);
     EXPECT_EQ(ladder.back().passes, 1);   // no jitter asked: one exact pass
+    const auto cost = [](const Quality &q) { return q.imageScale * q.imageScale / q.step; };
     for (size_t i = 0; i + 1 < ladder.size(); ++i) {
-        // Each cheaper level samples no finer and no more rays than the next.
-        EXPECT_GE(ladder[i].quality.step, ladder[i + 1].quality.step);
-        EXPECT_LE(ladder[i].quality.imageScale, ladder[i + 1].quality.imageScale);
-        EXPECT_GE(ladder[i].quality.mipLevel, ladder[i + 1].quality.mipLevel);
-        EXPECT_EQ(ladder[i].quality.interpolation, Interpolation::Linear);
+        const Quality &q = ladder[i].quality;
+        // Never finer than the final on any axis of cost, trilinear, one pass.
+        EXPECT_GE(q.step, final.step);
+        EXPECT_LE(q.imageScale, final.imageScale);
+        EXPECT_GE(q.mipLevel, final.mipLevel);
+        EXPECT_EQ(q.interpolation, Interpolation::Linear);
+        EXPECT_EQ(ladder[i].passes, 1);
+        // A coarse mip level is not sampled finer than its voxels (2^m level-0 voxels).
+        if (q.mipLevel > 0) {
+            EXPECT_GE(q.step, double(1 << q.mipLevel)) << "level " << i;
+        }
+        if (i + 2 < ladder.size()) {
+            EXPECT_LE(cost(q), cost(ladder[i + 1].quality)) << "level " << i;
+        }
+        for (size_t j = 0; j < i; ++j) EXPECT_FALSE(ladder[j].quality == q) << "levels " << j << " and " << i;
     }
+    // The 3 image scales × (3 steps at mip 0, 2 at mip 1, 1 at mip 2), and the jittered level.
+    EXPECT_EQ(ladder.size(), 3u * 6u + 1u + 1u);
     final.jitter = true;
     EXPECT_EQ(automaticLadder(final, 4).back().passes, 4);
     EXPECT_EQ(explicitLadder(final, 3).size(), 1u);
+
+    // A coarse final leaves out the levels that would equal it or be finer than it.
+    Quality coarse;
+    coarse.step = 4;
+    coarse.mipLevel = 2;
+    coarse.imageScale = 0.5;
+    const auto few = automaticLadder(coarse, 1);
+    for (const Level &l : few) {
+        EXPECT_GE(l.quality.step, 4);
+        EXPECT_EQ(l.quality.mipLevel, 2);
+        EXPECT_LE(l.quality.imageScale, 0.5);
+    }
 }
 
-TEST(LevelTimer, PicksTheFinestLevelThatFitsAndAdaptsToMeasurements) {
+TEST(LevelTimer, PredictsFromItsOwnMeasurementsThenTheBackgroundCostsScaledThenTheNearest) {
     LevelTimer timer;
     timer.reset(3);
-    const std::vector<double> samples{1e5, 1e6, 1e7};
-    // Before measurements: the 50 M samples/s guess, so 1e6 samples = 20 ms fits 40 ms.
-    EXPECT_EQ(timer.choose(3, 40, samples), 1u);
+    // Before measurements: the 50 M samples/s guess.
+    EXPECT_DOUBLE_EQ(timer.predictMs(1, 1e6), 20);
     // Level 0 measured 10x slower than the guess: every level borrows its cost.
     timer.record(0, 20, 1e5);
-    EXPECT_EQ(timer.choose(3, 40, samples), 0u);
-    // Level 1 measured fast: it is chosen again.
-    timer.record(1, 10, 1e6);
-    EXPECT_EQ(timer.choose(3, 40, samples), 1u);
-    EXPECT_EQ(timer.choose(3, 1000, samples), 2u);
+    EXPECT_DOUBLE_EQ(timer.predictMs(2, 1e6), 200);
+    // Background costs stand in for the unmeasured levels, scaled by level 0's ratio of its
+    // own cost to its background one (here 2e-4 / 1e-4 = 2).
+    timer.setBackgroundCosts({1e-4, 5e-6, 1e-5});
+    EXPECT_DOUBLE_EQ(timer.predictMs(1, 1e6), 5e-6 * 2 * 1e6);
+    EXPECT_DOUBLE_EQ(timer.predictMs(2, 1e6), 1e-5 * 2 * 1e6);
+    // A level measured itself keeps its own cost.
+    timer.record(1, 30, 1e6);
+    EXPECT_DOUBLE_EQ(timer.predictMs(1, 1e6), 30);
+    timer.forget(1);
+    EXPECT_GT(timer.predictMs(1, 1e6), 0);
+}
+
+TEST(QualityLadder, WhileInteractingTheLowestMeasuredErrorWithinTheTargetIsShown) {
+    // Levels in cost order, the last the final. Unmeasured: the costliest that fits.
+    std::vector<LevelOutlook> levels = {{5, {}}, {20, {}}, {35, {}}, {60, {}}, {900, {}}};
+    EXPECT_EQ(chooseInteractiveLevel(levels, 40), 2u);
+    EXPECT_EQ(chooseInteractiveLevel(levels, 1), 0u);   // none fits: the cheapest
+    EXPECT_EQ(chooseInteractiveLevel(levels, 1e6), 3u); // never the final while interacting
+    // Measured: a cheaper level with a lower error (half size at step 1 beats full size at step 4).
+    levels[0].error = 0.08;
+    levels[1].error = 0.02;
+    levels[2].error = 0.03;
+    levels[3].error = 0.01;
+    EXPECT_EQ(chooseInteractiveLevel(levels, 40), 1u);
+    EXPECT_EQ(chooseInteractiveLevel(levels, 100), 3u);
+    levels[2].error = 0.02;   // a tie: the cheaper
+    EXPECT_EQ(chooseInteractiveLevel(levels, 40), 1u);
+    levels[1].error.reset();  // one unmeasured among those that fit: the costliest
+    EXPECT_EQ(chooseInteractiveLevel(levels, 40), 2u);
+    EXPECT_EQ(chooseInteractiveLevel({{7, {}}}, 40), 0u);   // an explicit policy's one level
+}
+
+TEST(QualityLadder, AtRestOneStepBelowTheShownErrorWithinHalfTheFinalThenTheFinal) {
+    // bonsai at 512² on PoCL (README): 19, 184, 312, 804, 938 ms. Unmeasured: the costliest
+    // within half the final (804 > 938 / 2 is left out).
+    std::vector<LevelOutlook> levels = {{19, {}}, {184, {}}, {312, {}}, {804, {}}, {938, {}}};
+    EXPECT_EQ(nextRefinementLevel(0, levels), 2u);
+    EXPECT_EQ(nextRefinementLevel(2, levels), 4u);
+    EXPECT_EQ(nextRefinementLevel(3, levels), 4u);
+    EXPECT_EQ(nextRefinementLevel(4, levels), 4u);
+    // Measured: the lowest error below the shown one's, not the costliest.
+    levels[0].error = 0.05;
+    levels[1].error = 0.01;
+    levels[2].error = 0.03;
+    levels[3].error = 0.005;
+    EXPECT_EQ(nextRefinementLevel(0, levels), 1u);
+    EXPECT_EQ(nextRefinementLevel(1, levels), 4u);   // nothing below 0.01 within 469 ms
+    EXPECT_EQ(nextRefinementLevel(2, levels), 1u);   // a cheaper level with a lower error
+    EXPECT_EQ(nextRefinementLevel(0, {{5, {}}, {6, {}}}), 1u);
+    EXPECT_EQ(nextRefinementLevel(0, {{7, {}}}), 0u);
 }
 
 // The step is in level-0 voxels whatever the mip level (frameStep), so a ray takes as many
@@ -84,15 +160,55 @@ TEST(QualityLadder, PredictedSamplesFollowWhatTheRendererTakesAtEveryMipLevel) {
     }
 }
 
-TEST(QualityLadder, RefinementSkipsALevelCostingMoreThanHalfTheFinal) {
-    // bonsai at 512² (README): 19, 184, 312, 804, 938 ms.
-    const std::vector<double> ms = {19, 184, 312, 804, 938};
-    EXPECT_EQ(nextRefinementLevel(0, ms), 1u);
-    EXPECT_EQ(nextRefinementLevel(1, ms), 2u);
-    EXPECT_EQ(nextRefinementLevel(2, ms), 4u); // 804 > 938 / 2: straight to the final
-    EXPECT_EQ(nextRefinementLevel(4, ms), 4u);
-    EXPECT_EQ(nextRefinementLevel(0, {5, 6}), 1u);
-    EXPECT_EQ(nextRefinementLevel(0, {7}), 0u);
+// The front the ladder chooses from: once a view's final frame is in, every level below it is
+// rendered in the background, JPEG-coded as it would be sent, and its RMSE against the final
+// frame recorded, with its cost. Checked against the same measurement made here, and against
+// what the levels are: the coarsest level is further from the final than the finest one.
+TEST(ErrorCalibrator, MeasuresEveryLevelAsDeliveredAgainstTheFinalFrame) {
+    const SyntheticVolume blob = makeGaussianBlob({48, 48, 48}, {1, 1, 1}, 9, 200);
+    auto renderer = std::make_shared<CpuRenderer>(blob.volume);
+    auto view = std::make_shared<CalibrationView>();
+    view->key = "blob";
+    view->renderer = renderer;
+    view->transferFunction.points = {{0, 0, 0, 0, 0}, {60, 0.9, 0.5, 0.2, 0.05}, {200, 1, 1, 1, 0.4}};
+    view->camera.target = blob.volume.center();
+    view->camera.eye = view->camera.target + Vec3d(20, 30, 3 * length(blob.volume.extent()));
+    view->width = view->height = 64;
+    Quality final;
+    final.step = 0.5;
+    view->ladder = automaticLadder(final, 1);
+    const size_t count = view->ladder.size();
+    const Rgb8 finalRgb = toRgb8(renderer->render(view->transferFunction, view->camera, 64, 64, final, {}));
+
+    PreprocessWorker worker;
+    ErrorCalibrator calibrator(worker, true);
+    EXPECT_FALSE(calibrator.levels("blob", count).errors[0].has_value()) << "measured before any final frame";
+    calibrator.finalRendered(view, {}, finalRgb, 1);
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (worker.busy() && std::chrono::steady_clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    ASSERT_FALSE(worker.busy()) << "the calibration did not finish in 60 s";
+
+    const auto measured = calibrator.levels("blob", count);
+    EXPECT_FALSE(measured.errors[count - 1].has_value()) << "the final level is not compared with itself";
+    for (size_t l = 0; l + 1 < count; ++l) {
+        ASSERT_TRUE(measured.errors[l].has_value()) << "level " << l << " not measured";
+        EXPECT_GT(measured.backgroundMsPerSample[l], 0) << "level " << l;
+        const Level &level = view->ladder[l];
+        const Image image = renderer->render(view->transferFunction, view->camera, 64, 64, level.quality, {});
+        // The renderer and the JPEG coder are deterministic: the same measurement, to the bit.
+        EXPECT_DOUBLE_EQ(*measured.errors[l], rmseRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), finalRgb))
+            << "level " << l;
+    }
+    // Level 0 is the cheapest (quarter size, mip 2, step 4); the finest plain level (full
+    // size, mip 0, step 1) is the last but one or two, before or after the jittered level.
+    size_t finest = count;
+    for (size_t l = 0; l + 1 < count; ++l) {
+        const Quality &q = view->ladder[l].quality;
+        if (q.imageScale == 1 && q.mipLevel == 0 && q.step == 1 && !q.jitter) finest = l;
+    }
+    ASSERT_LT(finest, count) << "no full-size level at step 1 on mip level 0";
+    EXPECT_GT(*measured.errors[0], 2 * *measured.errors[finest])
+        << "the quarter-size, mip-2 level is not clearly further from the final than the finest level";
 }
 
 TEST(StaticFiles, MimeTypes) {
