@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <thread>
 
 namespace volcast::server {
 
@@ -128,8 +129,14 @@ void ErrorCalibrator::calibrateLevels(const CalibrationView &view, const Rgb8 &f
     const size_t count = view.ladder.size();
     std::vector<double> costs(count, 0);
     size_t done = 0;
+    double waited = 0;
     for (size_t l = 0; l + 1 < count; ++l) {
-        if (cancelled || std::chrono::duration<double>(Clock::now() - t0).count() > kLevelsBudgetSeconds) break;
+        while (dragging_ && dragging_() && !cancelled && waited < kLevelsWaitSeconds) {
+            std::this_thread::sleep_for(std::chrono::duration<double>(kPollSeconds));
+            waited += kPollSeconds;
+        }
+        const double rendering = std::chrono::duration<double>(Clock::now() - t0).count() - waited;
+        if (cancelled || waited >= kLevelsWaitSeconds || rendering > kLevelsBudgetSeconds) break;
         const Level &level = view.ladder[l];
         try {
             const auto t = Clock::now();

@@ -28,6 +28,7 @@
 #include "server/preprocess_worker.hpp"
 #include "server/quality_ladder.hpp"
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -75,7 +76,15 @@ class ErrorCalibrator {
     };
     LevelsMeasured levels(const std::string &key, size_t levels) const;
 
-    ErrorCalibrator(PreprocessWorker &worker, bool enabled) : worker_(worker), enabled_(enabled) {}
+    static constexpr double kLevelsWaitSeconds = 60;     // for the render thread to be free of drags
+    static constexpr double kPollSeconds = 0.02;
+
+    // `dragging` says whether a session is dragging now. The level renders hold the renderer's
+    // frame lock, at the worker's low priority: each waits until no one drags, so that an
+    // interactive frame never waits behind one (on a loaded machine, a starved calibration
+    // render held the lock for hundreds of ms).
+    ErrorCalibrator(PreprocessWorker &worker, bool enabled, std::function<bool()> dragging = {})
+        : worker_(worker), enabled_(enabled), dragging_(std::move(dragging)) {}
 
     // The estimate for a frame of `level` of a view with this key; nullopt until measured.
     std::optional<protocol::ErrorEstimate> estimate(const std::string &key, int level, bool final) const;
@@ -97,6 +106,7 @@ class ErrorCalibrator {
 
     PreprocessWorker &worker_;
     bool enabled_;
+    std::function<bool()> dragging_;
     mutable std::mutex mutex_;
     std::map<std::string, Measured> measured_;
 };

@@ -66,7 +66,11 @@ std::shared_ptr<FrameRenderer> rendererOf(const std::shared_ptr<VolumeEntry> &en
 }
 
 RenderScheduler::RenderScheduler(Metrics &metrics, SchedulerOptions options)
-    : metrics_(metrics), options_(options), calibrator_(preprocess_, options.errorCalibration) {
+    : metrics_(metrics), options_(options),
+      calibrator_(preprocess_, options.errorCalibration, [this] {
+          std::lock_guard lock(mutex_);
+          return draggingCount() > 0;
+      }) {
     worker_ = std::thread([this] { workerLoop(); });
 }
 
@@ -364,14 +368,16 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     return true;
 }
 
-size_t RenderScheduler::sessionsDragging() const {
+size_t RenderScheduler::sessionsDragging() const { return std::max<size_t>(draggingCount(), 1); }
+
+size_t RenderScheduler::draggingCount() const {
     size_t n = 0;
     for (const auto &[id, s] : slots_) {
         const bool awaitingInteractive = s.job && !s.job->stillOnly && s.sentLevel < 0 && s.substituteSent < 0 &&
                                          !s.finalSent && !s.failed_;
         if (s.interacting || awaitingInteractive) ++n;
     }
-    return std::max<size_t>(n, 1);
+    return n;
 }
 
 bool RenderScheduler::pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt) {

@@ -162,7 +162,8 @@ class RenderScheduler {
     void workerLoop();
     double leastServiceMs() const;   // over sessions with a view; under the lock
     double leastInteractiveFrames() const;
-    size_t sessionsDragging() const;   // interacting or awaiting an interactive frame (at least 1); under the lock
+    size_t draggingCount() const;      // sessions interacting or awaiting an interactive frame; under the lock
+    size_t sessionsDragging() const;   // the same, at least 1
     bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
     // What slot s should do now of this kind; false with wakeAt set when it waits for its idle time.
     bool nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
