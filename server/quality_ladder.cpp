@@ -110,6 +110,10 @@ double predictedSamples(const Volume &volume, const Quality &q, int width, int h
 void LevelTimer::record(size_t level, double ms, double samples) {
     if (level >= msPerSample_.size() || samples <= 0) return;
     const double measured = ms / samples;
+    if (msPerSample_[level] > 0) {
+        const double miss = std::fabs(ms - msPerSample_[level] * samples);
+        deviationMs_ = deviationMs_ == 0 ? miss : (1 - kSmoothing) * deviationMs_ + kSmoothing * miss;
+    }
     double &ema = msPerSample_[level];
     ema = ema == 0 ? measured : (1 - kSmoothing) * ema + kSmoothing * measured;
     lastRecorded_ = level;

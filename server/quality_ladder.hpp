@@ -77,6 +77,7 @@ class LevelTimer {
     void reset(size_t levels) {
         msPerSample_.assign(levels, 0);
         lastRecorded_ = 0;
+        deviationMs_ = 0;
     }
     void forget(size_t level) {
         if (level < msPerSample_.size()) msPerSample_[level] = 0;
@@ -91,6 +92,10 @@ class LevelTimer {
     double predictMs(size_t level, double samples) const;
     // Whether this level itself was measured (not borrowed from another, not the guess).
     bool measured(size_t level) const { return level < msPerSample_.size() && msPerSample_[level] > 0; }
+    // How far frames of a measured level come from its prediction (EMA of |ms − predicted|):
+    // frames vary with the camera (how much of the volume the view crosses), so a level
+    // planned at its mean would overrun the target on every other frame.
+    double deviationMs() const { return deviationMs_; }
     // Whether this level's cost is known from a measurement of it, here or in the background.
     bool known(size_t level) const {
         return measured(level) || (level < backgroundMsPerSample_.size() && backgroundMsPerSample_[level] > 0);
@@ -100,6 +105,7 @@ class LevelTimer {
     std::vector<double> msPerSample_;   // 0: not measured yet
     std::vector<double> backgroundMsPerSample_;
     size_t lastRecorded_ = 0;
+    double deviationMs_ = 0;
 };
 
 } // namespace volcast::server

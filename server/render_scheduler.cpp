@@ -12,6 +12,7 @@ namespace volcast::server {
 
 namespace {
 using Ms = std::chrono::duration<double, std::milli>;
+constexpr double kRenderShare = 0.8;   // of the target frame time, for rendering and encoding
 
 // Everything a level's error depends on besides the camera: volume, transfer function,
 // clip planes, the ladder and the frame size. The volume by its registry id, which is never
@@ -307,8 +308,12 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
                 // Interactive frames are shared by count, so a dragging session's next frame
                 // waits for one frame of every other dragging session: each gets its share of
                 // the target, less the encoding every frame takes at its full size whatever
-                // the level.
-                const double renderBudgetMs = job.targetFrameMs / double(sessionsDragging()) - s.encodeMs;
+                // the level, and twice the frames' measured deviation from their prediction; of
+                // the target, kRenderShare: the rest is the send, the client's decoding and the
+                // scheduler's own time (frames planned to the whole target arrived after 57–62 ms
+                // at p95: tests/server/fairness_bench.py, one session).
+                const double renderBudgetMs = kRenderShare * job.targetFrameMs / double(sessionsDragging()) -
+                                              s.encodeMs - 2 * s.timer.deviationMs();
                 level = last == 0 ? 0 : int(chooseInteractiveLevel(outlook(), renderBudgetMs));
             }
         } else {
