@@ -12,7 +12,7 @@ namespace volcast::server {
 
 namespace {
 using Ms = std::chrono::duration<double, std::milli>;
-constexpr double kRenderShare = 0.8;   // of the target frame time, for rendering and encoding
+constexpr double kRenderShare = 0.9;   // of the target frame time, for rendering and encoding
 
 // Everything a level's error depends on besides the camera: volume, transfer function,
 // clip planes, the ladder and the frame size. The volume by its registry id, which is never
@@ -310,8 +310,10 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
                 // the target, less the encoding every frame takes at its full size whatever
                 // the level, and twice the frames' measured deviation from their prediction; of
                 // the target, kRenderShare: the rest is the send, the client's decoding and the
-                // scheduler's own time (frames planned to the whole target arrived after 57–62 ms
-                // at p95: tests/server/fairness_bench.py, one session).
+                // scheduler's own time (one session dragging the demo in a closed loop,
+                // tests/server/fairness_bench.py: frames planned to the whole target arrived
+                // after 57–62 ms at p95, to 0.9 of it after 43–46 ms, to 0.8 after 20 ms; bonsai
+                // at 512², tests/bench/drag_quality.py: 43.7, 43 and 36 dB, docs/service.md).
                 const double renderBudgetMs = kRenderShare * job.targetFrameMs / double(sessionsDragging()) -
                                               s.encodeMs - 2 * s.timer.deviationMs();
                 level = last == 0 ? 0 : int(chooseInteractiveLevel(outlook(), renderBudgetMs));
