@@ -116,30 +116,20 @@ void LevelTimer::record(size_t level, double ms, double samples) {
     }
     double &ema = msPerSample_[level];
     ema = ema == 0 ? measured : (1 - kSmoothing) * ema + kSmoothing * measured;
-    lastRecorded_ = level;
+    recordedAt_[level] = ++records_;
 }
 
 double LevelTimer::predictMs(size_t level, double samples) const {
     if (measured(level)) return msPerSample_[level] * samples;
-    // Its background render's cost, scaled as the levels measured both ways compare.
+    // Its background render's cost, scaled by the latest level measured both ways.
     if (level < backgroundMsPerSample_.size() && backgroundMsPerSample_[level] > 0) {
-        const auto bothWays = [&](size_t i) {
-            return i < msPerSample_.size() && i < backgroundMsPerSample_.size() && msPerSample_[i] > 0 &&
-                   backgroundMsPerSample_[i] > 0;
-        };
         double ratio = 1;
-        if (bothWays(lastRecorded_)) {
-            ratio = msPerSample_[lastRecorded_] / backgroundMsPerSample_[lastRecorded_];
-        } else {
-            double logRatio = 0;
-            int both = 0;
-            for (size_t i = 0; i < msPerSample_.size(); ++i)
-                if (bothWays(i)) {
-                    logRatio += std::log(msPerSample_[i] / backgroundMsPerSample_[i]);
-                    ++both;
-                }
-            if (both) ratio = std::exp(logRatio / both);
-        }
+        uint64_t latest = 0;
+        for (size_t i = 0; i < msPerSample_.size() && i < backgroundMsPerSample_.size(); ++i)
+            if (msPerSample_[i] > 0 && backgroundMsPerSample_[i] > 0 && recordedAt_[i] > latest) {
+                latest = recordedAt_[i];
+                ratio = msPerSample_[i] / backgroundMsPerSample_[i];
+            }
         return backgroundMsPerSample_[level] * ratio * samples;
     }
     // The nearest measured level's cost, else the initial guess.

@@ -24,12 +24,13 @@
 // costliest level stands for the lowest error. The prediction is rays × samples per ray ×
 // cost per sample, with the cost per sample an exponential moving average measured per level
 // (unmeasured levels take their background calibration render's cost, scaled by how the
-// levels measured both ways compare; else the nearest measured level's; else a
+// latest level measured both ways compares; else the nearest measured level's; else a
 // device-independent guess).
 
 #include "renderer/scene.hpp"
 #include "renderer/volume.hpp"
 
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -76,7 +77,8 @@ class LevelTimer {
     static constexpr double kSmoothing = 0.3;                   // weight of the newest frame in the EMA
     void reset(size_t levels) {
         msPerSample_.assign(levels, 0);
-        lastRecorded_ = 0;
+        recordedAt_.assign(levels, 0);
+        records_ = 0;
         deviationMs_ = 0;
     }
     void forget(size_t level) {
@@ -84,10 +86,10 @@ class LevelTimer {
     }
     void record(size_t level, double ms, double samples);
     // Each level's cost per sample as its background calibration render measured it (0: not
-    // rendered there); it stands in for a level not measured here, scaled by how the level
-    // measured last compares both ways (else all levels measured both ways): the calibration
-    // renders ran at a lower priority beside other work, this session's frames on the render
-    // thread, and the level in use is measured at the machine's load of the moment.
+    // rendered there); it stands in for a level not measured here, scaled by how the latest
+    // level measured both ways compares (1 before there is one): the calibration renders ran
+    // at a lower priority beside other work, this session's frames on the render thread, and
+    // the latest frame was measured at the machine's load of the moment.
     void setBackgroundCosts(std::vector<double> msPerSample) { backgroundMsPerSample_ = std::move(msPerSample); }
     double predictMs(size_t level, double samples) const;
     // Whether this level itself was measured (not borrowed from another, not the guess).
@@ -104,7 +106,8 @@ class LevelTimer {
   private:
     std::vector<double> msPerSample_;   // 0: not measured yet
     std::vector<double> backgroundMsPerSample_;
-    size_t lastRecorded_ = 0;
+    std::vector<uint64_t> recordedAt_;   // the record() count when each level was last measured
+    uint64_t records_ = 0;
     double deviationMs_ = 0;
 };
 

@@ -281,20 +281,21 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
             s.timerLadder[i] = job.ladder[i].quality;
         }
     const auto samplesOf = [&](const Quality &q) { return predictedSamples(job.renderer->volume(), q, job.width, job.height); };
-    // The view's error-against-time front: each level's predicted time and measured error.
-    const auto outlook = [&] {
+
+    if (!s.refining) {
+        // The view's error-against-time front: each level's measured error and predicted time
+        // (the timer also plans this frame's cells from the background costs, below).
         ErrorCalibrator::LevelsMeasured measured;
         if (s.calibration) measured = calibrator_.levels(s.calibration->key, job.ladder.size());
         s.timer.setBackgroundCosts(measured.backgroundMsPerSample);
-        std::vector<LevelOutlook> levels(job.ladder.size());
-        for (size_t i = 0; i < job.ladder.size(); ++i) {
-            levels[i].predictedMs = s.timer.predictMs(i, samplesOf(job.ladder[i].quality)) * job.ladder[i].passes;
-            if (i < measured.errors.size()) levels[i].error = measured.errors[i];
-        }
-        return levels;
-    };
-
-    if (!s.refining) {
+        const auto outlook = [&] {
+            std::vector<LevelOutlook> levels(job.ladder.size());
+            for (size_t i = 0; i < job.ladder.size(); ++i) {
+                levels[i].predictedMs = s.timer.predictMs(i, samplesOf(job.ladder[i].quality)) * job.ladder[i].passes;
+                if (i < measured.errors.size()) levels[i].error = measured.errors[i];
+            }
+            return levels;
+        };
         const auto refineAt = s.lastInput + std::chrono::duration_cast<Clock::duration>(Ms(options_.idleMs));
         const bool still = now >= refineAt;
         int level = 0;
