@@ -2,6 +2,7 @@
 // A scalar volume on a regular grid, in the coordinates of docs/design.md: voxel (i, j, k) is a
 // sample at world = origin + D·(i·sx, j·sy, k·sz), and owns the cell of size s around it.
 
+#include "renderer/huge_pages.hpp"
 #include "renderer/math.hpp"
 #include "renderer/narrow_samples.hpp"
 
@@ -43,7 +44,7 @@ struct Volume {
     // kNarrowSlack bytes, with `voxels` empty. Read them through samples() or at().
     std::vector<float> voxels;
     NarrowWidth narrow;                     // bytes 4: the samples are in `voxels`
-    std::vector<unsigned char> narrowVoxels;
+    std::vector<unsigned char, HugePageAllocator<unsigned char>> narrowVoxels;
     ValueRange range;               // of the finite voxels
     Histogram histogram;
     size_t nonFiniteReplaced = 0;   // NaN/Inf voxels replaced under the loader's policy

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -222,6 +223,23 @@ TEST(MipPyramid, CoarseIndexMapReproducesALinearRamp) {
             // (L ≤ 3): below 4·6e-7 = 2.4e-6; 3e-6 leaves margin.
             EXPECT_NEAR(field(q), ramp(p.x), 3e-6) << "level " << L << " p.x " << p.x;
         }
+    }
+}
+
+// A narrow store of 2 MiB or more starts on a 2 MiB boundary, so that the kernel can back it
+// with huge pages (renderer/huge_pages.hpp: rays crossing slices otherwise miss the TLB); a
+// smaller one is an ordinary block. Either holds exactly the samples.
+TEST(NarrowStore, LargeStoresAreAlignedForHugePages) {
+    for (const Vec3i dims : {Vec3i{256, 256, 40}, Vec3i{7, 5, 3}}) {
+        Volume v = makeVolume(dims, std::vector<float>(size_t(dims.x) * size_t(dims.y) * size_t(dims.z)));
+        for (size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(i % 251);
+        const std::vector<float> samples = v.voxels;
+        ASSERT_TRUE(holdNarrow(v));
+        const auto address = reinterpret_cast<uintptr_t>(v.narrowVoxels.data());
+        if (v.narrowVoxels.size() >= kHugePageBytes) {
+            EXPECT_EQ(address % kHugePageBytes, 0u) << v.narrowVoxels.size() << " bytes";
+        }
+        EXPECT_EQ(MipPyramid(v).level(0).toFloats(), samples);
     }
 }
 
