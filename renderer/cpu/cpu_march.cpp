@@ -151,7 +151,7 @@ HWY_INLINE VI upperStep(VI i, int n, int stride) {
 }
 
 // Trilinear from a float level: 8 gathers.
-VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
+HWY_INLINE VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
     const DF df;
     const TrilinearCell c = trilinearCell(P, x, y, z);
     const VI one = upperStep(c.ix, P.levelDims[0], 1), sy = upperStep(c.iy, P.levelDims[1], P.rowStride);
@@ -172,7 +172,7 @@ VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
 // as a float level holds and blended in the same order, so the value is bit for bit the one
 // sampleTrilinear returns for the same samples held as float.
 template <int Bytes>
-VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
+HWY_INLINE VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
     const DF df;
     const DI di;
     const TrilinearCell c = trilinearCell(P, x, y, z);
@@ -231,7 +231,7 @@ VF sampleCubic(const FrameParams &P, VF x, VF y, VF z) {
     return sum;
 }
 
-inline VF sampleVolume(const FrameParams &P, VF x, VF y, VF z) {
+HWY_INLINE VF sampleVolume(const FrameParams &P, VF x, VF y, VF z) {
     if (P.features.cubic) return sampleCubic(P, x, y, z);
     if (P.narrowBytes == 1) return sampleTrilinearNarrow<1>(P, x, y, z);
     if (P.narrowBytes == 2) return sampleTrilinearNarrow<2>(P, x, y, z);
@@ -375,7 +375,7 @@ struct BrickWalk {
 };
 
 // 1 − exp(−x): the kernel's Taylor polynomial below 1/2, exp above.
-VF opacityFromDepth(VF x) {
+HWY_INLINE VF opacityFromDepth(VF x) {
     const DF df;
     const VF one = hn::Set(df, 1.0f);
     VF r = hn::Sub(one, hn::Mul(x, hn::Set(df, 1.0f / 8.0f)));
@@ -470,245 +470,356 @@ void projectPacket(const FrameParams &P, VF t0, VF t1, VF j, const VF q0[3], con
     hn::Store(samples, di, samplesOut);
 }
 
+// One packet's march: its rays and where each lane has got to.
+struct PacketMarch {
+    VF t0, t1, j, q0[3], dq[3], dir[3];
+    VF k, segStart;
+    BrickWalk walk;
+    MF alive, sfStale;
+    VF depth, depthCarry, T, color[3], colorCarry[3], sf;
+    VI samples;
+    HWY_ALIGN int32_t hita[kMaxLanes];
+    int px[kMaxLanes], py[kMaxLanes];
+    int hits = 0;
+};
+
+struct MarchTotals {
+    uint64_t samples = 0, hit = 0, terminated = 0, truncated = 0, skipped = 0;
+};
+
+// One segment further in every lane still marching, for N packets side by side. Each phase
+// (the segment's bounds and skipping, the sample, its classification, the opacity, the sums)
+// is done for every packet before the next phase starts: the packets' chains are
+// independent, so the core works on one while the other waits on its gathers. One packet's
+// step is a chain of dependent gathers and arithmetic a few hundred instructions long; two
+// packets stepped one after the other did not overlap (docs/cpu_renderer.md).
+struct StepState {
+    VF boundary, segEnd, len, tMid, jumpTo, value, segDepth, alpha, segColor[3], weight, q[3];
+    MF take, partial, skipped;
+    TableSpot spot;
+    bool any = false, anySkipped = false;
+};
+
+// A pre-integrated segment's contribution: the segment from the table for a full step; a
+// partial one scales the depth by len/step (Eq. 3) and the colour with its opacity, unless
+// the full step's alpha is too close to 1 to hold its depth: then it is classified at its
+// centre (raycast.cl, VC_ALPHA_HOLDS_DEPTH). The front value is sampled afresh after skips.
+HWY_INLINE void preintegratedContribution(const FrameParams &P, PacketMarch &m, StepState &s) {
+    const DF df;
+    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step);
+    const MF fresh = hn::And(s.take, m.sfStale);
+    if (!hn::AllFalse(df, fresh)) {
+        m.sf = hn::IfThenElse(fresh, sampleVolume(P, hn::MulAdd(m.segStart, m.dq[0], m.q0[0]),
+                                                  hn::MulAdd(m.segStart, m.dq[1], m.q0[1]),
+                                                  hn::MulAdd(m.segStart, m.dq[2], m.q0[2])),
+                              m.sf);
+        m.sfStale = hn::AndNot(fresh, m.sfStale);
+    }
+    const VF sb = sampleVolume(P, hn::MulAdd(s.segEnd, m.dq[0], m.q0[0]), hn::MulAdd(s.segEnd, m.dq[1], m.q0[1]),
+                               hn::MulAdd(s.segEnd, m.dq[2], m.q0[2]));
+    VF seg[4];
+    preintegratedSegment(P, m.sf, sb, seg);
+    m.sf = hn::IfThenElse(s.take, sb, m.sf);
+    const MF opaque = hn::Ge(seg[3], one); // −log1p(−1) = +inf: T becomes 0
+    s.segDepth = hn::IfThenElse(opaque, hn::Set(df, kInf), hn::Neg(hn::Log1p(df, hn::Neg(hn::IfThenZeroElse(opaque, seg[3])))));
+    s.alpha = seg[3];
+    for (int a = 0; a < 3; ++a) s.segColor[a] = seg[a];
+    const MF partialHere = hn::And(s.take, s.partial);
+    if (!hn::AllFalse(df, partialHere)) {
+        const VF fraction = hn::Div(s.len, d);
+        const MF holds = hn::And(partialHere, hn::Le(seg[3], hn::Set(df, 1.0f - 1.0f / 4096.0f)));
+        const VF scaledDepth = hn::Mul(s.segDepth, fraction);
+        const VF scaledAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(holds), scaledDepth));
+        const VF colourScale = hn::IfThenElse(hn::Gt(seg[3], zero), hn::Div(scaledAlpha, seg[3]), fraction);
+        VF c[4];
+        classify(P, sampleVolume(P, s.q[0], s.q[1], s.q[2]), c);
+        const VF centreDepth = hn::Mul(c[3], hn::Div(s.len, hn::Set(df, P.opacityUnit)));
+        const MF centre = hn::AndNot(holds, partialHere);
+        const VF centreAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(centre), centreDepth));
+        s.segDepth = hn::IfThenElse(holds, scaledDepth, hn::IfThenElse(centre, centreDepth, s.segDepth));
+        s.alpha = hn::IfThenElse(holds, scaledAlpha, hn::IfThenElse(centre, centreAlpha, s.alpha));
+        for (int a = 0; a < 3; ++a)
+            s.segColor[a] = hn::IfThenElse(holds, hn::Mul(s.segColor[a], colourScale),
+                                           hn::IfThenElse(centre, hn::Mul(centreAlpha, c[a]), s.segColor[a]));
+    }
+    if (P.features.shading) {
+        // Light the premultiplied colour; the highlight is weighted by the opacity.
+        VF diffuse, specular;
+        phong(P, s.q, m.dir, diffuse, specular);
+        for (int a = 0; a < 3; ++a) s.segColor[a] = hn::Min(hn::MulAdd(s.segColor[a], diffuse, hn::Mul(specular, s.alpha)), s.alpha);
+    }
+}
+
+template <int N>
+HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &totals) {
+    const DF df;
+    const DI di;
+    const int lanes = int(hn::Lanes(df));
+    const Features &F = P.features;
+    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step), half = hn::Set(df, 0.5f);
+    StepState st[N];
+
+    for (int p = 0; p < N; ++p) {
+        PacketMarch &m = ms[p];
+        StepState &s = st[p];
+        s.boundary = hn::MulAdd(hn::Add(m.k, m.j), d, m.t0);
+        s.segEnd = hn::Min(s.boundary, m.t1);
+        s.len = hn::Sub(s.segEnd, m.segStart);
+        s.tMid = hn::MulAdd(half, s.len, m.segStart);
+        s.take = hn::And(m.alive, hn::Gt(s.len, zero));
+        // A partial segment: the first one under jitter, or the last at the exit.
+        s.partial = hn::Or(hn::Gt(s.boundary, m.t1), hn::Eq(m.k, zero));
+        if (!F.boundarySegment) s.take = hn::AndNot(s.partial, s.take);
+        s.skipped = hn::FirstN(df, 0);
+        s.jumpTo = zero; // last segment, from k, that lies in the empty brick too
+        s.anySkipped = false;
+    }
+    // Empty-space skipping by sample position: a segment is not taken when the point that
+    // decides it lies in a brick the transfer function makes empty. A sampled segment is
+    // decided by its sample (its centre): there it would classify to opacity 0 and add
+    // nothing. A pre-integrated one reads the values at both ends and everything between, so
+    // it is skipped only when the whole segment lies in the empty brick (both ends before the
+    // brick's exit).
+    if (F.emptySpaceSkipping) {
+        for (int p = 0; p < N; ++p)
+            ms[p].walk.advance(P, ms[p].q0, ms[p].dq, F.preintegrated ? ms[p].segStart : st[p].tMid, st[p].take);
+        for (int p = 0; p < N; ++p) {
+            PacketMarch &m = ms[p];
+            StepState &s = st[p];
+            const VF exit = m.walk.exit();
+            s.skipped = hn::AndNot(m.walk.visible, s.take);
+            if (F.preintegrated) s.skipped = hn::And(s.skipped, hn::Le(s.segEnd, exit));
+            s.anySkipped = !hn::AllFalse(df, s.skipped);
+            if (!s.anySkipped) continue;
+            s.take = hn::AndNot(s.skipped, s.take);
+            m.sfStale = hn::Or(m.sfStale, s.skipped);
+            // Later full segments k' whose deciding point (centre t0 + (k' + j − ½)·d, or end
+            // t0 + (k' + j)·d) is before the exit, one fewer for rounding, and ending before
+            // t1: skipped at once instead of one per iteration.
+            const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, m.t0), d), m.j),
+                                                        hn::Set(df, F.preintegrated ? 0.0f : 0.5f))),
+                                      one);
+            const VF byEnd = hn::Sub(hn::Floor(hn::Sub(hn::Div(hn::Sub(m.t1, m.t0), d), m.j)), one);
+            s.jumpTo = hn::IfThenElse(s.skipped, hn::Min(byExit, byEnd), zero);
+        }
+    }
+    for (int p = 0; p < N; ++p) {
+        PacketMarch &m = ms[p];
+        StepState &s = st[p];
+        s.any = !hn::AllFalse(df, s.take);
+        if (!s.any) continue;
+        const MF truncated = hn::AndNot(hn::RebindMask(df, hn::Lt(m.samples, hn::Set(di, P.maxSamples))), s.take);
+        if (!hn::AllFalse(df, truncated)) {
+            totals.truncated += hn::CountTrue(df, truncated);
+            m.alive = hn::AndNot(truncated, m.alive);
+            s.take = hn::AndNot(truncated, s.take);
+        }
+        m.samples = hn::Add(m.samples, hn::IfThenElseZero(hn::RebindMask(di, s.take), hn::Set(di, 1)));
+        for (int a = 0; a < 3; ++a) s.q[a] = hn::MulAdd(s.tMid, m.dq[a], m.q0[a]);
+        s.weight = one;
+    }
+    // Contribution T·weight·segColor: weight is alpha for a sampled segment (the kernel's
+    // T·alpha·rgb, in its order), 1 for a premultiplied one.
+    if (F.preintegrated) {
+        for (int p = 0; p < N; ++p)
+            if (st[p].any) preintegratedContribution(P, ms[p], st[p]);
+    } else {
+        // Sample the segment at its centre and classify: sigma first, and the colour only if
+        // some lane's sigma is positive. Where none is, alpha is 0 and T·alpha·colour is +0
+        // for any colour, so 0 stands in for it exactly.
+        for (int p = 0; p < N; ++p)
+            if (st[p].any) st[p].value = sampleVolume(P, st[p].q[0], st[p].q[1], st[p].q[2]);
+        for (int p = 0; p < N; ++p)
+            if (st[p].any) {
+                st[p].spot = tableSpot(P, st[p].value);
+                st[p].segDepth = tableChannel(P, st[p].spot, 3); // sigma, for now
+            }
+        for (int p = 0; p < N; ++p) {
+            StepState &s = st[p];
+            if (!s.any) continue;
+            const bool opaqueSomewhere = !hn::AllFalse(df, hn::And(s.take, hn::Gt(s.segDepth, zero)));
+            for (int a = 0; a < 3; ++a) s.segColor[a] = opaqueSomewhere ? tableChannel(P, s.spot, a) : zero;
+            // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
+            s.segDepth = hn::Mul(s.segDepth, hn::Div(s.len, hn::Set(df, P.opacityUnit)));
+        }
+        for (int p = 0; p < N; ++p)
+            if (st[p].any) st[p].alpha = opacityFromDepth(st[p].segDepth);
+        for (int p = 0; p < N; ++p) {
+            StepState &s = st[p];
+            if (!s.any) continue;
+            if (F.shading) {
+                const MF lit = hn::And(s.take, hn::Gt(s.alpha, zero));
+                if (!hn::AllFalse(df, lit)) {
+                    VF diffuse, specular;
+                    phong(P, s.q, ms[p].dir, diffuse, specular);
+                    for (int a = 0; a < 3; ++a)
+                        s.segColor[a] = hn::IfThenElse(lit, hn::Min(hn::MulAdd(s.segColor[a], diffuse, specular), one),
+                                                       s.segColor[a]);
+                }
+            }
+            s.weight = s.alpha;
+        }
+    }
+    for (int p = 0; p < N; ++p) {
+        PacketMarch &m = ms[p];
+        StepState &s = st[p];
+        if (!s.any) continue;
+        const VF tw = hn::Mul(m.T, s.weight);
+        for (int a = 0; a < 3; ++a) addCompensated(s.take, m.color[a], m.colorCarry[a], hn::Mul(tw, s.segColor[a]), false);
+        addCompensated(s.take, m.depth, m.depthCarry, s.segDepth, true);
+        // T = exp(−depth), kept by products and made exact every 16 samples.
+        VF nextT = hn::Mul(m.T, hn::Sub(one, s.alpha));
+        const MF exact = hn::And(s.take, hn::RebindMask(df, hn::Eq(hn::And(m.samples, hn::Set(di, 15)), hn::Zero(di))));
+        if (!hn::AllFalse(df, exact))
+            nextT = hn::IfThenElse(exact, hn::Exp(df, hn::Neg(hn::Sub(m.depth, m.depthCarry))), nextT);
+        m.T = hn::IfThenElse(s.take, nextT, m.T);
+        if (F.earlyTermination) {
+            const MF stop = hn::And(s.take, hn::Ge(m.depth, hn::Set(df, P.terminationDepth)));
+            if (!hn::AllFalse(df, stop)) {
+                totals.terminated += hn::CountTrue(df, stop);
+                m.alive = hn::AndNot(stop, m.alive);
+            }
+        }
+    }
+    for (int p = 0; p < N; ++p) {
+        PacketMarch &m = ms[p];
+        StepState &s = st[p];
+        m.alive = hn::AndNot(hn::Ge(s.boundary, m.t1), m.alive);
+        m.segStart = hn::IfThenElse(m.alive, s.segEnd, m.segStart);
+        m.k = hn::IfThenElse(m.alive, hn::Add(m.k, one), m.k);
+        if (F.emptySpaceSkipping && s.anySkipped) {
+            // Segments k … jumpTo are skipped; the next to look at is jumpTo + 1.
+            const MF jump = hn::And(m.alive, hn::Ge(s.jumpTo, m.k));
+            HWY_ALIGN float count[kMaxLanes];
+            hn::Store(hn::IfThenElse(jump, hn::Add(hn::Sub(s.jumpTo, m.k), hn::Set(df, 2.0f)),
+                                     hn::IfThenElseZero(s.skipped, one)),
+                      df, count);
+            for (int l = 0; l < lanes; ++l) totals.skipped += uint64_t(count[l]);
+            m.segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(s.jumpTo, m.j), d, m.t0), m.segStart);
+            m.k = hn::IfThenElse(jump, hn::Add(s.jumpTo, one), m.k);
+        }
+    }
+}
+
+// Sets up the packet of the lanes' block at (bx, by): rays, cleared pixels for the lanes
+// that miss, and the march's start; false when no lane hits (nothing to march).
+HWY_INLINE bool startPacket(const FrameParams &P, int bx, int by, int x1, int y1, const int32_t *laneX,
+                            const int32_t *laneY, float *rgba, PacketMarch &m) {
+    const DF df;
+    const DI di;
+    const int lanes = int(hn::Lanes(df));
+    const Features &F = P.features;
+    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f);
+    const VI xi = hn::Add(hn::Load(di, laneX), hn::Set(di, bx)), yi = hn::Add(hn::Load(di, laneY), hn::Set(di, by));
+    const MF inside = hn::RebindMask(df, hn::And(hn::Lt(xi, hn::Set(di, x1)), hn::Lt(yi, hn::Set(di, y1))));
+    const PacketRays rays = setUpPacket(P, hn::ConvertTo(df, xi), hn::ConvertTo(df, yi), inside);
+    hn::Store(hn::IfThenElseZero(hn::RebindMask(di, rays.hit), hn::Set(di, 1)), di, m.hita);
+    HWY_ALIGN float ja[kMaxLanes];
+    m.hits = 0;
+    for (int l = 0; l < lanes; ++l) {
+        const int x = bx + laneX[l], y = by + laneY[l];
+        m.px[l] = x;
+        m.py[l] = y;
+        if (x < x1 && y < y1 && !m.hita[l])
+            std::fill_n(rgba + (size_t(y - P.outY) * size_t(P.outWidth) + size_t(x - P.outX)) * 4, 4, 0.0f);
+        m.hits += m.hita[l];
+        ja[l] = m.hita[l] && F.jitter ? random01(uint32_t(x), uint32_t(y), P.seed, P.pass) : 0.0f;
+    }
+    if (m.hits == 0) return false;
+    m.t0 = rays.t0;
+    m.t1 = rays.t1;
+    m.j = hn::Load(df, ja);
+    for (int a = 0; a < 3; ++a) {
+        m.q0[a] = rays.q0[a];
+        m.dq[a] = rays.dq[a];
+        m.dir[a] = F.shading ? rays.dir[a] : zero;
+    }
+    m.alive = rays.hit;
+    m.k = hn::IfThenElse(hn::Gt(m.j, zero), zero, one); // the first boundary past t0
+    m.segStart = m.t0;
+    m.walk = BrickWalk();
+    if (F.emptySpaceSkipping && F.intensityProjection == 0) m.walk.start(P, m.q0, m.dq, m.t0, m.alive);
+    m.sfStale = hn::Not(m.alive); // pre-integration: sf must be sampled at segStart first
+    m.depth = m.depthCarry = zero;
+    m.T = one;
+    for (int a = 0; a < 3; ++a) m.color[a] = m.colorCarry[a] = zero;
+    m.samples = hn::Zero(di);
+    m.sf = zero; // pre-integration: the value at the segment's front
+    if (F.preintegrated && F.intensityProjection == 0)
+        m.sf = sampleVolume(P, hn::MulAdd(m.t0, m.dq[0], m.q0[0]), hn::MulAdd(m.t0, m.dq[1], m.q0[1]),
+                            hn::MulAdd(m.t0, m.dq[2], m.q0[2]));
+    return true;
+}
+
+// Writes the lanes that hit: colour and opacity (out, lane-wise) and their samples.
+void writePacket(const FrameParams &P, const PacketMarch &m, const float out[4][kMaxLanes], const int32_t *samples,
+                 float *rgba, MarchTotals &totals) {
+    const int lanes = int(hn::Lanes(DF()));
+    for (int l = 0; l < lanes; ++l) {
+        if (!m.hita[l]) continue;
+        totals.samples += uint64_t(samples[l]);
+        float *pixel = rgba + (size_t(m.py[l] - P.outY) * size_t(P.outWidth) + size_t(m.px[l] - P.outX)) * 4;
+        for (int c = 0; c < 4; ++c) pixel[c] = out[c][l];
+    }
+}
+
+// Two packets side by side march in one loop: each step of one is independent of the
+// other's, so the core has the other's work to do while one waits on its gathers.
 void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba, Counters &counters) {
     const DF df;
     const DI di;
     const int lanes = int(hn::Lanes(df));
     const int packetWide = std::min(lanes, 4), packetHigh = lanes / packetWide;
     const Features &F = P.features;
-    uint64_t samplesTotal = 0, hitTotal = 0, terminatedTotal = 0, truncatedTotal = 0, skippedTotal = 0;
+    MarchTotals totals;
 
-    HWY_ALIGN float ja[kMaxLanes], outa[4][kMaxLanes];
-    HWY_ALIGN int32_t hita[kMaxLanes], samplesa[kMaxLanes], laneX[kMaxLanes], laneY[kMaxLanes];
-    int px[kMaxLanes], py[kMaxLanes];
+    HWY_ALIGN float outa[4][kMaxLanes];
+    HWY_ALIGN int32_t samplesa[kMaxLanes], laneX[kMaxLanes], laneY[kMaxLanes];
     for (int l = 0; l < lanes; ++l) {
         laneX[l] = l % packetWide;
         laneY[l] = l / packetWide;
     }
-    const VI laneXv = hn::Load(di, laneX), laneYv = hn::Load(di, laneY);
-
-    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step);
+    // Two packets (8×4 rays on AVX-512) march side by side: marchStep interleaves their steps.
+    constexpr int kPackets = 2;
+    PacketMarch m[kPackets];
     for (int by = y0; by < y1; by += packetHigh)
-        for (int bx = x0; bx < x1; bx += packetWide) {
-            const VI xi = hn::Add(laneXv, hn::Set(di, bx)), yi = hn::Add(laneYv, hn::Set(di, by));
-            const MF inside = hn::RebindMask(df, hn::And(hn::Lt(xi, hn::Set(di, x1)), hn::Lt(yi, hn::Set(di, y1))));
-            const PacketRays rays = setUpPacket(P, hn::ConvertTo(df, xi), hn::ConvertTo(df, yi), inside);
-            hn::Store(hn::IfThenElseZero(hn::RebindMask(di, rays.hit), hn::Set(di, 1)), di, hita);
-            int hits = 0;
-            for (int l = 0; l < lanes; ++l) {
-                const int x = bx + laneX[l], y = by + laneY[l];
-                px[l] = x;
-                py[l] = y;
-                if (x < x1 && y < y1 && !hita[l])
-                    std::fill_n(rgba + (size_t(y - P.outY) * size_t(P.outWidth) + size_t(x - P.outX)) * 4, 4, 0.0f);
-                hits += hita[l];
-                ja[l] = hita[l] && F.jitter ? random01(uint32_t(x), uint32_t(y), P.seed, P.pass) : 0.0f;
-            }
-            if (hits == 0) continue;
-            hitTotal += uint64_t(hits);
-
-            const VF t0 = rays.t0, t1 = rays.t1, j = hn::Load(df, ja);
-            const VF *q0 = rays.q0, *dq = rays.dq;
-            VF dir[3] = {zero, zero, zero};
-            if (F.shading)
-                for (int a = 0; a < 3; ++a) dir[a] = rays.dir[a];
-            MF alive = rays.hit;
-
-            if (F.intensityProjection != 0) {
-                projectPacket(P, t0, t1, j, q0, dq, alive, outa, samplesa, truncatedTotal);
-                for (int l = 0; l < lanes; ++l) {
-                    if (!hita[l]) continue;
-                    samplesTotal += uint64_t(samplesa[l]);
-                    float *pixel = rgba + (size_t(py[l] - P.outY) * size_t(P.outWidth) + size_t(px[l] - P.outX)) * 4;
-                    for (int c = 0; c < 4; ++c) pixel[c] = outa[c][l];
+        for (int bx = x0; bx < x1; bx += kPackets * packetWide) {
+            bool marching[kPackets];
+            for (int p = 0; p < kPackets; ++p) {
+                const int px0 = bx + p * packetWide;
+                marching[p] = px0 < x1 && startPacket(P, px0, by, x1, y1, laneX, laneY, rgba, m[p]);
+                if (!marching[p]) {
+                    m[p] = PacketMarch(); // no lane alive: the other packet marches alone
+                    continue;
                 }
-                continue;
-            }
-            VF k = hn::IfThenElse(hn::Gt(j, zero), zero, one); // the first boundary past t0
-            VF segStart = t0;
-            BrickWalk walk;
-            if (F.emptySpaceSkipping) walk.start(P, q0, dq, t0, alive);
-            MF sfStale = hn::Not(alive); // pre-integration: sf must be sampled at segStart first
-            VF depth = zero, depthCarry = zero, T = one;
-            VF color[3] = {zero, zero, zero}, colorCarry[3] = {zero, zero, zero};
-            VI samples = hn::Zero(di);
-            VF sf = zero; // pre-integration: the value at the segment's front
-            if (F.preintegrated)
-                sf = sampleVolume(P, hn::MulAdd(t0, dq[0], q0[0]), hn::MulAdd(t0, dq[1], q0[1]),
-                                  hn::MulAdd(t0, dq[2], q0[2]));
-            while (!hn::AllFalse(df, alive)) {
-                const VF boundary = hn::MulAdd(hn::Add(k, j), d, t0);
-                const VF segEnd = hn::Min(boundary, t1);
-                const VF len = hn::Sub(segEnd, segStart);
-                const VF tMid = hn::MulAdd(hn::Set(df, 0.5f), len, segStart);
-                MF take = hn::And(alive, hn::Gt(len, zero));
-                // A partial segment: the first one under jitter, or the last at the exit.
-                const MF partial = hn::Or(hn::Gt(boundary, t1), hn::Eq(k, zero));
-                if (!F.boundarySegment) take = hn::AndNot(partial, take);
-                // Empty-space skipping by sample position: a segment is not taken when the
-                // point that decides it lies in a brick the transfer function makes empty. A
-                // sampled segment is decided by its sample (its centre): there it would
-                // classify to opacity 0 and add nothing. A pre-integrated one reads the values
-                // at both ends and everything between, so it is skipped only when the whole
-                // segment lies in the empty brick (both ends before the brick's exit).
-                MF skipped = hn::FirstN(df, 0);
-                VF jumpTo = zero; // last segment, from k, that lies in the empty brick too
-                if (F.emptySpaceSkipping) {
-                    walk.advance(P, q0, dq, F.preintegrated ? segStart : tMid, take);
-                    const VF exit = walk.exit();
-                    skipped = hn::AndNot(walk.visible, take);
-                    if (F.preintegrated) skipped = hn::And(skipped, hn::Le(segEnd, exit));
-                    if (!hn::AllFalse(df, skipped)) {
-                        take = hn::AndNot(skipped, take);
-                        sfStale = hn::Or(sfStale, skipped);
-                        // Later full segments k' whose deciding point (centre t0 + (k' + j − ½)·d,
-                        // or end t0 + (k' + j)·d) is before the exit, one fewer for rounding, and
-                        // ending before t1: skipped at once instead of one per iteration.
-                        const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, t0), d), j),
-                                                                    hn::Set(df, F.preintegrated ? 0.0f : 0.5f))),
-                                                  one);
-                        const VF byEnd = hn::Sub(hn::Floor(hn::Sub(hn::Div(hn::Sub(t1, t0), d), j)), one);
-                        jumpTo = hn::IfThenElse(skipped, hn::Min(byExit, byEnd), zero);
-                    }
-                }
-                if (!hn::AllFalse(df, take)) {
-                    const MF truncated =
-                        hn::AndNot(hn::RebindMask(df, hn::Lt(samples, hn::Set(di, P.maxSamples))), take);
-                    if (!hn::AllFalse(df, truncated)) {
-                        truncatedTotal += hn::CountTrue(df, truncated);
-                        alive = hn::AndNot(truncated, alive);
-                        take = hn::AndNot(truncated, take);
-                    }
-                    samples = hn::Add(samples, hn::IfThenElseZero(hn::RebindMask(di, take), hn::Set(di, 1)));
-                    if (F.preintegrated) {
-                        const MF fresh = hn::And(take, sfStale);
-                        if (!hn::AllFalse(df, fresh)) {
-                            sf = hn::IfThenElse(fresh, sampleVolume(P, hn::MulAdd(segStart, dq[0], q0[0]),
-                                                                    hn::MulAdd(segStart, dq[1], q0[1]),
-                                                                    hn::MulAdd(segStart, dq[2], q0[2])),
-                                                sf);
-                            sfStale = hn::AndNot(fresh, sfStale);
-                        }
-                    }
-                    const VF q[3] = {hn::MulAdd(tMid, dq[0], q0[0]), hn::MulAdd(tMid, dq[1], q0[1]),
-                                     hn::MulAdd(tMid, dq[2], q0[2])};
-                    // Contribution T·weight·segColor: weight is alpha for a sampled segment
-                    // (the kernel's T·alpha·rgb, in its order), 1 for a premultiplied one.
-                    VF segDepth, alpha, segColor[3], weight = one;
-                    if (F.preintegrated) {
-                        // The segment from the table for a full step; a partial one scales the
-                        // depth by len/step (Eq. 3) and the colour with its opacity, unless the
-                        // full step's alpha is too close to 1 to hold its depth: then it is
-                        // classified at its centre (raycast.cl, VC_ALPHA_HOLDS_DEPTH).
-                        const VF sb = sampleVolume(P, hn::MulAdd(segEnd, dq[0], q0[0]), hn::MulAdd(segEnd, dq[1], q0[1]),
-                                                   hn::MulAdd(segEnd, dq[2], q0[2]));
-                        VF seg[4];
-                        preintegratedSegment(P, sf, sb, seg);
-                        sf = hn::IfThenElse(take, sb, sf);
-                        const MF opaque = hn::Ge(seg[3], one); // −log1p(−1) = +inf: T becomes 0
-                        segDepth = hn::IfThenElse(opaque, hn::Set(df, kInf),
-                                                  hn::Neg(hn::Log1p(df, hn::Neg(hn::IfThenZeroElse(opaque, seg[3])))));
-                        alpha = seg[3];
-                        for (int a = 0; a < 3; ++a) segColor[a] = seg[a];
-                        const MF partialHere = hn::And(take, partial);
-                        if (!hn::AllFalse(df, partialHere)) {
-                            const VF fraction = hn::Div(len, d);
-                            const MF holds = hn::And(partialHere, hn::Le(seg[3], hn::Set(df, 1.0f - 1.0f / 4096.0f)));
-                            const VF scaledDepth = hn::Mul(segDepth, fraction);
-                            const VF scaledAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(holds), scaledDepth));
-                            const VF colourScale =
-                                hn::IfThenElse(hn::Gt(seg[3], zero), hn::Div(scaledAlpha, seg[3]), fraction);
-                            VF c[4];
-                            classify(P, sampleVolume(P, q[0], q[1], q[2]), c);
-                            const VF centreDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
-                            const MF centre = hn::AndNot(holds, partialHere);
-                            const VF centreAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(centre), centreDepth));
-                            segDepth = hn::IfThenElse(holds, scaledDepth, hn::IfThenElse(centre, centreDepth, segDepth));
-                            alpha = hn::IfThenElse(holds, scaledAlpha, hn::IfThenElse(centre, centreAlpha, alpha));
-                            for (int a = 0; a < 3; ++a)
-                                segColor[a] = hn::IfThenElse(holds, hn::Mul(segColor[a], colourScale),
-                                                             hn::IfThenElse(centre, hn::Mul(centreAlpha, c[a]), segColor[a]));
-                        }
-                        if (F.shading) {
-                            // Light the premultiplied colour; the highlight is weighted by the opacity.
-                            VF diffuse, specular;
-                            phong(P, q, dir, diffuse, specular);
-                            for (int a = 0; a < 3; ++a)
-                                segColor[a] = hn::Min(hn::MulAdd(segColor[a], diffuse, hn::Mul(specular, alpha)), alpha);
-                        }
-                    } else {
-                        // Sample the segment at its centre and classify: sigma first, and the
-                        // colour only if some lane's sigma is positive. Where none is, alpha is 0
-                        // and T·alpha·colour is +0 for any colour, so 0 stands in for it exactly.
-                        VF c[4];
-                        const TableSpot spot = tableSpot(P, sampleVolume(P, q[0], q[1], q[2]));
-                        c[3] = tableChannel(P, spot, 3);
-                        const bool opaqueSomewhere = !hn::AllFalse(df, hn::And(take, hn::Gt(c[3], zero)));
-                        for (int a = 0; a < 3; ++a) c[a] = opaqueSomewhere ? tableChannel(P, spot, a) : zero;
-                        // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
-                        segDepth = hn::Mul(c[3], hn::Div(len, hn::Set(df, P.opacityUnit)));
-                        alpha = opacityFromDepth(segDepth);
-                        if (F.shading) {
-                            const MF lit = hn::And(take, hn::Gt(alpha, zero));
-                            if (!hn::AllFalse(df, lit)) {
-                                VF diffuse, specular;
-                                phong(P, q, dir, diffuse, specular);
-                                for (int a = 0; a < 3; ++a)
-                                    c[a] = hn::IfThenElse(lit, hn::Min(hn::MulAdd(c[a], diffuse, specular), one), c[a]);
-                            }
-                        }
-                        for (int a = 0; a < 3; ++a) segColor[a] = c[a];
-                        weight = alpha;
-                    }
-                    const VF tw = hn::Mul(T, weight);
-                    for (int a = 0; a < 3; ++a) addCompensated(take, color[a], colorCarry[a], hn::Mul(tw, segColor[a]), false);
-                    addCompensated(take, depth, depthCarry, segDepth, true);
-                    // T = exp(−depth), kept by products and made exact every 16 samples.
-                    VF nextT = hn::Mul(T, hn::Sub(one, alpha));
-                    const MF exact =
-                        hn::And(take, hn::RebindMask(df, hn::Eq(hn::And(samples, hn::Set(di, 15)), hn::Zero(di))));
-                    if (!hn::AllFalse(df, exact))
-                        nextT = hn::IfThenElse(exact, hn::Exp(df, hn::Neg(hn::Sub(depth, depthCarry))), nextT);
-                    T = hn::IfThenElse(take, nextT, T);
-                    if (F.earlyTermination) {
-                        const MF stop = hn::And(take, hn::Ge(depth, hn::Set(df, P.terminationDepth)));
-                        if (!hn::AllFalse(df, stop)) {
-                            terminatedTotal += hn::CountTrue(df, stop);
-                            alive = hn::AndNot(stop, alive);
-                        }
-                    }
-                }
-                alive = hn::AndNot(hn::Ge(boundary, t1), alive);
-                segStart = hn::IfThenElse(alive, segEnd, segStart);
-                k = hn::IfThenElse(alive, hn::Add(k, one), k);
-                if (F.emptySpaceSkipping && !hn::AllFalse(df, skipped)) {
-                    // Segments k … jumpTo are skipped; the next to look at is jumpTo + 1.
-                    const MF jump = hn::And(alive, hn::Ge(jumpTo, k));
-                    HWY_ALIGN float count[kMaxLanes];
-                    hn::Store(hn::IfThenElse(jump, hn::Add(hn::Sub(jumpTo, k), hn::Set(df, 2.0f)),
-                                             hn::IfThenElseZero(skipped, one)),
-                              df, count);
-                    for (int l = 0; l < lanes; ++l) skippedTotal += uint64_t(count[l]);
-                    segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(jumpTo, j), d, t0), segStart);
-                    k = hn::IfThenElse(jump, hn::Add(jumpTo, one), k);
+                totals.hit += uint64_t(m[p].hits);
+                if (F.intensityProjection != 0) {
+                    projectPacket(P, m[p].t0, m[p].t1, m[p].j, m[p].q0, m[p].dq, m[p].alive, outa, samplesa,
+                                  totals.truncated);
+                    writePacket(P, m[p], outa, samplesa, rgba, totals);
+                    marching[p] = false;
+                    m[p].alive = hn::FirstN(df, 0);
                 }
             }
-
-            for (int a = 0; a < 3; ++a) hn::Store(hn::Sub(color[a], colorCarry[a]), df, outa[a]);
-            hn::Store(opacityFromDepth(hn::Sub(depth, depthCarry)), df, outa[3]);
-            hn::Store(samples, di, samplesa);
-            for (int l = 0; l < lanes; ++l) {
-                if (!hita[l]) continue;
-                samplesTotal += uint64_t(samplesa[l]);
-                float *pixel = rgba + (size_t(py[l] - P.outY) * size_t(P.outWidth) + size_t(px[l] - P.outX)) * 4;
-                for (int c = 0; c < 4; ++c) pixel[c] = outa[c][l];
+            for (;;) {
+                bool alive = false;
+                for (int p = 0; p < kPackets; ++p) alive = alive || !hn::AllFalse(df, m[p].alive);
+                if (!alive) break;
+                marchStep<kPackets>(P, m, totals);
+            }
+            for (int p = 0; p < kPackets; ++p) {
+                if (!marching[p]) continue;
+                for (int a = 0; a < 3; ++a) hn::Store(hn::Sub(m[p].color[a], m[p].colorCarry[a]), df, outa[a]);
+                hn::Store(opacityFromDepth(hn::Sub(m[p].depth, m[p].depthCarry)), df, outa[3]);
+                hn::Store(m[p].samples, di, samplesa);
+                writePacket(P, m[p], outa, samplesa, rgba, totals);
             }
         }
-    counters.samples += samplesTotal;
-    counters.raysHit += hitTotal;
-    counters.terminatedEarly += terminatedTotal;
-    counters.truncated += truncatedTotal;
-    counters.segmentsSkipped += skippedTotal;
+    counters.samples += totals.samples;
+    counters.raysHit += totals.hit;
+    counters.terminatedEarly += totals.terminated;
+    counters.truncated += totals.truncated;
+    counters.segmentsSkipped += totals.skipped;
 }
 
 int LanesHere() { return int(hn::Lanes(DF())); }

@@ -15,7 +15,7 @@ B=$repo/build
 variant() { # name, patch ('' for none), extra compiler flags
     local name=$1 patch=$2 flags=$3 dir=$out/bin/$1
     mkdir -p "$dir"
-    git -C "$repo" show HEAD:renderer/cpu/cpu_march.cpp > "$dir/cpu_march.cpp"
+    git -C "$repo" show 7ebd2bf:renderer/cpu/cpu_march.cpp > "$dir/cpu_march.cpp" # the march the patches change
     [ -n "$patch" ] && patch -s "$dir/cpu_march.cpp" < "$here/$patch"
     # The copy includes itself through Highway's foreach_target: compile it in place of the original.
     cp "$dir/cpu_march.cpp" "$dir/cpu_march_variant.cpp"
