@@ -487,12 +487,7 @@ struct MarchTotals {
     uint64_t samples = 0, hit = 0, terminated = 0, truncated = 0, skipped = 0;
 };
 
-// One segment further in every lane still marching, for N packets side by side. Each phase
-// (the segment's bounds and skipping, the sample, its classification, the opacity, the sums)
-// is done for every packet before the next phase starts: the packets' chains are
-// independent, so the core works on one while the other waits on its gathers. One packet's
-// step is a chain of dependent gathers and arithmetic a few hundred instructions long; two
-// packets stepped one after the other did not overlap (docs/cpu_renderer.md).
+// What one packet's current step has found so far, phase by phase (marchStep).
 struct StepState {
     VF boundary, segEnd, len, tMid, jumpTo, value, segDepth, alpha, segColor[3], weight, q[3];
     MF take, partial, skipped;
@@ -550,6 +545,12 @@ HWY_INLINE void preintegratedContribution(const FrameParams &P, PacketMarch &m, 
     }
 }
 
+// One segment further in every lane still marching, for N packets side by side. Each phase
+// (the segment's bounds and skipping, the sample, its classification, the opacity, the sums)
+// is done for every packet before the next phase starts: the packets' chains are
+// independent, so the core works on one while the other waits on its gathers. One packet's
+// step is a chain of dependent gathers and arithmetic a few hundred instructions long; two
+// packets stepped one after the other did not overlap (docs/cpu_renderer.md).
 template <int N>
 HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &totals) {
     const DF df;
@@ -763,8 +764,6 @@ void writePacket(const FrameParams &P, const PacketMarch &m, const float out[4][
     }
 }
 
-// Two packets side by side march in one loop: each step of one is independent of the
-// other's, so the core has the other's work to do while one waits on its gathers.
 void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba, Counters &counters) {
     const DF df;
     const DI di;
