@@ -66,6 +66,11 @@ export const requests = {
   clipPlanes: (planes) => ({ type: "clip_planes", clip_planes: planes }),
   still: (image) => (image ? { type: "still", image } : { type: "still" }),
   getState: () => ({ type: "get_state" }),
+  // A search of a DICOMweb source; build it with core/studies.js's buildStudyQuery, which
+  // checks the fields first. filters: {patient_name, patient_id, study_date, modality,
+  // accession_number}, each optional.
+  findStudies: (source, filters = {}, limit) =>
+    (limit === undefined ? { type: "find_studies", source, filters } : { type: "find_studies", source, filters, limit }),
   close: () => ({ type: "close" }),
   // A plane of the open volume (protocol/README.md, `slice`): axis "axial" | "coronal" |
   // "sagittal", size in pixels; optional point/center (world mm), pixel_spacing, window, level.
@@ -92,6 +97,7 @@ export const REPLY_TYPE = Object.freeze({
   list_volumes: "volumes",
   open_volume: "state",
   get_state: "state",
+  find_studies: "studies",
 });
 
 // ---------------------------------------------------------------------------------------

@@ -6,7 +6,8 @@
 //
 // No DOM here: the app listens to the events and draws; tests drive it with a fake socket.
 //
-// Events: "connection" (Connection "state" payload), "hello", "volumes" (array), "progress"
+// Events: "connection" (Connection "state" payload), "hello", "volumes" (array), "sources"
+// (the server's DICOMweb sources, [{name, kind}], with every volume list), "progress"
 // (progress message), "loading" ({name} | null), "state" (a server `state`), "opened"
 // ({state, restored}: a volume is open and, after a reconnection, the view put back), "frame" ({header, image, latency}), "server_error" (error message),
 // "protocol_error" (Error), "scene" (a local scene change was sent).
@@ -33,6 +34,7 @@ export class Session extends Emitter {
     this.preferredVolume = options.preferredVolume ?? null;
     this.autoOpen = options.autoOpen ?? true;
     this.volumes = [];
+    this.sources = [];           // the server's image archives: [{name, kind: "dicomweb"}]
     this.volume = null;          // the open volume's object (protocol `volumes` form)
     this.wantedVolume = null;    // the name this client means to have open
     this.loading = null;         // {name} while an open_volume is in flight
@@ -91,8 +93,20 @@ export class Session extends Emitter {
   async refreshVolumes() {
     const reply = await this.connection.request(requests.listVolumes());
     this.volumes = Array.isArray(reply.volumes) ? reply.volumes : [];
+    this.sources = Array.isArray(reply.sources)
+      ? reply.sources.filter((s) => s && typeof s.name === "string" && s.name).map((s) => ({ name: s.name, kind: String(s.kind ?? "") }))
+      : [];
     this.emit("volumes", this.volumes);
+    this.emit("sources", this.sources);
     return this.volumes;
+  }
+
+  // Search a source: query is a `find_studies` request (core/studies.js's buildStudyQuery).
+  // Resolves with the server's `studies` answer; rejects with ServerError (source_failed,
+  // not_found, bad_field) or ConnectionLost.
+  findStudies(query) {
+    if (!this.ready) return Promise.reject(new Error("not connected to the server"));
+    return this.connection.request(query);
   }
 
   // --- requests -------------------------------------------------------------------------

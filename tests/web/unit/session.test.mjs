@@ -176,3 +176,30 @@ test("a frame the page cannot decode is reported, not thrown", async () => {
   ws.serverSend(new Uint8Array([0x56, 0x43, 0x46, 0x31, 9, 0, 0, 0]).buffer);
   assert.match(events.find(([t]) => t === "protocol_error")[1].message, /truncated header/);
 });
+
+test("the server's DICOMweb sources come with the volume list, and a search resolves with its studies", async () => {
+  const { s } = make({ autoOpen: false });
+  const sources = [];
+  s.on("sources", (list) => sources.push(list));
+  s.start();
+  const ws = FakeWebSocket.last;
+  ws.handshake();
+  await flush();
+  ws.serverSend({ type: "volumes", id: ws.lastSent("list_volumes").id, volumes: [demoVolume],
+    sources: [{ name: "orthanc", kind: "dicomweb" }, { kind: "dicomweb" }, null] });
+  await flush();
+  assert.deepEqual(sources, [[{ name: "orthanc", kind: "dicomweb" }]], "entries without a name are dropped");
+  const query = { type: "find_studies", source: "orthanc", filters: { patient_name: "DOE*" }, limit: 100 };
+  const answer = s.findStudies(query);
+  const sent = ws.lastSent("find_studies");
+  assert.deepEqual({ ...sent, id: undefined }, { ...query, id: undefined });
+  ws.serverSend({ type: "studies", id: sent.id, source: "orthanc", studies: [{ study_uid: "1.2", series: [] }] });
+  assert.deepEqual((await answer).studies, [{ study_uid: "1.2", series: [] }]);
+  // A refusal rejects the search with the server's code, and is not also shown as a stray error.
+  const errors = [];
+  s.on("server_error", (e) => errors.push(e));
+  const refused = s.findStudies({ ...query, source: "gone" });
+  ws.serverSend({ type: "error", id: ws.lastSent("find_studies").id, code: "not_found", message: "no source gone", request_type: "find_studies" });
+  await assert.rejects(refused, (e) => e.code === "not_found" && e.serverMessage === "no source gone");
+  assert.deepEqual(errors, []);
+});

@@ -61,3 +61,14 @@ test("hostile or broken links are refused whole, saying why", () => {
     assert.match(r.error, why, `${fragment.slice(0, 80)} → ${r.error}`);
   }
 });
+
+test("a DICOMweb or uploaded volume's name survives the link: its ':' and '/' come back as they were", () => {
+  for (const volume of ["dicomweb:my-pacs/1.2.840.113619.2.55.3/1.2.840.113619.2.55.3.604", "upload:0123456789abcdef0123456789abcdef"]) {
+    const link = formatViewLink({ ...view, volume });
+    assert.ok(!/[:/]/.test(new URLSearchParams(link).toString().split("&")[0].slice("volume=".length)),
+      `the name is percent-encoded in the fragment: ${link.slice(0, 60)}`);
+    assert.deepEqual(parseViewLink(`#${link}`), { view: { ...view, volume }, error: null });
+    // Typed or pasted by hand, unencoded, it means the same.
+    assert.equal(parseViewLink(`#volume=${volume}`).view.volume, volume);
+  }
+});
