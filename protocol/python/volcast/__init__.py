@@ -24,7 +24,10 @@ from .messages import (CLIENT_TYPES, COMPOSITING_MODES, ERROR_CODES, PROTOCOL_VE
                        RequestId, ServerError, camera, clip_planes, close, dumps, get_state, hello,
                        interaction_end, interaction_start, list_volumes, open_volume, orbit_camera,
                        parse_server_message, preset, quality_automatic, quality_explicit, still,
-                       transfer_function, viewport, crop_box, with_compositing)
+                       transfer_function, viewport, crop_box, with_compositing, find_studies)
+from .nrrd import NRRD_TYPES, encode_nrrd, nrrd_bytes, nrrd_header
+from .studies import Series, Study, parse_studies
+from .upload import UploadError, http_endpoint, post_file, post_volume
 from .slices import (SLICE_AXES, SLICE_MAGIC, Slice, decode_slice, encode_slice, is_slice_message,
                      slice_request)
 
@@ -40,5 +43,7 @@ __all__ = [
     "parse_server_message", "preset", "quality_automatic", "quality_explicit", "still",
     "transfer_function", "viewport", "COMPOSITING_MODES", "crop_box", "with_compositing",
     "SLICE_AXES", "SLICE_MAGIC", "Slice", "decode_slice", "encode_slice", "is_slice_message",
-    "slice_request",
+    "slice_request", "find_studies", "Series", "Study", "parse_studies",
+    "NRRD_TYPES", "encode_nrrd", "nrrd_bytes", "nrrd_header",
+    "UploadError", "http_endpoint", "post_file", "post_volume",
 ]

@@ -5,11 +5,16 @@ from __future__ import annotations
 
 import asyncio
 import collections
-from typing import Any, Callable, Deque, Dict, List, Optional, Protocol, Union
+import os
+from typing import Any, Callable, Deque, Dict, List, Optional, Protocol, Sequence, Union
 
 from .frames import Frame, decode_frame
-from .messages import RequestId, ServerError, close, dumps, hello, parse_server_message
+from .messages import (MessageError, RequestId, ServerError, StudyDate, close, dumps, find_studies, hello,
+                       open_volume, parse_server_message)
+from .nrrd import encode_nrrd
 from .slices import Slice, decode_slice, is_slice_message, slice_request
+from .studies import Study, parse_studies
+from .upload import Progress, post_file, post_volume
 
 Message = Dict[str, Any]
 
@@ -28,8 +33,11 @@ class Client:
     """One session. Anything with async send(str) / recv() -> str | bytes / close() serves as
     the socket (tests pass a stand-in); connect() opens a real WebSocket."""
 
-    def __init__(self, socket: Socket) -> None:
+    def __init__(self, socket: Socket, url: Optional[str] = None, token: Optional[str] = None) -> None:
         self._socket = socket
+        # Uploads go to the same host and port over HTTP, with the same token.
+        self.url = url
+        self.token = token
         self._next_id = 1
         # Messages read while waiting for another.
         self._backlog: Deque[Union[Message, Frame, Slice]] = collections.deque()
@@ -44,7 +52,7 @@ class Client:
 
         # max_size: a final PNG of a large view is many MiB; the library's default is 1 MiB.
         socket = await websockets.connect(url, max_size=max_size)
-        client = cls(socket)
+        client = cls(socket, url=url, token=token)
         try:
             client.server_hello = await client.request(hello(token=token, client=client_name))
         except BaseException:
@@ -125,6 +133,84 @@ class Client:
                     on_frame(item)
             elif isinstance(item, dict) and item.get("type") == "error" and (request is None or item.get("id") == request):
                 raise ServerError(item)
+
+    async def open_volume(self, name: str, on_progress: Optional[Callable[[Message], None]] = None,
+                          timeout: Optional[float] = None) -> Message:
+        """Open a volume (a data-folder name, `builtin:…`, `dicomweb:SOURCE/STUDY/SERIES` or
+        `upload:<id>`) and return the server's `state`; raises ServerError when it refuses.
+        Its progress messages go to on_progress: `loading` and `preprocessing` with a
+        `fraction`, and for a DICOMweb series first `retrieving` with `instances` [done,
+        total] and `bytes` where the server knows them."""
+        return await self.request(open_volume(name), on_progress=on_progress, timeout=timeout)
+
+    async def find_studies(self, source: str, patient_name: Optional[str] = None,
+                           patient_id: Optional[str] = None, study_date: Optional[StudyDate] = None,
+                           modality: Optional[str] = None, accession_number: Optional[str] = None,
+                           limit: int = 100, timeout: Optional[float] = None) -> List[Study]:
+        """Search the server's DICOMweb source `source` for studies (the message builder
+        find_studies says what each filter takes); each Study lists its series, whose
+        `volume` open_volume takes. Raises ServerError when the server refuses (`not_found`:
+        no such source; `source_failed`: the PACS refused or is down; `bad_field`)."""
+        answer = await self.request(find_studies(source, patient_name=patient_name, patient_id=patient_id,
+                                                 study_date=study_date, modality=modality,
+                                                 accession_number=accession_number, limit=limit),
+                                    timeout=timeout)
+        if answer.get("type") != "studies":
+            raise MessageError(f"find_studies: the server answered {answer.get('type')!r}, not studies")
+        return parse_studies(answer)
+
+    async def upload(self, path: Union[str, "os.PathLike[str]"], filename: Optional[str] = None,
+                     on_progress: Optional[Progress] = None, timeout: Optional[float] = 600) -> str:
+        """Upload a volume file (`.nrrd` with attached data, `.nii`, `.nii.gz`, `.mha`, or a
+        `.zip` of a DICOM series) with HTTP `POST /api/volumes` to this session's server, and
+        return its name (`upload:<id>`) for open_volume. The file is streamed from disk, not
+        read whole; the server names it by filename (default: path's base name, whose
+        extension gives the format). on_progress(sent, total) follows each MiB sent. Raises
+        volcast.UploadError with the HTTP status and the server's reason when it refuses."""
+        url = self._upload_url()
+        loop = asyncio.get_running_loop()
+        answer = await asyncio.to_thread(post_file, url, path, token=self.token, filename=filename,
+                                         timeout=timeout, on_progress=self._in_loop(loop, on_progress))
+        return answer["volume"]
+
+    async def open_array(self, array: Any, spacing: Sequence[float] = (1, 1, 1),
+                         origin: Sequence[float] = (0, 0, 0),
+                         direction: Optional[Sequence[Sequence[float]]] = None, name: str = "array.nrrd",
+                         on_progress: Optional[Callable[[Message], None]] = None,
+                         timeout: Optional[float] = 600) -> Message:
+        """Render a numpy volume: upload it as an in-memory NRRD, open it, and return the
+        server's `state` (as open_volume). The array is indexed **[z, y, x]**, as numpy
+        volumes usually are (SimpleITK's GetArrayFromImage, nibabel's data transposed): its
+        last axis is x, the one that varies fastest. spacing and origin are in x, y, z order
+        (world units, millimetres for scans), and direction's columns are the unit
+        directions of the x, y, z axes in patient space (LPS; 3 rows of 3 numbers, default
+        the identity), so voxel array[k, j, i] lies at origin + direction · (i·sx, j·sy,
+        k·sz), as the state's `volume` reports it. Types: int8, uint8, int16, uint16, int32,
+        uint32, float32, float64; other dtypes (bool, complex, int64, object, …) and arrays
+        that are not 3-D raise ValueError saying what to do. A non-contiguous or big-endian
+        array is copied once; a C-contiguous little-endian one is sent as it is.
+        on_progress gets open_volume's progress messages; timeout bounds the upload's socket
+        operations and the wait for the state."""
+        header, voxels = encode_nrrd(array, spacing=spacing, origin=origin, direction=direction)
+        if not name.lower().endswith(".nrrd"):
+            name += ".nrrd"
+        url = self._upload_url()
+        answer = await asyncio.to_thread(post_volume, url, [header, voxels], len(header) + voxels.nbytes, name,
+                                         token=self.token, timeout=timeout)
+        return await self.open_volume(answer["volume"], on_progress=on_progress, timeout=timeout)
+
+    def _upload_url(self) -> str:
+        if not self.url:
+            raise ValueError("upload: this Client has no server URL (Client.connect sets it; "
+                             "Client(socket, url=...) otherwise)")
+        return self.url
+
+    @staticmethod
+    def _in_loop(loop: asyncio.AbstractEventLoop, callback: Optional[Progress]) -> Optional[Progress]:
+        # The upload runs in a worker thread; the caller's callback runs in its event loop.
+        if callback is None:
+            return None
+        return lambda sent, total: loop.call_soon_threadsafe(callback, sent, total)
 
     async def request_slice(self, axis: str, width: int, height: int, timeout: Optional[float] = None,
                             **fields: Any) -> Slice:

@@ -3,9 +3,10 @@ the server's messages, and the error a server's refusal becomes. Standard librar
 
 from __future__ import annotations
 
+import datetime
 import json
 import math
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 PROTOCOL_VERSION = 1
 
@@ -13,14 +14,14 @@ PROTOCOL_VERSION = 1
 ERROR_CODES = (
     "malformed_json", "too_large", "bad_message", "unknown_type", "bad_field",
     "unsupported_version", "unauthorized", "bad_state", "bad_volume_name", "not_found",
-    "load_failed", "busy", "render_failed", "internal",
+    "load_failed", "busy", "render_failed", "internal", "source_failed",
 )
 CLIENT_TYPES = (
     "hello", "list_volumes", "open_volume", "camera", "interaction_start", "interaction_end",
     "viewport", "transfer_function", "quality_policy", "clip_planes", "still", "get_state",
-    "close", "slice",
+    "close", "slice", "find_studies",
 )
-SERVER_TYPES = ("hello", "volumes", "progress", "state", "error")
+SERVER_TYPES = ("hello", "volumes", "progress", "state", "error", "studies")
 
 RequestId = Union[int, str, None]
 
@@ -58,9 +59,55 @@ def list_volumes(id: RequestId = None) -> Dict[str, Any]:
 
 
 def open_volume(name: str, id: RequestId = None) -> Dict[str, Any]:
+    """name: as `volumes` lists it (`ct/head.nrrd`, `builtin:demo`), a series `find_studies`
+    found (`dicomweb:SOURCE/STUDY_UID/SERIES_UID`), or what an upload answered (`upload:<id>`).
+    The server checks the name; the client sends it as it is."""
     if not isinstance(name, str):
         raise TypeError("open_volume: name must be a string")
     return _message("open_volume", id, name=name)
+
+
+DateLike = Union[str, datetime.date]
+StudyDate = Union[DateLike, Tuple[Optional[DateLike], Optional[DateLike]]]
+
+
+def _dicom_date(value: Optional[DateLike], what: str) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, datetime.date):
+        return value.strftime("%Y%m%d")
+    if isinstance(value, str):
+        return value
+    raise TypeError(f"find_studies: {what} must be a 'YYYYMMDD' string or a datetime.date, "
+                    f"got {type(value).__name__}")
+
+
+def find_studies(source: str, patient_name: Optional[str] = None, patient_id: Optional[str] = None,
+                 study_date: Optional[StudyDate] = None, modality: Optional[str] = None,
+                 accession_number: Optional[str] = None, limit: int = 100,
+                 id: RequestId = None) -> Dict[str, Any]:
+    """Search a DICOMweb source the server names (`volumes`' `sources`) for studies.
+    patient_name may hold DICOM wildcards (`*`, `?`); study_date is "YYYYMMDD", a range
+    "YYYYMMDD-YYYYMMDD" (either end may be empty), a datetime.date, or a (first, last) pair
+    of those (None for an open end). Filters left as None are not sent; limit is 1..1000."""
+    if not isinstance(source, str) or not source:
+        raise ValueError("find_studies: source must be a non-empty string (a source the server names)")
+    if isinstance(limit, bool) or not isinstance(limit, int) or not 1 <= limit <= 1000:
+        raise ValueError(f"find_studies: limit must be an integer in 1..1000, got {limit!r}")
+    if isinstance(study_date, tuple):
+        if len(study_date) != 2:
+            raise ValueError("find_studies: a study_date range is a (first, last) pair")
+        study_date = (f"{_dicom_date(study_date[0], 'study_date[0]')}-"
+                      f"{_dicom_date(study_date[1], 'study_date[1]')}")
+    elif study_date is not None:
+        study_date = _dicom_date(study_date, "study_date")
+    filters = {"patient_name": patient_name, "patient_id": patient_id, "study_date": study_date,
+               "modality": modality, "accession_number": accession_number}
+    for key, value in filters.items():
+        if value is not None and not isinstance(value, str):
+            raise TypeError(f"find_studies: {key} must be a string, got {type(value).__name__}")
+    return _message("find_studies", id, source=source,
+                    filters={k: v for k, v in filters.items() if v is not None}, limit=limit)
 
 
 def camera(camera: Dict[str, Any], id: RequestId = None) -> Dict[str, Any]:
