@@ -13,8 +13,12 @@
 
     asyncio.run(main())
 
-Message building and frame decoding are standard library only and work offline; only
-Client.connect needs websockets, and only Frame.to_numpy needs numpy and Pillow.
+A numpy volume (indexed [z, y, x]) is rendered with
+`state = await client.open_array(volume, spacing=(sx, sy, sz))`; a file is sent with
+`await client.upload(path)`, a PACS searched with `await client.find_studies(source, ...)`.
+
+Message building, frame decoding and uploads are standard library only; only
+Client.connect needs websockets, Frame.to_numpy numpy and Pillow, and open_array numpy.
 """
 
 from .client import Client, Socket
