@@ -4,6 +4,7 @@
 #include "protocol/utf8.hpp"
 #include "protocol/version.hpp"
 
+#include <algorithm>
 #include <array>
 #include <utility>
 
@@ -126,6 +127,67 @@ ClientMessage readSlice(const json &root, const RequestId &id, const Limits &) {
     return detail::readSliceRequest(root, id);
 }
 
+bool isDigits(std::string_view s) {
+    return std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+// A DICOM date (DA): YYYYMMDD with a month 01-12 and a day 01-31.
+bool isDicomDate(std::string_view s) {
+    if (s.size() != 8 || !isDigits(s)) return false;
+    const int month = (s[4] - '0') * 10 + (s[5] - '0'), day = (s[6] - '0') * 10 + (s[7] - '0');
+    return month >= 1 && month <= 12 && day >= 1 && day <= 31;
+}
+
+// A filter value: printable text that a DICOM attribute of its kind can hold (64 bytes is the
+// longest of them, LO and PN components), no control characters and no backslash (DICOM's
+// value separator, which would turn one value into a list).
+std::string filterText(const Fields &f, std::string_view key) {
+    const json *value = f.find(key);
+    if (!value) return {};
+    const std::string path = f.pathOf(key);
+    std::string text = detail::string(*value, path, 64);
+    for (unsigned char c : text)
+        if (c < 0x20 || c == 0x7f || c == '\\')
+            badField(path, "must not hold control characters or backslashes");
+    return text;
+}
+
+ClientMessage readFindStudies(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "source", "filters", "limit"});
+    FindStudiesRequest m;
+    m.id = id;
+    m.source = detail::string(f.require("source"), "source", std::string::npos);
+    if (const auto problem = validateSourceName(m.source))
+        badField("source", json(quotableText(m.source, detail::kMaxQuotedBytes)).dump() + " " + *problem);
+    if (const json *filters = f.find("filters")) {
+        const Fields ff(detail::object(*filters, "filters"), "filters",
+                        {"patient_name", "patient_id", "study_date", "modality", "accession_number"});
+        m.filters.patientName = filterText(ff, "patient_name");
+        m.filters.patientId = filterText(ff, "patient_id");
+        m.filters.studyDate = filterText(ff, "study_date");
+        m.filters.modality = filterText(ff, "modality");
+        m.filters.accessionNumber = filterText(ff, "accession_number");
+        const std::string &date = m.filters.studyDate;
+        if (!date.empty()) {
+            const size_t dash = date.find('-');
+            const std::string_view from = std::string_view(date).substr(0, dash);
+            const std::string_view to = dash == std::string::npos ? std::string_view() : std::string_view(date).substr(dash + 1);
+            const bool ok = dash == std::string::npos ? isDicomDate(date)
+                                                      : (from.empty() || isDicomDate(from)) &&
+                                                            (to.empty() || isDicomDate(to)) && !(from.empty() && to.empty());
+            if (!ok)
+                badField(ff.pathOf("study_date"), "must be a date YYYYMMDD or a range YYYYMMDD-YYYYMMDD (either end may "
+                                                  "be left out), got " + json(quotableText(date, 64)).dump());
+        }
+        for (char c : m.filters.modality)
+            if (!((c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_'))
+                badField(ff.pathOf("modality"), "must be a DICOM modality code such as \"CT\" or \"MR\" (capitals, "
+                                                "digits, _), got " + json(quotableText(m.filters.modality, 64)).dump());
+    }
+    if (const json *limit = f.find("limit")) m.limit = int(detail::integer(*limit, "limit", 1, kMaxStudiesLimit));
+    return m;
+}
+
 struct ReaderEntry {
     std::string_view type;
     Reader read;
@@ -146,6 +208,7 @@ constexpr std::array<ReaderEntry, std::variant_size_v<ClientMessage>> kReaders{{
     {GetStateRequest::kType, readBare<GetStateRequest>},
     {CloseRequest::kType, readBare<CloseRequest>},
     {SliceRequest::kType, readSlice},
+    {FindStudiesRequest::kType, readFindStudies},
 }};
 
 std::string knownTypes() {
@@ -173,6 +236,18 @@ json fieldsOf(const StillRequest &m) {
     return j;
 }
 json fieldsOf(const SliceRequest &m) { return detail::sliceRequestFields(m); }
+json fieldsOf(const FindStudiesRequest &m) {
+    json filters = json::object();
+    const auto add = [&](const char *key, const std::string &value) {
+        if (!value.empty()) filters[key] = value;
+    };
+    add("patient_name", m.filters.patientName);
+    add("patient_id", m.filters.patientId);
+    add("study_date", m.filters.studyDate);
+    add("modality", m.filters.modality);
+    add("accession_number", m.filters.accessionNumber);
+    return {{"source", m.source}, {"filters", std::move(filters)}, {"limit", m.limit}};
+}
 // The requests with no fields of their own.
 template <class Request>
 json fieldsOf(const Request &) {
@@ -180,6 +255,15 @@ json fieldsOf(const Request &) {
 }
 
 } // namespace
+
+std::optional<std::string> validateSourceName(std::string_view name) {
+    if (name.empty()) return "is empty";
+    if (name.size() > kMaxSourceNameBytes) return "is longer than " + std::to_string(kMaxSourceNameBytes) + " bytes";
+    for (char c : name)
+        if (!((c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '-'))
+            return "may hold only letters, digits, _ and -";
+    return std::nullopt;
+}
 
 std::string_view messageType(const ClientMessage &message) {
     return std::visit([](const auto &m) { return m.kType; }, message);

@@ -55,6 +55,32 @@ struct OpenVolumeRequest {
     bool operator==(const OpenVolumeRequest &) const = default;
 };
 
+// A study search on a DICOMweb source (QIDO-RS). Empty filters match everything; the
+// protocol checks their form, the source answers what matches.
+struct StudyFilters {
+    std::string patientName;       // DICOM wildcards * and ? allowed
+    std::string patientId;
+    std::string studyDate;         // "YYYYMMDD", or a range "YYYYMMDD-YYYYMMDD" with either end empty
+    std::string modality;          // "CT", "MR", ...
+    std::string accessionNumber;
+    bool operator==(const StudyFilters &) const = default;
+};
+
+inline constexpr int kMaxStudiesLimit = 1000;
+inline constexpr size_t kMaxSourceNameBytes = 64;
+
+struct FindStudiesRequest {
+    static constexpr std::string_view kType = "find_studies";
+    RequestId id;
+    std::string source;   // a source as volumes' "sources" lists it: [A-Za-z0-9_-], at most 64
+    StudyFilters filters;
+    int limit = 100;      // studies at most, in [1, kMaxStudiesLimit]
+    bool operator==(const FindStudiesRequest &) const = default;
+};
+
+// Why `name` cannot be a source name, or nullopt.
+std::optional<std::string> validateSourceName(std::string_view name);
+
 struct CameraRequest {
     static constexpr std::string_view kType = "camera";
     RequestId id;
@@ -144,7 +170,7 @@ using ClientMessage =
     std::variant<HelloRequest, ListVolumesRequest, OpenVolumeRequest, CameraRequest,
                  InteractionStartRequest, InteractionEndRequest, ViewportRequest,
                  TransferFunctionRequest, QualityPolicyRequest, ClipPlanesRequest,
-                 StillRequest, GetStateRequest, CloseRequest, SliceRequest>;
+                 StillRequest, GetStateRequest, CloseRequest, SliceRequest, FindStudiesRequest>;
 
 // The wire "type" of each request, e.g. "open_volume".
 std::string_view messageType(const ClientMessage &message);

@@ -7,7 +7,7 @@ namespace volcast::protocol {
 namespace {
 
 // One table for both directions, so a name cannot drift from its code.
-constexpr std::array<std::pair<ErrorCode, std::string_view>, 14> kNames{{
+constexpr std::array<std::pair<ErrorCode, std::string_view>, 15> kNames{{
     {ErrorCode::MalformedJson, "malformed_json"},
     {ErrorCode::TooLarge, "too_large"},
     {ErrorCode::BadMessage, "bad_message"},
@@ -22,6 +22,7 @@ constexpr std::array<std::pair<ErrorCode, std::string_view>, 14> kNames{{
     {ErrorCode::Busy, "busy"},
     {ErrorCode::RenderFailed, "render_failed"},
     {ErrorCode::Internal, "internal"},
+    {ErrorCode::SourceFailed, "source_failed"},
 }};
 
 } // namespace

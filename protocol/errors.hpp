@@ -27,6 +27,7 @@ enum class ErrorCode {
     Busy,               // the server is at capacity (sessions, loads); try again later
     RenderFailed,       // the renderer failed (device error, out of device memory)
     Internal,           // a bug; the message says what was caught
+    SourceFailed,       // a DICOMweb source refused a search or is unreachable
 };
 
 // The wire name, e.g. "malformed_json".

@@ -16,10 +16,11 @@ constexpr auto kIgnore = Fields::Unknown::Ignore;
 // Server-sent strings are not bounded by the client's limits; the message size is.
 constexpr size_t kAnyLength = std::numeric_limits<size_t>::max();
 
-constexpr std::array<std::pair<ProgressStage, std::string_view>, 3> kStages{{
+constexpr std::array<std::pair<ProgressStage, std::string_view>, 4> kStages{{
     {ProgressStage::Loading, "loading"},
     {ProgressStage::Preprocessing, "preprocessing"},
     {ProgressStage::Uploading, "uploading"},
+    {ProgressStage::Retrieving, "retrieving"},
 }};
 
 json volumeToJson(const VolumeInfo &v) {
@@ -63,13 +64,39 @@ json fieldsOf(const ServerHello &m) {
 json fieldsOf(const VolumesMessage &m) {
     json list = json::array();
     for (const VolumeInfo &v : m.volumes) list.push_back(volumeToJson(v));
-    return {{"volumes", std::move(list)}};
+    json sources = json::array();
+    for (const SourceInfo &s : m.sources) sources.push_back({{"name", s.name}, {"kind", s.kind}});
+    return {{"volumes", std::move(list)}, {"sources", std::move(sources)}};
 }
 
 json fieldsOf(const ProgressMessage &m) {
     json j{{"volume", m.volume}, {"stage", progressStageName(m.stage)}, {"fraction", m.fraction}};
     if (!m.task.empty()) j["task"] = m.task;
+    if (m.instances) j["instances"] = *m.instances;
+    if (m.bytes) j["bytes"] = *m.bytes;
     return j;
+}
+
+json fieldsOf(const StudiesMessage &m) {
+    json studies = json::array();
+    for (const StudyInfo &s : m.studies) {
+        json series = json::array();
+        for (const SeriesInfo &r : s.series)
+            series.push_back({{"series_uid", r.seriesUid},
+                              {"modality", r.modality},
+                              {"description", r.description},
+                              {"instances", r.instances},
+                              {"volume", r.volume}});
+        studies.push_back({{"study_uid", s.studyUid},
+                           {"patient_name", s.patientName},
+                           {"patient_id", s.patientId},
+                           {"study_date", s.studyDate},
+                           {"description", s.description},
+                           {"accession_number", s.accessionNumber},
+                           {"modalities", s.modalities},
+                           {"series", std::move(series)}});
+    }
+    return {{"source", m.source}, {"studies", std::move(studies)}};
 }
 
 json fieldsOf(const StateMessage &m) {
@@ -198,6 +225,52 @@ ServerMessage readVolumes(const Fields &f, RequestId id) {
     m.id = std::move(id);
     const json &list = detail::array(f.require("volumes"), "volumes");
     for (size_t i = 0; i < list.size(); ++i) m.volumes.push_back(readVolume(list[i], detail::element("volumes", i)));
+    if (const json *sources = f.find("sources")) {
+        detail::array(*sources, "sources");
+        for (size_t i = 0; i < sources->size(); ++i) {
+            const Fields sf((*sources)[i], detail::element("sources", i), {}, kIgnore);
+            m.sources.push_back({detail::string(sf.require("name"), sf.pathOf("name"), kAnyLength),
+                                 detail::string(sf.require("kind"), sf.pathOf("kind"), kAnyLength)});
+        }
+    }
+    return m;
+}
+
+ServerMessage readStudies(const Fields &f, RequestId id) {
+    StudiesMessage m;
+    m.id = std::move(id);
+    m.source = detail::string(f.require("source"), "source", kAnyLength);
+    const json &studies = detail::array(f.require("studies"), "studies");
+    const auto text = [](const Fields &of, std::string_view key) {
+        return detail::string(of.require(key), of.pathOf(key), kAnyLength);
+    };
+    for (size_t i = 0; i < studies.size(); ++i) {
+        const Fields sf(studies[i], detail::element("studies", i), {}, kIgnore);
+        StudyInfo s;
+        s.studyUid = text(sf, "study_uid");
+        s.patientName = text(sf, "patient_name");
+        s.patientId = text(sf, "patient_id");
+        s.studyDate = text(sf, "study_date");
+        s.description = text(sf, "description");
+        if (sf.find("accession_number")) s.accessionNumber = text(sf, "accession_number");
+        const json &modalities = detail::array(sf.require("modalities"), sf.pathOf("modalities"));
+        for (size_t k = 0; k < modalities.size(); ++k)
+            s.modalities.push_back(
+                detail::string(modalities[k], detail::element(sf.pathOf("modalities"), k), kAnyLength));
+        const json &series = detail::array(sf.require("series"), sf.pathOf("series"));
+        for (size_t k = 0; k < series.size(); ++k) {
+            const Fields rf(series[k], detail::element(sf.pathOf("series"), k), {}, kIgnore);
+            SeriesInfo r;
+            r.seriesUid = text(rf, "series_uid");
+            r.modality = text(rf, "modality");
+            r.description = text(rf, "description");
+            r.instances = detail::integer(rf.require("instances"), rf.pathOf("instances"), 0,
+                                          std::numeric_limits<int64_t>::max());
+            r.volume = text(rf, "volume");
+            s.series.push_back(std::move(r));
+        }
+        m.studies.push_back(std::move(s));
+    }
     return m;
 }
 
@@ -213,6 +286,16 @@ ServerMessage readProgress(const Fields &f, RequestId id) {
     if (const json *task = f.find("task")) m.task = detail::string(*task, "task", kAnyLength);
     m.fraction = detail::number(f.require("fraction"), "fraction");
     if (m.fraction < 0 || m.fraction > 1) detail::badField("fraction", "must be in [0, 1]");
+    if (const json *instances = f.find("instances")) {
+        detail::array(*instances, "instances");
+        if (instances->size() != 2) detail::badField("instances", "must be [done, total]");
+        std::array<int64_t, 2> counts{};
+        for (size_t i = 0; i < 2; ++i)
+            counts[i] = detail::integer((*instances)[i], detail::element("instances", i), 0,
+                                        std::numeric_limits<int64_t>::max());
+        m.instances = counts;
+    }
+    if (const json *bytes = f.find("bytes")) m.bytes = detail::unsignedInteger(*bytes, "bytes");
     return m;
 }
 
@@ -276,6 +359,7 @@ ServerMessage parseServerMessage(std::string_view text) {
         if (type == VolumesMessage::kType) return readVolumes(f, std::move(id));
         if (type == ProgressMessage::kType) return readProgress(f, std::move(id));
         if (type == StateMessage::kType) return readState(f, std::move(id));
+        if (type == StudiesMessage::kType) return readStudies(f, std::move(id));
         if (type == ProtocolError::kType) return readError(f, std::move(id));
         detail::fail(ErrorCode::UnknownType, "unknown message type " + json(type).dump());
     } catch (const detail::ReadError &e) {

@@ -95,17 +95,59 @@ struct VolumeInfo {
     bool operator==(const VolumeInfo &) const = default;
 };
 
+// A place studies can be searched and retrieved from: a PACS over DICOMweb.
+struct SourceInfo {
+    std::string name;   // what find_studies and dicomweb: volume names take
+    std::string kind;   // "dicomweb"
+    bool operator==(const SourceInfo &) const = default;
+};
+
 struct VolumesMessage {
     static constexpr std::string_view kType = "volumes";
     RequestId id;
     std::vector<VolumeInfo> volumes;
+    std::vector<SourceInfo> sources;   // absent from older servers: empty
     bool operator==(const VolumesMessage &) const = default;
+};
+
+// One series of a study found on a source; `volume` is the name open_volume takes
+// ("dicomweb:SOURCE/STUDY_UID/SERIES_UID").
+struct SeriesInfo {
+    std::string seriesUid;
+    std::string modality;
+    std::string description;
+    int64_t instances = 0;   // as the source counts them; 0 when it did not say
+    std::string volume;
+    bool operator==(const SeriesInfo &) const = default;
+};
+
+// One study as the source describes it. Patient names travel only in these messages.
+struct StudyInfo {
+    std::string studyUid;
+    std::string patientName;   // DICOM person name, components joined by '^'
+    std::string patientId;
+    std::string studyDate;     // YYYYMMDD, or empty
+    std::string description;
+    std::string accessionNumber;
+    std::vector<std::string> modalities;
+    std::vector<SeriesInfo> series;
+    bool operator==(const StudyInfo &) const = default;
+};
+
+// The answer to find_studies.
+struct StudiesMessage {
+    static constexpr std::string_view kType = "studies";
+    RequestId id;
+    std::string source;
+    std::vector<StudyInfo> studies;
+    bool operator==(const StudiesMessage &) const = default;
 };
 
 enum class ProgressStage {
     Loading,         // reading and converting the file
     Preprocessing,   // statistics, min-max bricks, mipmaps, B-spline coefficients, tables
     Uploading,       // copying to the device
+    Retrieving,      // receiving a series from a DICOMweb source
 };
 std::string_view progressStageName(ProgressStage stage);
 
@@ -117,6 +159,9 @@ struct ProgressMessage {
     ProgressStage stage = ProgressStage::Loading;
     std::string task;        // within the stage, e.g. "bspline_coefficients"; may be empty
     double fraction = 0;     // of the stage done, in [0, 1]
+    // While retrieving: DICOM instances received of those announced, and bytes received.
+    std::optional<std::array<int64_t, 2>> instances;
+    std::optional<uint64_t> bytes;
     bool operator==(const ProgressMessage &) const = default;
 };
 
@@ -136,7 +181,7 @@ struct StateMessage {
 };
 
 using ServerMessage =
-    std::variant<ServerHello, VolumesMessage, ProgressMessage, StateMessage, ProtocolError>;
+    std::variant<ServerHello, VolumesMessage, ProgressMessage, StateMessage, StudiesMessage, ProtocolError>;
 
 std::string_view messageType(const ServerMessage &message);
 

@@ -74,7 +74,9 @@ std::vector<ClientMessage> everyRequest() {
             CloseRequest{"bye"},
             SliceRequest{14, "axial", std::nullopt, std::nullopt, 64, 32, std::nullopt, std::nullopt, std::nullopt},
             SliceRequest{"s", "sagittal", std::array<double, 3>{1, 2, 3}, std::array<double, 3>{0, -1, 0.5},
-                         512, 512, 0.25, 2000.0, 400.0}};
+                         512, 512, 0.25, 2000.0, 400.0},
+            FindStudiesRequest{15, "pacs", {}, 100},
+            FindStudiesRequest{"f", "orthanc-1", {"DOE^J*", "12345", "20240101-", "CT", "A-77"}, 5}};
 }
 
 TEST(ClientMessages, EveryRequestRoundTrips) {
@@ -312,6 +314,59 @@ TEST(ClientMessageErrors, ParsingStaysUsableAfterAnError) {
     // The parser holds no state: a refused message does not affect the next one.
     EXPECT_EQ(errorOf("{").code, ErrorCode::MalformedJson);
     EXPECT_TRUE(std::holds_alternative<ListVolumesRequest>(accepted(R"({"type": "list_volumes"})")));
+}
+
+} // namespace
+} // namespace volcast::protocol
+
+namespace volcast::protocol {
+namespace {
+
+TEST(FindStudies, FiltersAndLimitAreRead) {
+    const ClientMessage m = accepted(R"({"type": "find_studies", "id": 1, "source": "pacs",
+        "filters": {"patient_name": "Müller*", "study_date": "-20241231", "modality": "MR"}, "limit": 3})");
+    const auto &f = std::get<FindStudiesRequest>(m);
+    EXPECT_EQ(f.source, "pacs");
+    EXPECT_EQ(f.filters.patientName, "M\u00fcller*") << "non-ASCII names pass untouched";
+    EXPECT_EQ(f.filters.studyDate, "-20241231");
+    EXPECT_EQ(f.filters.modality, "MR");
+    EXPECT_EQ(f.limit, 3);
+    EXPECT_EQ(std::get<FindStudiesRequest>(accepted(R"({"type": "find_studies", "source": "a"})")).limit, 100)
+        << "the default limit";
+}
+
+TEST(FindStudies, EachMalformedFieldIsNamed) {
+    const auto refused = [](std::string_view text, std::string_view path) {
+        const ProtocolError e = errorOf(text);
+        EXPECT_EQ(e.code, ErrorCode::BadField) << text;
+        EXPECT_TRUE(e.message.starts_with(path)) << "the message should start with " << path << ": " << e.message;
+        EXPECT_EQ(e.requestType, "find_studies");
+    };
+    refused(R"({"type": "find_studies"})", "source");
+    refused(R"({"type": "find_studies", "source": ""})", "source");
+    refused(R"({"type": "find_studies", "source": "a/b"})", "source");
+    refused(R"({"type": "find_studies", "source": "pacs:1"})", "source");
+    refused(R"({"type": "find_studies", "source": "é"})", "source");
+    refused(R"({"type": "find_studies", "source": "pacs", "filters": []})", "filters");
+    refused(R"({"type": "find_studies", "source": "pacs", "filters": {"name": "x"}})", "filters");
+    refused(R"({"type": "find_studies", "source": "pacs", "filters": {"patient_id": 12}})", "filters.patient_id");
+    refused(R"({"type": "find_studies", "source": "pacs", "filters": {"patient_id": "a\\b"}})", "filters.patient_id");
+    refused(R"({"type": "find_studies", "source": "pacs", "filters": {"patient_id": "a\u0001"}})", "filters.patient_id");
+    refused(R"({"type": "find_studies", "source": "pacs", "filters": {"patient_name": ")" + std::string(65, 'x') + R"("}})",
+            "filters.patient_name");
+    for (const char *date : {"2024", "20241301", "20240132", "2024-01-01", "-", "20240101-2024", "x20240101"})
+        refused(std::string(R"({"type": "find_studies", "source": "pacs", "filters": {"study_date": ")") + date + "\"}}",
+                "filters.study_date");
+    refused(R"({"type": "find_studies", "source": "pacs", "filters": {"modality": "ct"}})", "filters.modality");
+    refused(R"({"type": "find_studies", "source": "pacs", "limit": 0})", "limit");
+    refused(R"({"type": "find_studies", "source": "pacs", "limit": 1001})", "limit");
+    refused(R"({"type": "find_studies", "source": "pacs", "limit": -1})", "limit");
+    refused(R"({"type": "find_studies", "source": "pacs", "limit": 1e300})", "limit");
+}
+
+TEST(FindStudies, DicomWebAndUploadNamesPassTheVolumeNameGate) {
+    EXPECT_EQ(validateVolumeName("dicomweb:pacs/1.2.840.113619.2.55/1.2.840.113619.2.55.3"), std::nullopt);
+    EXPECT_EQ(validateVolumeName("upload:0123456789abcdef0123456789abcdef"), std::nullopt);
 }
 
 } // namespace

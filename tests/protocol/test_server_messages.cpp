@@ -50,10 +50,25 @@ std::vector<ServerMessage> everyMessage() {
     volumes.id = "list";
     volumes.volumes = {loadedVolume(), notLoaded("ct/head.nrrd")};
     VolumesMessage noVolumes;
+    VolumesMessage withSources;
+    withSources.volumes = {notLoaded("builtin:demo")};
+    withSources.sources = {{"pacs", "dicomweb"}, {"cloud-store", "dicomweb"}};
 
-    ProgressMessage progress{2, "bonsai", ProgressStage::Preprocessing, "bspline_coefficients", 0.25};
-    ProgressMessage loading{2, "bonsai", ProgressStage::Loading, "", 1.0};
-    ProgressMessage uploading{nullptr, "bonsai", ProgressStage::Uploading, "", 0};
+    StudiesMessage studies;
+    studies.id = 9;
+    studies.source = "pacs";
+    studies.studies = {StudyInfo{"1.2.3", "M\u00fcller^Hans", "P-1", "20240102", "CT head", "A-7", {"CT", "SR"},
+                                 {SeriesInfo{"1.2.3.4", "CT", "Axial 1 mm", 300, "dicomweb:pacs/1.2.3/1.2.3.4"},
+                                  SeriesInfo{"1.2.3.5", "SR", "", 0, "dicomweb:pacs/1.2.3/1.2.3.5"}}},
+                       StudyInfo{"1.2.4", "", "", "", "", "", {}, {}}};
+    StudiesMessage noStudies;
+    noStudies.source = "pacs";
+
+    ProgressMessage progress{2, "bonsai", ProgressStage::Preprocessing, "bspline_coefficients", 0.25, {}, {}};
+    ProgressMessage loading{2, "bonsai", ProgressStage::Loading, "", 1.0, {}, {}};
+    ProgressMessage uploading{nullptr, "bonsai", ProgressStage::Uploading, "", 0, {}, {}};
+    ProgressMessage retrieving{5, "dicomweb:pacs/1.2/1.3", ProgressStage::Retrieving, "retrieving instances", 0.4,
+                               std::array<int64_t, 2>{120, 300}, uint64_t(62) << 20};
 
     StateMessage before;
     StateMessage after;
@@ -70,6 +85,10 @@ std::vector<ServerMessage> everyMessage() {
     return {hello,
             volumes,
             noVolumes,
+            withSources,
+            studies,
+            noStudies,
+            retrieving,
             progress,
             loading,
             uploading,
