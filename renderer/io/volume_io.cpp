@@ -1,5 +1,6 @@
 #include "renderer/io/volume_io.hpp"
 #include "renderer/io/dicom_check.hpp"
+#include "renderer/io/zip_extract.hpp"
 
 #include <itkCommand.h>
 #include <itkGDCMImageIO.h>
@@ -31,6 +32,7 @@
 #include <spawn.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
+#include <cstdlib>
 #include <unistd.h>
 
 #include <algorithm>
@@ -1442,13 +1444,16 @@ struct Child {
     }
 };
 
-void checkDicomInChild(const fs::path &path, const LoadOptions &options, LoadProgress &progress) {
+// `dicom`: the file may reach GDCM (the messages say so); otherwise it is checked because the
+// caller asked for every file to be (LoadOptions::parseInChild).
+void checkInChild(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom) {
     const auto checker = dicomCheckerPath();
     if (!checker)
-        fail(path, fmt::format("may be DICOM, which is first parsed in a separate process, but the DICOM checker '{}' "
+        fail(path, fmt::format("{}, which is first parsed in a separate process, but the DICOM checker '{}' "
                                "was not found (next to this program, in the build tree, or as $VOLCAST_DICOM_CHECK); "
                                "it is not loaded",
-                               kCheckerName));
+                               dicom ? "may be DICOM" : "comes from outside", kCheckerName));
+    const std::string parser = dicom ? "the DICOM parser (GDCM)" : "the parser";
     int fds[2];
     if (::pipe2(fds, O_CLOEXEC) != 0) fail(path, fmt::format("cannot start the DICOM checker: {}", std::strerror(errno)));
     Child child;
@@ -1469,7 +1474,8 @@ void checkDicomInChild(const fs::path &path, const LoadOptions &options, LoadPro
     posix_spawnattr_setsigdefault(&attr, &all);
     posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
     std::vector<std::string> args = {checker->string(), path.string(), std::to_string(options.maxBytes),
-                                     std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds)};
+                                     std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds),
+                                     std::to_string(options.maxArchiveBytes)};
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -1487,7 +1493,7 @@ void checkDicomInChild(const fs::path &path, const LoadOptions &options, LoadPro
     std::string said;
     int status = 0;
     for (;;) {
-        progress(0, "checking DICOM in a separate process");
+        progress(0, dicom ? "checking DICOM in a separate process" : "checking the file in a separate process");
         if (child.output >= 0) {
             pollfd p{child.output, POLLIN, 0};
             if (::poll(&p, 1, 100) > 0) {
@@ -1516,22 +1522,27 @@ void checkDicomInChild(const fs::path &path, const LoadOptions &options, LoadPro
     }
     if (WIFEXITED(status) && (WEXITSTATUS(status) == kCheckLoaded || WEXITSTATUS(status) == kCheckRefused)) return;
     while (!said.empty() && std::isspace(static_cast<unsigned char>(said.back()))) said.pop_back();
-    spdlog::warn("{}: the DICOM checker ({}) {}; it said: {}", path.string(), checker->string(),
+    spdlog::warn("{}: the checker ({}) {}; it said: {}", path.string(), checker->string(),
                  WIFSIGNALED(status) ? "ended with " + signalName(WTERMSIG(status))
                                      : fmt::format("exited with status {}", WEXITSTATUS(status)),
                  said.empty() ? "nothing" : said);
     if (WIFSIGNALED(status))
-        fail(path, fmt::format("was rejected by the DICOM parser (GDCM): parsing it in a separate process ended with "
-                               "{}; the file is damaged or not DICOM, and it is not loaded",
-                               signalName(WTERMSIG(status))));
+        fail(path, fmt::format("was rejected by {}: parsing it in a separate process ended with "
+                               "{}; the file is damaged{}, and it is not loaded",
+                               parser, signalName(WTERMSIG(status)), dicom ? " or not DICOM" : ""));
     if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckOutOfMemory)
-        fail(path, fmt::format("was rejected by the DICOM parser (GDCM): parsing it in a separate process needed more "
+        fail(path, fmt::format("was rejected by {}: parsing it in a separate process needed more "
                                "than its limit of {} MiB; it is not loaded",
-                               checkerMemoryLimit(options) >> 20));
-    fail(path, fmt::format("was rejected by the DICOM parser (GDCM): parsing it in a separate process failed (exit "
+                               parser, checkerMemoryLimit(options) >> 20));
+    fail(path, fmt::format("was rejected by {}: parsing it in a separate process failed (exit "
                            "status {}); it is not loaded",
-                           WIFEXITED(status) ? WEXITSTATUS(status) : -1));
+                           parser, WIFEXITED(status) ? WEXITSTATUS(status) : -1));
 }
+
+// A DICOM series packed as a .zip: unpacked into a fresh folder beside it (private to the
+// caller: the upload folder), loaded as a folder, the folder removed whatever happens. The
+// loader's messages name the archive, not the folder.
+Volume loadZippedSeries(const fs::path &path, const LoadOptions &options, LoadProgress &progress);
 
 Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dicomInChild) {
     registerItkFactories();
@@ -1544,10 +1555,15 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
     try {
         LoadProgress progress(options, path);
         progress(0, "reading header");
-        if (dicomInChild && (fs::is_directory(status) || (fileSize(path).value_or(0) > 0 && reachesGdcm(path))))
-            checkDicomInChild(path, options, progress);
-        Volume v = fs::is_directory(status) ? loadDicomFolder(path, options, progress)
-                                            : loadImageFile(path, options, progress);
+        const bool folder = fs::is_directory(status);
+        const bool zip = !folder && isZipName(path);
+        if (dicomInChild) {
+            const bool dicom = folder || zip || (fileSize(path).value_or(0) > 0 && reachesGdcm(path));
+            if (dicom || options.parseInChild) checkInChild(path, options, progress, dicom);
+        }
+        Volume v = folder ? loadDicomFolder(path, options, progress)
+                   : zip  ? loadZippedSeries(path, options, progress)
+                          : loadImageFile(path, options, progress);
         v.name = displayName(path);
         progress(0.9, "statistics");
         if (!v.voxels.empty()) v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
@@ -1569,6 +1585,45 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
     }
 }
 
+Volume loadZippedSeries(const fs::path &path, const LoadOptions &options, LoadProgress &progress) {
+    std::string pattern = (path.parent_path() / (path.filename().string() + ".unpacked-XXXXXX")).string();
+    if (!::mkdtemp(pattern.data())) fail(path, fmt::format("cannot be unpacked: {}", std::strerror(errno)));
+    const fs::path folder = pattern;
+    struct Remove {
+        fs::path folder;
+        ~Remove() {
+            std::error_code ec;
+            fs::remove_all(folder, ec);
+        }
+    } remove{folder};
+    progress(0, "unpacking the archive");
+    ZipLimits limits;
+    limits.maxBytes = options.maxArchiveBytes;
+    try {
+        extractZip(path, folder, limits, path.string());
+    } catch (const ZipError &e) {
+        throw VolumeLoadError(e.what());
+    }
+    // The series' messages name entries as archive/entry_00003.
+    const auto named = [&](const std::string &message) {
+        std::string out = message;
+        for (size_t at; (at = out.find(folder.string())) != std::string::npos;)
+            out.replace(at, folder.string().size(), path.string());
+        return out;
+    };
+    try {
+        return loadDicomFolder(folder, options, progress);
+    } catch (const VolumeTooLarge &e) {
+        throw VolumeTooLarge(named(e.what()), e.bytes);
+    } catch (const VolumeLoadTimeout &e) {
+        throw VolumeLoadTimeout(named(e.what()), e.limitSeconds);
+    } catch (const LoadOutOfMemory &) {
+        throw;
+    } catch (const VolumeLoadError &e) {
+        throw VolumeLoadError(named(e.what()));
+    }
+}
+
 void setLimit(int resource, uint64_t value) {
     rlimit limit{};
     limit.rlim_cur = limit.rlim_max = rlim_t(value);
@@ -1583,8 +1638,8 @@ Volume loadVolume(const fs::path &path, const LoadOptions &options) {
 }
 
 int runDicomCheck(int argc, char **argv) {
-    if (argc != 5) {
-        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S\n"
+    if (argc != 5 && argc != 6) {
+        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES]\n"
                              "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
                              "DICOM away from the server); exit status 0 loaded, 1 refused, 3 out of memory.\n",
                      kCheckerName);
@@ -1595,6 +1650,7 @@ int runDicomCheck(int argc, char **argv) {
         options.maxBytes = std::stoull(argv[2]);
         options.maxDimension = std::stoll(argv[3]);
         options.timeLimitSeconds = std::stod(argv[4]);
+        if (argc == 6) options.maxArchiveBytes = std::stoull(argv[5]);
     } catch (const std::exception &) {
         std::fprintf(stderr, "%s: bad limits '%s' '%s' '%s'\n", kCheckerName, argv[2], argv[3], argv[4]);
         return kCheckUsage;

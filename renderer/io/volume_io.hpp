@@ -36,6 +36,9 @@
 //   x.nii.gz, would take its header but x.nii's voxels.
 // - A folder is read as a DICOM series; if it holds several, the first one (in the order
 //   ITK's GDCMSeriesFileNames lists them) is loaded and the choice is logged.
+// - A .zip file is a DICOM series packed: unpacked (zip_extract.hpp: entry names ignored,
+//   links refused, entries, bytes and ratio bounded) into a fresh folder beside it, loaded as
+//   a folder, and the folder removed. Like every folder it is parsed first in the checker.
 
 #include "renderer/volume.hpp"
 
@@ -63,6 +66,12 @@ struct LoadOptions {
     // Asked at every progress step; true ends the load with VolumeLoadError (a server
     // shutting down).
     std::function<bool()> stopRequested;
+    // Every file, whatever its format, is parsed first in the checker process, not only what
+    // reaches GDCM (dicom_check.hpp): for bytes from a browser or a PACS, hostile until a parse
+    // has survived. A crash or runaway parse then ends the child and the load fails saying so.
+    bool parseInChild = false;
+    // A .zip (a DICOM series) unpacks to at most this many bytes (zip_extract.hpp).
+    uint64_t maxArchiveBytes = uint64_t(8) << 30;
 };
 
 // Every failure to load: the message starts with the file's path and names the problem.
