@@ -20,10 +20,12 @@ import { ConnectionIndicator, ErrorList, ViewMessage } from "./status.js";
 import { TransferFunctionEditor } from "./tf_editor.js";
 import { View } from "./view.js";
 import { formatViewLink, parseViewLink } from "../core/view_link.js";
+import { describeError, overallProgress, progressText } from "../core/studies.js";
+import { StudiesPanel } from "./studies_panel.js";
+import { FileOpener } from "./file_opener.js";
 
 const CLIENT_NAME = "volcast-web 0.1.0";
 const MAX_FRAMES_KEPT = 400;           // frame headers kept in window.volcast.frames (tests, console)
-const STAGE_SHARE = { loading: [0, 0.6], preprocessing: [0.6, 0.9], uploading: [0.9, 1] };   // of the bar
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -49,7 +51,13 @@ const app = {
   frameSinceOpen: false,
   resolution: "auto",
   pendingLink: viewLink.view,   // the view link's camera and transfer function, until its volume opens
+  lastOpening: null,        // the name of the latest open_volume: what an open error is about
+  labels: new Map(),        // volume name → what the picker shows (an upload's file name, a series' description)
 };
+
+// Names of volumes a user brought (an upload's id is its only key; a PACS series names a
+// study): kept out of the address's query string, which reaches server logs; the fragment does not.
+const isPrivateName = (name) => /^(upload|dicomweb):/.test(name ?? "");
 
 // --- widgets --------------------------------------------------------------------------
 
@@ -260,12 +268,12 @@ session.on("volumes", (volumes) => {
 
 function showOpenVolume() {
   const select = $("volume-select"), name = session.volume?.name ?? "";
-  if (name && ![...select.options].some((o) => o.value === name)) select.append(new Option(name, name));
+  if (name && ![...select.options].some((o) => o.value === name)) select.append(new Option(app.labels.get(name) ?? name, name));
   select.value = name;
 }
 
 session.on("loading", (l) => {
-  if (l) { app.progress = null; app.openError = null; }
+  if (l) { app.progress = null; app.openError = null; app.lastOpening = l.name; }
   $("open-volume").disabled = $("volume-select").disabled = !!l;
   updateMessage();
 });
@@ -308,14 +316,26 @@ session.on("opened", ({ state, restored }) => {
   $("volume-info").textContent = $("volume-info").title = describeVolume(volume);
   document.title = volume?.name ? `${volume.name} — volcast` : "volcast";
   const url = new URL(location.href);
-  url.searchParams.set("volume", volume?.name ?? "");
   // A view link names the view it opened; another volume makes it wrong.
   if (url.hash && parseViewLink(url.hash).view?.volume !== volume?.name && !app.pendingLink) url.hash = "";
+  if (isPrivateName(volume?.name)) {
+    url.searchParams.delete("volume");
+    if (!url.hash) url.hash = formatViewLink({ volume: volume.name });   // a reload reopens it while it lives
+  } else {
+    url.searchParams.set("volume", volume?.name ?? "");
+  }
   history.replaceState(null, "", url);
   updateMessage();
 });
 
 session.on("server_error", (e) => {
+  // A volume the user brought (an upload, a PACS series): said in words, the server's reason after.
+  if (e.request_type === "open_volume" && isPrivateName(app.lastOpening)) {
+    const said = describeError(e, { volume: app.lastOpening });
+    e = { ...e, message: [said.title, said.detail].filter(Boolean).join(" ") };
+    studies.showOpenError(e, app.lastOpening);
+    opener.openFailed(said.title);
+  }
   errors.show(e);
   // A refused quality policy leaves the server's: show that, not the refused values.
   if (e.request_type === "quality_policy") {
@@ -365,6 +385,8 @@ function describeVolume(v) {
 // The message over the view: whatever explains a missing or stale image.
 function updateMessage() {
   const state = session.connection.state;
+  const upload = opener.uploadMessage();
+  if (upload && state === "ready") return message.show(upload);
   $("view").classList.toggle("stale", state !== "ready" && view.hasImage);
   if (state !== "ready") {
     const why = session.connection.lastCloseReason;
@@ -373,14 +395,14 @@ function updateMessage() {
     return message.show({ title: "Connecting to the server…", detail: serverUrl, progress: true });
   }
   if (session.loading) {
-    const p = app.progress;
-    const share = STAGE_SHARE[p?.stage] ?? [0, 1];
-    const overall = p ? share[0] + p.fraction * (share[1] - share[0]) : true;
-    const detail = p ? `${p.stage}${p.task ? ` · ${p.task.replace(/_/g, " ")}` : ""} · ${Math.round(p.fraction * 100)} %` : "asking the server…";
-    return message.show({ title: `Opening ${session.loading.name}`, detail, progress: overall });
+    const p = app.progress, name = session.loading.name;
+    return message.show({ title: `Opening ${app.labels.get(name) ?? name}`, detail: progressText(p), progress: overallProgress(name, p) });
   }
   if (!session.volume) {
-    if (app.openError) return message.show({ kind: "error", title: "Could not open the volume", detail: `${app.openError.code}: ${app.openError.message}` });
+    if (app.openError) {
+      if (isPrivateName(app.lastOpening)) return message.show({ kind: "error", title: describeError(app.openError, { volume: app.lastOpening }).title, detail: `${app.openError.code}: ${app.openError.message}` });
+      return message.show({ kind: "error", title: "Could not open the volume", detail: `${app.openError.code}: ${app.openError.message}` });
+    }
     return message.show({ title: "No volume open", detail: "Choose a volume above." });
   }
   if (app.sceneProgress) {
@@ -527,7 +549,20 @@ $("reset-view").addEventListener("click", resetView);
 
 // For the console and the browser tests: the session and the frame headers seen.
 const slices = new SliceViews(document, session, $("slices"), $("view"));
-window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene, orientation, slices };
+
+// A volume the user brings: a series from a PACS (the studies panel), a file from their disk.
+function openBrought(name, label) {
+  if (label) app.labels.set(name, label);
+  openNamed(name);
+}
+const studies = new StudiesPanel($("studies-card"), session, { onOpen: openBrought });
+const opener = new FileOpener(document, session, {
+  serverUrl, token: params.get("token") || undefined,
+  open: (name, label) => openBrought(name, label),
+  changed: () => updateMessage(),
+  error: (text) => errors.show({ code: "upload", message: text }),
+});
+window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene, orientation, slices, studies, opener };
 
 // Closing the tab says goodbye, so the server frees the session at once.
 window.addEventListener("pagehide", () => session.stop());
