@@ -2,6 +2,7 @@
 """Open a volume, orbit the camera once around it, wait for the final frame and save it.
 
     /usr/bin/python3 protocol/python/examples/orbit.py --volume bonsai -o out/orbit.png
+    /usr/bin/python3 protocol/python/examples/orbit.py --file head.nii.gz -o out/orbit.png
 
 Needs a running volcast server and websockets (Debian: python3-websockets, so run it with
 /usr/bin/python3). Uses the volcast package beside this folder, or the installed one
@@ -34,9 +35,19 @@ async def orbit(args) -> int:
         print(f"server {server['server']} on {server['device']['name']} ({server['device']['type']})")
 
         def progress(p):
-            print(f"  {p['stage']} {p.get('task', '')} {100 * p['fraction']:.0f}%", flush=True)
+            # A DICOMweb series reports instances and bytes while retrieving, not a fraction.
+            done = [f"{100 * p['fraction']:.0f}%"] if "fraction" in p else []
+            if "instances" in p:
+                done.append(f"{p['instances'][0]}/{p['instances'][1]} instances")
+            if "bytes" in p:
+                done.append(f"{p['bytes'] / 2**20:.1f} MiB")
+            print(f"  {p['stage']} {p.get('task', '')} {', '.join(done)}", flush=True)
 
-        state = await client.request(vc.open_volume(args.volume), on_progress=progress)
+        name = args.volume
+        if args.file:
+            name = await client.upload(args.file)
+            print(f"uploaded {args.file} as {name}")
+        state = await client.open_volume(name, on_progress=progress)
         info = state["volume"]
         print(f"opened {info['name']}: dims {info.get('dims')}, spacing {info.get('spacing')}")
         width, height = (int(v) for v in args.size.split("x"))
@@ -78,7 +89,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--url", default="ws://127.0.0.1:8080/ws", help="the server's WebSocket URL")
     parser.add_argument("--token", help="access token, if the server asks for one")
-    parser.add_argument("--volume", required=True, help='a name from list_volumes, e.g. "bonsai"')
+    which = parser.add_mutually_exclusive_group(required=True)
+    which.add_argument("--volume", help='a name from list_volumes ("bonsai"), a find_studies series\' '
+                                        '"dicomweb:SOURCE/STUDY/SERIES", or an upload\'s "upload:<id>"')
+    which.add_argument("--file", help="a volume file of this machine to upload first (.nrrd, .nii, "
+                                      ".nii.gz, .mha, or a .zip of a DICOM series)")
     parser.add_argument("--steps", type=int, default=36, help="camera positions in one turn")
     parser.add_argument("--size", default="512x512", help="viewport WIDTHxHEIGHT in pixels")
     parser.add_argument("--target-ms", type=float, default=40, help="frame-time target while orbiting, ms")
