@@ -240,9 +240,10 @@ class ReadmeExampleTests(unittest.TestCase):
         # Every message the README documents is in its example session. (The package may know
         # a message before the README documents it: those are not required here.)
         documented = documented_types(read_readme())
-        self.assertEqual({t for side, t in seen if side == "C"}, set(vc.CLIENT_TYPES) & documented["C"])
+        why = "messages the README documents (and the package knows) but its example session does not show"
+        self.assertEqual({t for side, t in seen if side == "C"}, set(vc.CLIENT_TYPES) & documented["C"], why)
         self.assertEqual({t for side, t in seen if side == "S"},
-                         (set(vc.SERVER_TYPES) & documented["S"]) | {"frame"})
+                         (set(vc.SERVER_TYPES) & documented["S"]) | {"frame"}, why)
 
 
 class FakeSocket:
