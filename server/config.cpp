@@ -135,6 +135,27 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     app.add_option("--header-timeout-ms", c.headerTimeoutMs, "ms a client has to send a request's headers")
         ->envname("VOLCAST_HEADER_TIMEOUT_MS")
         ->check(CLI::Range(100, 3600000));
+    // Uploads.
+    double uploadMiB = double(c.maxUploadBytes >> 20), uploadStorageMiB = double(c.maxUploadStorageBytes >> 20);
+    double uploadTtlMin = c.uploadTtlSeconds / 60;
+    std::string uploadDir;
+    app.add_option("--max-upload-mib", uploadMiB, "Largest upload (POST /api/volumes), MiB; over it: 413")
+        ->envname("VOLCAST_MAX_UPLOAD_MIB")
+        ->check(CLI::Range(1.0, 1e7));
+    app.add_option("--max-uploads-per-address", c.maxUploadsPerAddress, "Uploads at once from one IP address")
+        ->envname("VOLCAST_MAX_UPLOADS_PER_ADDRESS")
+        ->check(CLI::Range(1, 10000));
+    app.add_option("--max-upload-storage-mib", uploadStorageMiB,
+                   "Disk for all uploads kept, MiB; the least recently opened are deleted to make room")
+        ->envname("VOLCAST_MAX_UPLOAD_STORAGE_MIB")
+        ->check(CLI::Range(1.0, 1e9));
+    app.add_option("--upload-ttl-min", uploadTtlMin, "Minutes an upload is kept after it arrives")
+        ->envname("VOLCAST_UPLOAD_TTL_MIN")
+        ->check(CLI::Range(0.01, 1e6));
+    app.add_option("--upload-dir", uploadDir,
+                   "Private folder for uploads (made 0700; what it holds is deleted at start and at shutdown; "
+                   "default: a new folder under $TMPDIR or /tmp)")
+        ->envname("VOLCAST_UPLOAD_DIR");
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError &e) {
@@ -147,6 +168,10 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     c.portFile = portFile;
     c.memoryBudgetBytes = uint64_t(budgetMiB * 1024.0 * 1024.0);
     c.maxRequestBytes = uint64_t(requestMiB * 1024.0 * 1024.0);
+    c.maxUploadBytes = uint64_t(uploadMiB * 1024.0 * 1024.0);
+    c.maxUploadStorageBytes = uint64_t(uploadStorageMiB * 1024.0 * 1024.0);
+    c.uploadTtlSeconds = uploadTtlMin * 60;
+    c.uploadDir = uploadDir;
     return c;
 }
 

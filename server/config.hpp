@@ -52,6 +52,13 @@ struct ServerConfig {
     std::string metricsBind;                  // "ADDR:PORT": /metrics, /healthz, /readyz there, and /metrics off the main port
     int maxConnectionsPerAddress = 64;        // open TCP connections from one IP (HTTP and WebSocket); 0: no cap
     int headerTimeoutMs = 10000;              // ms for a request's headers to arrive (slowloris)
+
+    // Uploads: POST /api/volumes (server/upload_store.hpp; docs/hardening.md).
+    uint64_t maxUploadBytes = uint64_t(1024) << 20;        // one upload's body; over it: 413
+    int maxUploadsPerAddress = 2;                          // uploads at once from one IP; more: 429
+    uint64_t maxUploadStorageBytes = uint64_t(8192) << 20; // all uploads kept; oldest unused evicted, else 507
+    double uploadTtlSeconds = 3600;                        // an upload's life (--upload-ttl-min; seconds for tests)
+    std::filesystem::path uploadDir;                       // empty: a new private folder under $TMPDIR or /tmp
 };
 
 // Parse flags and environment. Returns nullopt after printing help or an error (exitCode set).

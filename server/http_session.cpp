@@ -8,10 +8,14 @@
 #include <boost/asio/ip/address.hpp>
 #include <boost/beast/_experimental/test/stream.hpp>
 #include <boost/beast/websocket.hpp>
+#include <nlohmann/json.hpp>
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <filesystem>
 
 namespace volcast::server {
 
@@ -77,6 +81,22 @@ std::string printable(std::string_view s) {
         if ((unsigned char)c < 0x20 || (unsigned char)c == 0x7f) c = '?';
     if (s.size() > 200) out += "...";
     return out;
+}
+
+// One line for an answer: line breaks and other controls become spaces (a loader's message
+// may quote several lines of a parser's).
+std::string oneLine(std::string_view s) {
+    std::string out(s);
+    for (char &c : out)
+        if ((unsigned char)c < 0x20 || (unsigned char)c == 0x7f) c = ' ';
+    return out;
+}
+
+int hexDigit(char c) {
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
 }
 
 // Constant-time, so that the token cannot be guessed a character at a time from timings.
@@ -166,6 +186,37 @@ HttpEndpoint httpEndpointFor(const ServerConfig &config, std::string_view bindAd
     return e;
 }
 
+UploadName uploadNameOf(std::string_view target, std::string_view headerValue, bool headerPresent) {
+    // The header is taken as it is: a browser sends the name's UTF-8 bytes there.
+    if (headerPresent) return {std::string(headerValue), {}};
+    const size_t q = target.find('?');
+    if (q == std::string_view::npos) return {};
+    std::string_view query = target.substr(q + 1);
+    while (!query.empty()) {
+        const size_t amp = query.find('&');
+        const std::string_view pair = query.substr(0, amp);
+        query = amp == std::string_view::npos ? std::string_view() : query.substr(amp + 1);
+        if (!pair.starts_with("filename=")) continue;
+        const std::string_view encoded = pair.substr(9);
+        std::string name;
+        for (size_t i = 0; i < encoded.size(); ++i) {
+            if (encoded[i] == '+') {
+                name += ' ';
+            } else if (encoded[i] == '%') {
+                const int hi = i + 2 < encoded.size() ? hexDigit(encoded[i + 1]) : -1;
+                const int lo = i + 2 < encoded.size() ? hexDigit(encoded[i + 2]) : -1;
+                if (hi < 0 || lo < 0) return {std::nullopt, "malformed ?filename=: bad percent-encoding"};
+                name += char(hi * 16 + lo);
+                i += 2;
+            } else {
+                name += encoded[i];
+            }
+        }
+        return {std::move(name), {}};
+    }
+    return {};
+}
+
 template <class Stream>
 BasicHttpSession<Stream>::BasicHttpSession(Stream &&stream, std::shared_ptr<SharedState> state,
                                            std::shared_ptr<const HttpEndpoint> endpoint,
@@ -181,7 +232,8 @@ template <class Stream>
 void BasicHttpSession<Stream>::doRead() {
     parser_.emplace();
     parser_->header_limit(uint32_t(kMaxHeaderBytes));
-    parser_->body_limit(kMaxRequestBodyBytes);
+    // Set once the head says what the request is: an upload's limit is its own.
+    parser_->body_limit(boost::none);
     // The headers must all be there in time (slowloris); also the keep-alive idle limit.
     if constexpr (std::is_same_v<Stream, beast::tcp_stream>)
         stream_.expires_after(std::chrono::milliseconds(state_->config().headerTimeoutMs));
@@ -196,6 +248,18 @@ void BasicHttpSession<Stream>::onHeader(beast::error_code ec, size_t bytes) {
         const auto &h = parser_->get();
         return refuse(refusal->first, std::move(refusal->second), h.version(), h.method() == http::verb::head);
     }
+    {
+        const auto &h = parser_->get();
+        const std::string_view target = h.target();
+        if (!endpoint_->metricsOnly && h.method() == http::verb::post &&
+            target.substr(0, target.find('?')) == kUploadPath)
+            return startUpload();
+    }
+    // Any other request carries a small body at most (only 405s carry one).
+    if (const auto length = parser_->content_length(); length && *length > kMaxRequestBodyBytes)
+        return refuse(http::status::payload_too_large,
+                      "request body over " + std::to_string(kMaxRequestBodyBytes) + " bytes\n");
+    parser_->body_limit(kMaxRequestBodyBytes);
     if (parser_->is_done()) return onRead({}, bytes);
     if constexpr (std::is_same_v<Stream, beast::tcp_stream>) stream_.expires_after(kBodyTimeout);
     http::async_read(stream_, buffer_, *parser_,
@@ -276,6 +340,11 @@ void BasicHttpSession<Stream>::handle(Request &&req) {
         return handOff(std::move(req));
     }
 
+    if (path == kUploadPath) {
+        auto res = textResponse(req, http::status::method_not_allowed, "uploads are POST requests\n");
+        res.set(http::field::allow, "POST");
+        return send(std::move(res));
+    }
     if (req.method() != http::verb::get && req.method() != http::verb::head) {
         auto res = textResponse(req, http::status::method_not_allowed, "only GET and HEAD\n");
         res.set(http::field::allow, "GET, HEAD");
@@ -325,6 +394,165 @@ void BasicHttpSession<Stream>::handle(Request &&req) {
     res.set(http::field::content_type, mimeType(*file));
     res.content_length(size);
     send(std::move(res));
+}
+
+template <class Stream>
+std::string BasicHttpSession<Stream>::peerAddress() const {
+    if constexpr (std::is_same_v<Stream, beast::tcp_stream>) {
+        beast::error_code ec;
+        const auto endpoint = stream_.socket().remote_endpoint(ec);
+        if (!ec) return endpoint.address().to_string();
+    }
+    return "unknown";
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::startUpload() {
+    const auto &req = parser_->get();
+    const unsigned version = req.version();
+    const std::string &token = state_->config().token;
+    if (!token.empty() && !bearerMatches(req[http::field::authorization], token)) {
+        auto res = textResponse(version, false, false, http::status::unauthorized,
+                                "uploads need the server's token: Authorization: Bearer <token>\n");
+        res.set(http::field::www_authenticate, "Bearer realm=\"volcast\"");
+        return send(std::move(res));
+    }
+    const auto header = req.find("X-Volcast-Filename");
+    const bool named = header != req.end();
+    const UploadName given = uploadNameOf(req.target(), named ? std::string_view(header->value()) : std::string_view(),
+                                          named);
+    if (!given.error.empty()) return refuse(http::status::bad_request, given.error + "\n", version);
+    if (!given.name)
+        return refuse(http::status::bad_request,
+                      "no file name: send it in the X-Volcast-Filename header or as ?filename=\n", version);
+    const std::string &name = *given.name;
+    if (const auto problem = uploadFilenameProblem(name))
+        return refuse(http::status::bad_request, *problem + "\n", version);
+    // Checked UTF-8 without controls above: quoting it whole is safe.
+    if (!uploadExtension(name))
+        return refuse(http::status::unsupported_media_type,
+                      "unsupported file type \"" + name +
+                          "\": upload .nrrd, .nii, .nii.gz, .mha or .zip (a DICOM series)\n",
+                      version);
+    UploadStore &store = state_->uploads();
+    const uint64_t limit = store.maxUploadBytes();
+    const std::optional<uint64_t> length =
+        parser_->content_length() ? std::optional<uint64_t>(*parser_->content_length()) : std::nullopt;
+    const bool chunked = parser_->chunked();
+    // Refused from the head alone: not a byte of such a body is read.
+    if (length && *length > limit)
+        return refuse(http::status::payload_too_large,
+                      fmt::format("upload of {} bytes is over the limit of {} MiB (server flag --max-upload-mib)\n",
+                                  *length, limit >> 20),
+                      version);
+    if (!chunked && length.value_or(0) == 0)
+        return refuse(http::status::bad_request, "the upload is empty: send the file as the request body\n", version);
+    auto begun = store.begin(peerAddress(), name, chunked ? std::optional<uint64_t>() : length);
+    if (const auto *refusal = std::get_if<UploadRefusal>(&begun))
+        return refuse(http::status(refusal->status), oneLine(refusal->message) + "\n", version);
+    pendingUpload_ = std::get<std::shared_ptr<UploadStore::Pending>>(std::move(begun));
+    const bool expectContinue = beast::iequals(req[http::field::expect], "100-continue");
+
+    upload_.emplace(std::move(*parser_));
+    upload_->body_limit(limit);
+    beast::error_code fec;
+    upload_->get().body().open(pendingUpload_->file().c_str(), beast::file_mode::write_new, fec);
+    if (fec) {
+        spdlog::error("uploads: cannot write {}: {}", pendingUpload_->file().string(), fec.message());
+        pendingUpload_.reset();
+        return refuse(http::status::internal_server_error, "cannot store the upload\n", version);
+    }
+    if (expectContinue) {
+        // curl asks before sending a body over 1 MiB, and waits a second for this otherwise.
+        auto res = std::make_shared<http::response<http::empty_body>>(http::status::continue_, version);
+        http::async_write(stream_, *res, [self = this->shared_from_this(), res](beast::error_code ec, size_t) {
+            if (ec) return self->doClose();
+            self->readUploadBody();
+        });
+        return;
+    }
+    readUploadBody();
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::readUploadBody() {
+    if constexpr (std::is_same_v<Stream, beast::tcp_stream>) {
+        // The stream's own timeout would close the socket, leaving no way to answer: a timer
+        // of ours cancels the read instead, and the answer is a 408.
+        stream_.expires_never();
+        if (!silence_) silence_.emplace(stream_.get_executor());
+        silence_->expires_after(std::chrono::milliseconds(state_->config().headerTimeoutMs));
+        silence_->async_wait([self = this->shared_from_this()](beast::error_code ec) {
+            if (ec) return;
+            self->silent_ = true;
+            beast::error_code ignored;
+            self->stream_.socket().cancel(ignored);
+        });
+    }
+    http::async_read_some(stream_, buffer_, *upload_,
+                          beast::bind_front_handler(&BasicHttpSession::onUploadBody, this->shared_from_this()));
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::onUploadBody(beast::error_code ec, size_t) {
+    if (silence_) silence_->cancel();
+    const unsigned version = upload_->get().version();
+    if (silent_) {
+        pendingUpload_.reset();
+        return refuse(http::status::request_timeout,
+                      fmt::format("the upload stopped arriving: no bytes for {} ms (server flag --header-timeout-ms)\n",
+                                  state_->config().headerTimeoutMs),
+                      version);
+    }
+    if (ec == http::error::body_limit) {
+        pendingUpload_.reset();
+        return refuse(http::status::payload_too_large,
+                      fmt::format("upload over the limit of {} MiB (server flag --max-upload-mib)\n",
+                                  state_->uploads().maxUploadBytes() >> 20),
+                      version);
+    }
+    if (ec == http::error::end_of_stream || ec == http::error::partial_message || ec == net::error::eof ||
+        ec == net::error::connection_reset || ec == net::error::operation_aborted) {
+        // The client went away: the part it sent is deleted with the pending upload.
+        pendingUpload_.reset();
+        return doClose();
+    }
+    if (ec) {
+        pendingUpload_.reset();
+        return refuse(http::status::bad_request, "malformed upload body: " + ec.message() + "\n", version);
+    }
+    if (!upload_->is_done()) return readUploadBody();
+    upload_->get().body().close();
+    std::error_code sizeError;
+    const uint64_t bytes = std::filesystem::file_size(pendingUpload_->file(), sizeError);
+    // The answer comes back to this connection's strand; the parse never runs on a network thread.
+    state_->uploads().finish(std::move(pendingUpload_), sizeError ? 0 : bytes,
+                             [self = this->shared_from_this()](UploadStore::Result result) {
+                                 net::post(self->stream_.get_executor(), [self, result = std::move(result)]() mutable {
+                                     self->onUploadChecked(std::move(result));
+                                 });
+                             });
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::onUploadChecked(UploadStore::Result result) {
+    const auto &req = upload_->get();
+    const unsigned version = req.version();
+    const bool keepAlive = req.keep_alive();
+    upload_.reset();
+    if (const auto *accepted = std::get_if<UploadStore::Accepted>(&result)) {
+        const nlohmann::json body = {{"volume", accepted->volume},
+                                     {"filename", accepted->filename},
+                                     {"bytes", accepted->bytes},
+                                     {"expires_in_s", std::lround(accepted->expiresInSeconds)},
+                                     {"dims", accepted->dims},
+                                     {"voxel_type", accepted->voxelType}};
+        return send(textResponse(version, false, keepAlive, http::status::created,
+                                 body.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n",
+                                 "application/json"));
+    }
+    const auto &refusal = std::get<UploadRefusal>(result);
+    send(textResponse(version, false, keepAlive, http::status(refusal.status), oneLine(refusal.message) + "\n"));
 }
 
 template <class Stream>

@@ -1,8 +1,9 @@
 #pragma once
 // One HTTP connection (Beast advanced_server's http_session): answers GET/HEAD for the
-// health endpoints, the metrics and the static files, and hands a WebSocket upgrade on /ws
-// to a WebsocketSession. Every bad request gets its status (400, 405, 413, 414, 421, 431)
-// with a line saying what was wrong, then the connection closes.
+// health endpoints, the metrics and the static files, takes uploads (POST /api/volumes,
+// UploadStore), and hands a WebSocket upgrade on /ws to a WebsocketSession. Every bad request
+// gets its status (400, 405, 413, 414, 421, 431) with a line saying what was wrong, then the
+// connection closes.
 //
 // Generic over its stream so that a fuzz target can drive it with beast::test::stream; the
 // server uses HttpSession (a tcp_stream). Only a tcp_stream has timeouts and can become a
@@ -10,7 +11,9 @@
 // the refusals (404, 403) stay reachable without a socket.
 
 #include "server/shared_state.hpp"
+#include "server/upload_store.hpp"
 
+#include <boost/asio/steady_timer.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 
@@ -49,6 +52,16 @@ inline constexpr size_t kMaxTargetBytes = 8 * 1024;
 inline constexpr size_t kMaxHeaderBytes = 16 * 1024;
 inline constexpr size_t kMaxRequestBodyBytes = 64 * 1024;
 
+// Uploads: POST here, the file as the body (server/README.md, "HTTP").
+inline constexpr const char *kUploadPath = "/api/volumes";
+// The upload's file name: the X-Volcast-Filename header as it is, else `?filename=`
+// percent-decoded; nullopt when neither is there; an error message for a bad encoding.
+struct UploadName {
+    std::optional<std::string> name;
+    std::string error;
+};
+UploadName uploadNameOf(std::string_view target, std::string_view headerValue, bool headerPresent);
+
 template <class Stream>
 class BasicHttpSession : public std::enable_shared_from_this<BasicHttpSession<Stream>> {
   public:
@@ -77,6 +90,15 @@ class BasicHttpSession : public std::enable_shared_from_this<BasicHttpSession<St
     // Why the request head is refused (status, message), or nullopt.
     std::optional<std::pair<boost::beast::http::status, std::string>> checkHeader() const;
 
+    // POST /api/volumes: the head's checks, then the body streamed into the upload's file
+    // (each read within the header timeout: 408 when the body stops arriving), then the parse
+    // on the store's worker, answered back on this connection's strand.
+    void startUpload();
+    void readUploadBody();
+    void onUploadBody(boost::beast::error_code ec, size_t bytes);
+    void onUploadChecked(UploadStore::Result result);
+    std::string peerAddress() const;
+
     Stream stream_;
     boost::beast::flat_buffer buffer_;
     std::shared_ptr<SharedState> state_;
@@ -85,6 +107,12 @@ class BasicHttpSession : public std::enable_shared_from_this<BasicHttpSession<St
     std::optional<boost::beast::http::request_parser<boost::beast::http::string_body>> parser_;
     std::array<char, 4096> drain_{};
     size_t drained_ = 0;
+
+    using UploadParser = boost::beast::http::request_parser<boost::beast::http::file_body>;
+    std::optional<UploadParser> upload_;
+    std::shared_ptr<UploadStore::Pending> pendingUpload_;
+    std::optional<boost::asio::steady_timer> silence_;   // a tcp_stream's upload body only
+    bool silent_ = false;                               // the silence timer fired
 };
 
 // http_session.cpp instantiates it for these two streams only.

@@ -15,6 +15,7 @@
 #include "server/metrics.hpp"
 #include "server/render_scheduler.hpp"
 #include "server/slice_service.hpp"
+#include "server/upload_store.hpp"
 #include "server/volume_registry.hpp"
 
 #include <atomic>
@@ -41,6 +42,9 @@ class SharedState {
     VolumeRegistry &registry() { return *registry_; }
     RenderScheduler &scheduler() { return *scheduler_; }
     SliceService &slices() { return *slices_; }
+    // Uploaded volumes (POST /api/volumes); also the registry's provider of "upload:" names.
+    UploadStore &uploads() { return *uploads_; }
+    std::shared_ptr<UploadStore> uploadStore() const { return uploads_; }
     const protocol::DeviceInfo &device() const { return device_; }
     protocol::ServerLimits limits() const;
     uint16_t port() const { return port_; }
@@ -99,6 +103,8 @@ class SharedState {
     bool kernelReady_ = false;
     std::atomic<int> warmUpFrames_{0};
     std::string kernelError_;
+    // Last, so that it is made once config_ is, and goes first: its worker parses files.
+    std::shared_ptr<UploadStore> uploads_ = std::make_shared<UploadStore>(config_);
 };
 
 } // namespace volcast::server

@@ -1,0 +1,410 @@
+#include "server/upload_store.hpp"
+
+#include "renderer/io/volume_io.hpp"
+
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include <sys/random.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <stdexcept>
+
+namespace volcast::server {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+constexpr size_t kIdHexChars = 32;   // 128 bits
+
+bool isId(std::string_view s) {
+    return s.size() == kIdHexChars &&
+           std::all_of(s.begin(), s.end(), [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
+}
+
+std::string newId() {
+    unsigned char bytes[kIdHexChars / 2];
+    size_t got = 0;
+    while (got < sizeof bytes) {
+        const ssize_t n = ::getrandom(bytes + got, sizeof bytes - got, 0);
+        if (n < 0) {
+            if (errno == EINTR) continue;
+            throw std::runtime_error(std::string("getrandom failed: ") + std::strerror(errno));
+        }
+        got += size_t(n);
+    }
+    std::string id;
+    for (const unsigned char b : bytes) id += fmt::format("{:02x}", b);
+    return id;
+}
+
+// Valid UTF-8 (no overlong forms, no surrogates, nothing past U+10FFFF).
+bool validUtf8(std::string_view s) {
+    size_t i = 0;
+    while (i < s.size()) {
+        const auto c = (unsigned char)s[i];
+        int more = 0;
+        uint32_t cp = 0;
+        if (c < 0x80) {
+            ++i;
+            continue;
+        } else if ((c & 0xE0) == 0xC0) {
+            more = 1, cp = c & 0x1F;
+        } else if ((c & 0xF0) == 0xE0) {
+            more = 2, cp = c & 0x0F;
+        } else if ((c & 0xF8) == 0xF0) {
+            more = 3, cp = c & 0x07;
+        } else {
+            return false;
+        }
+        if (i + size_t(more) >= s.size()) return false;
+        for (int k = 1; k <= more; ++k) {
+            const auto d = (unsigned char)s[i + size_t(k)];
+            if ((d & 0xC0) != 0x80) return false;
+            cp = (cp << 6) | (d & 0x3F);
+        }
+        if ((more == 1 && cp < 0x80) || (more == 2 && cp < 0x800) || (more == 3 && cp < 0x10000) || cp > 0x10FFFF ||
+            (cp >= 0xD800 && cp <= 0xDFFF))
+            return false;
+        i += size_t(more) + 1;
+    }
+    return true;
+}
+
+std::string lower(std::string_view s) {
+    std::string out(s);
+    std::transform(out.begin(), out.end(), out.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return out;
+}
+
+void removeFolder(const fs::path &folder) {
+    std::error_code ec;
+    fs::remove_all(folder, ec);
+    if (ec) spdlog::warn("uploads: cannot delete {}: {}", folder.string(), ec.message());
+}
+
+// The folder for uploads: given (made if missing, our leftovers in it deleted) or a new one.
+fs::path makeFolder(const fs::path &given, bool &own) {
+    if (given.empty()) {
+        const char *tmp = std::getenv("TMPDIR");
+        std::string pattern = (((tmp && *tmp) ? fs::path(tmp) : fs::path("/tmp")) / "volcast-uploads-XXXXXX").string();
+        if (!::mkdtemp(pattern.data()))   // mkdtemp makes it 0700
+            throw std::runtime_error(fmt::format("cannot create the upload folder {}: {}", pattern, std::strerror(errno)));
+        own = true;
+        return pattern;
+    }
+    std::error_code ec;
+    fs::create_directories(given, ec);
+    struct stat st{};
+    if (::lstat(given.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
+        throw std::runtime_error(fmt::format("the upload folder {} is not a folder (a link is not taken)", given.string()));
+    if (st.st_uid != ::geteuid())
+        throw std::runtime_error(fmt::format("the upload folder {} belongs to another user", given.string()));
+    if (::chmod(given.c_str(), 0700) != 0)
+        throw std::runtime_error(
+            fmt::format("cannot make the upload folder {} private: {}", given.string(), std::strerror(errno)));
+    // Only what this server would have made there: a given folder may hold other things.
+    for (const auto &entry : fs::directory_iterator(given, ec))
+        if (isId(entry.path().filename().string())) removeFolder(entry.path());
+    own = false;
+    return given;
+}
+
+} // namespace
+
+std::optional<std::string> uploadFilenameProblem(std::string_view name) {
+    if (name.empty()) return "the file name is empty";
+    if (name.size() > 255) return fmt::format("the file name is {} bytes long, over 255", name.size());
+    if (!validUtf8(name)) return "the file name is not valid UTF-8";
+    for (const char c : name) {
+        if (c == '/' || c == '\\') return "the file name holds a '/' or '\\' (give the name only, not a path)";
+        if ((unsigned char)c < 0x20 || c == 0x7f) return "the file name holds a control character";
+    }
+    return std::nullopt;
+}
+
+std::optional<std::string> uploadExtension(std::string_view name) {
+    const std::string l = lower(name);
+    for (const char *ext : {".nii.gz", ".nrrd", ".nii", ".mha", ".zip"})
+        if (l.size() > std::strlen(ext) && l.ends_with(ext)) return std::string(ext);
+    return std::nullopt;
+}
+
+UploadStore::UploadStore(const ServerConfig &config)
+    : maxUploadBytes_(config.maxUploadBytes), maxPerAddress_(config.maxUploadsPerAddress),
+      maxStorageBytes_(config.maxUploadStorageBytes), ttl_(config.uploadTtlSeconds),
+      maxLoadBytes_(config.memoryBudgetBytes), loadTimeoutS_(config.loadTimeoutS) {
+    folder_ = makeFolder(config.uploadDir, ownFolder_);
+    spdlog::debug("uploads: kept in {}", folder_.string());
+    worker_ = std::thread([this] { work(); });
+}
+
+UploadStore::~UploadStore() {
+    std::deque<Job> dropped;
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;
+        dropped.swap(jobs_);
+    }
+    wake_.notify_all();
+    if (worker_.joinable()) worker_.join();
+    dropped.clear();   // their Pending release into the store: while it is whole
+    std::lock_guard lock(mutex_);
+    for (const auto &[id, record] : uploads_) removeFolder(record.folder);
+    uploads_.clear();
+    if (ownFolder_) removeFolder(folder_);
+}
+
+void UploadStore::setForgetHook(std::function<void(const std::string &)> hook) {
+    std::lock_guard lock(mutex_);
+    forget_ = std::move(hook);
+}
+
+size_t UploadStore::count() const {
+    std::lock_guard lock(mutex_);
+    return uploads_.size();
+}
+
+std::optional<std::string> UploadStore::idOf(const std::string &name) const {
+    if (!name.starts_with(kPrefix)) return std::nullopt;
+    const std::string id = name.substr(kPrefix.size());
+    return isId(id) ? std::optional(id) : std::nullopt;
+}
+
+std::string UploadStore::notFoundMessage(const std::string &name) const {
+    std::string shown = name.substr(0, 100);
+    for (char &c : shown)
+        if ((unsigned char)c < 0x20 || (unsigned char)c >= 0x7f) c = '?';
+    return fmt::format("no uploaded volume \"{}\" (uploads expire after {:g} minutes)", shown, ttl_.count() / 60);
+}
+
+std::vector<std::pair<std::string, UploadStore::Record>> UploadStore::takeExpired(Clock::time_point now) const {
+    std::vector<std::pair<std::string, Record>> gone;
+    for (auto it = uploads_.begin(); it != uploads_.end();) {
+        if (now - it->second.created >= ttl_) {
+            stored_ -= it->second.bytes;
+            gone.emplace_back(it->first, std::move(it->second));
+            it = uploads_.erase(it);
+        } else {
+            ++it;
+        }
+    }
+    return gone;
+}
+
+void UploadStore::forgetAll(std::vector<std::pair<std::string, Record>> &gone) const {
+    std::function<void(const std::string &)> hook;
+    {
+        std::lock_guard lock(mutex_);
+        hook = forget_;
+    }
+    for (const auto &[id, record] : gone) {
+        spdlog::info("uploads: deleted upload:{}", id);
+        removeFolder(record.folder);
+        if (hook) hook(std::string(kPrefix) + id);
+    }
+}
+
+std::optional<protocol::ProtocolError> UploadStore::check(const std::string &name) const {
+    const auto id = idOf(name);
+    std::vector<std::pair<std::string, Record>> gone;
+    bool found = false;
+    {
+        std::lock_guard lock(mutex_);
+        gone = takeExpired(Clock::now());
+        if (id) {
+            const auto it = uploads_.find(*id);
+            if (it != uploads_.end()) {
+                found = true;
+                it->second.lastUse = Clock::now();
+            }
+        }
+    }
+    forgetAll(gone);
+    if (found) return std::nullopt;
+    protocol::ProtocolError e;
+    e.code = protocol::ErrorCode::NotFound;
+    e.message = notFoundMessage(name);
+    return e;
+}
+
+fs::path UploadStore::fetch(const std::string &name, const FetchContext &) {
+    const auto id = idOf(name);
+    std::lock_guard lock(mutex_);
+    const auto it = id ? uploads_.find(*id) : uploads_.end();
+    if (it == uploads_.end() || Clock::now() - it->second.created >= ttl_)
+        throw VolumeFetchError(protocol::ErrorCode::NotFound, notFoundMessage(name));
+    it->second.lastUse = Clock::now();
+    return it->second.file;
+}
+
+bool UploadStore::makeRoom(uint64_t bytes, std::vector<std::pair<std::string, Record>> &evicted) {
+    const auto used = [&] { return stored_ + reserved_; };
+    if (bytes > maxStorageBytes_) return false;
+    uint64_t evictable = 0;
+    for (const auto &[id, r] : uploads_) evictable += r.bytes;
+    if (used() + bytes > maxStorageBytes_ + evictable) return false;
+    while (used() + bytes > maxStorageBytes_ && !uploads_.empty()) {
+        const auto oldest = std::min_element(uploads_.begin(), uploads_.end(), [](const auto &a, const auto &b) {
+            return a.second.lastUse < b.second.lastUse;
+        });
+        stored_ -= oldest->second.bytes;
+        evicted.emplace_back(oldest->first, std::move(oldest->second));
+        uploads_.erase(oldest);
+    }
+    return used() + bytes <= maxStorageBytes_;
+}
+
+std::variant<std::shared_ptr<UploadStore::Pending>, UploadRefusal>
+UploadStore::begin(const std::string &address, const std::string &filename, std::optional<uint64_t> declaredBytes) {
+    std::vector<std::pair<std::string, Record>> gone;
+    std::shared_ptr<Pending> pending(new Pending());
+    std::optional<UploadRefusal> refusal;
+    {
+        std::lock_guard lock(mutex_);
+        gone = takeExpired(Clock::now());
+        if (stopping_) {
+            refusal = UploadRefusal{503, "the server is shutting down"};
+        } else if (active_[address] >= maxPerAddress_) {
+            refusal = UploadRefusal{429, fmt::format("{} uploads from this address are already under way, the most "
+                                                     "at once (server flag --max-uploads-per-address)",
+                                                     active_[address])};
+        } else if (const uint64_t need = declaredBytes.value_or(0); !makeRoom(need, gone)) {
+            refusal = UploadRefusal{507, fmt::format("no room for {} more bytes in the upload storage of {} MiB "
+                                                     "(server flag --max-upload-storage-mib)",
+                                                     need, maxStorageBytes_ >> 20)};
+        } else {
+            pending->store_ = this;
+            pending->id_ = newId();
+            pending->address_ = address;
+            pending->filename_ = filename;
+            pending->reserved_ = need;
+            pending->folder_ = folder_ / pending->id_;
+            pending->file_ = pending->folder_ / ("volume" + uploadExtension(filename).value_or(".bin"));
+            reserved_ += need;
+            ++active_[address];
+        }
+        if (active_[address] == 0) active_.erase(address);
+    }
+    forgetAll(gone);
+    if (refusal) return *refusal;
+    std::error_code ec;
+    if (!fs::create_directory(pending->folder_, ec) || ec)
+        return UploadRefusal{500, "cannot store the upload: " + (ec ? ec.message() : std::string("id in use"))};
+    return pending;
+}
+
+UploadStore::Pending::~Pending() {
+    if (store_) store_->release(*this);
+}
+
+void UploadStore::release(Pending &p) {
+    {
+        std::lock_guard lock(mutex_);
+        reserved_ -= p.reserved_;
+        if (--active_[p.address_] <= 0) active_.erase(p.address_);
+    }
+    if (!p.kept_) removeFolder(p.folder_);
+}
+
+void UploadStore::finish(std::shared_ptr<Pending> pending, uint64_t bytes, std::function<void(Result)> done) {
+    {
+        std::lock_guard lock(mutex_);
+        if (stopping_) return;
+        jobs_.push_back(Job{std::move(pending), bytes, std::move(done)});
+    }
+    wake_.notify_all();
+}
+
+void UploadStore::work() {
+    // Expired uploads are deleted at least this often, even with no request coming.
+    const auto sweepEvery = std::chrono::duration_cast<Clock::duration>(
+        std::clamp(ttl_ / 10, std::chrono::duration<double>(0.05), std::chrono::duration<double>(30)));
+    std::unique_lock lock(mutex_);
+    while (!stopping_) {
+        wake_.wait_for(lock, sweepEvery, [&] { return stopping_ || !jobs_.empty(); });
+        if (stopping_) break;
+        auto gone = takeExpired(Clock::now());
+        std::optional<Job> job;
+        if (!jobs_.empty()) {
+            job = std::move(jobs_.front());
+            jobs_.pop_front();
+        }
+        lock.unlock();
+        forgetAll(gone);
+        if (job) {
+            Result result = verify(*job);
+            job->done(std::move(result));
+            job.reset();   // the Pending released without the lock held
+        }
+        lock.lock();
+    }
+}
+
+UploadStore::Result UploadStore::verify(Job &job) {
+    Pending &p = *job.pending;
+    LoadOptions options;
+    options.parseInChild = true;
+    options.maxBytes = maxLoadBytes_;
+    options.maxArchiveBytes = maxUploadBytes_;
+    options.timeLimitSeconds = loadTimeoutS_;
+    options.stopRequested = [this] {
+        std::lock_guard lock(mutex_);
+        return stopping_;
+    };
+    Accepted accepted;
+    try {
+        // The volume is dropped: the registry loads the file again when it is opened
+        // (an upload may never be opened, and the registry's budget decides what stays).
+        const Volume v = loadVolume(p.file_, options);
+        accepted.dims = {v.dims.x, v.dims.y, v.dims.z};
+        accepted.voxelType = std::string(voxelTypeName(v.sourceType));
+    } catch (const std::exception &e) {
+        // The loader names the file by its path: the client sees its own file name instead.
+        std::string message = e.what();
+        for (const std::string &path : {p.file_.string(), p.folder_.string(), folder_.string()})
+            for (size_t at; (at = message.find(path)) != std::string::npos;)
+                message.replace(at, path.size(), path == p.file_.string() ? p.filename_ : "");
+        // The file name may name a patient: at debug level only.
+        spdlog::info("uploads: refused an upload of {} bytes", job.bytes);
+        spdlog::debug("uploads: refused {}: {}", p.filename_, message);
+        return UploadRefusal{422, message};
+    }
+    std::vector<std::pair<std::string, Record>> evicted;
+    std::optional<UploadRefusal> refusal;
+    {
+        std::lock_guard lock(mutex_);
+        // What was reserved at begin() is this upload's own room.
+        reserved_ -= p.reserved_;
+        p.reserved_ = 0;
+        if (!makeRoom(job.bytes, evicted)) {
+            refusal = UploadRefusal{507, fmt::format("no room for {} bytes in the upload storage of {} MiB (server "
+                                                     "flag --max-upload-storage-mib)",
+                                                     job.bytes, maxStorageBytes_ >> 20)};
+        } else {
+            const auto now = Clock::now();
+            uploads_[p.id_] = Record{p.folder_, p.file_, p.filename_, job.bytes, now, now};
+            stored_ += job.bytes;
+            p.kept_ = true;
+        }
+    }
+    forgetAll(evicted);
+    if (refusal) return *refusal;
+    accepted.volume = std::string(kPrefix) + p.id_;
+    accepted.filename = p.filename_;
+    accepted.bytes = job.bytes;
+    accepted.expiresInSeconds = ttl_.count();
+    spdlog::info("uploads: kept {} ({} bytes, {} x {} x {} {})", accepted.volume, job.bytes, accepted.dims[0],
+                 accepted.dims[1], accepted.dims[2], accepted.voxelType);
+    return accepted;
+}
+
+} // namespace volcast::server

@@ -1,0 +1,163 @@
+#pragma once
+// Volumes users upload (POST /api/volumes), opened as "upload:<id>". The id is 128 random
+// bits (getrandom) as 32 lowercase hex characters and is the only way to reach an upload:
+// uploads are never listed. Each lives in a folder of its own inside a private folder
+// (0700; --upload-dir, else a new folder under $TMPDIR or /tmp), on disk under a name the
+// server chose, never the user's; the folder's uploads are deleted at start (a given
+// --upload-dir's leftovers), at expiry, at eviction and at shutdown.
+//
+// An upload goes: begin() (the request's head passed its checks: a slot of its address and
+// storage room reserved) → the body streamed into pending->file() → finish(), which on the
+// store's worker thread parses the file (LoadOptions::parseInChild: first in the checker
+// process, so a parser crash ends the child, not the server) and only then keeps it.
+// Limits: bytes per upload, uploads at once per address, total storage (the least recently
+// opened uploads are evicted to make room), a lifetime from arrival. An upload that expires
+// or is evicted is reported to the forget hook (the registry then drops its loaded copy).
+
+#include "server/config.hpp"
+#include "server/volume_provider.hpp"
+
+#include <array>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <variant>
+#include <vector>
+
+namespace volcast::server {
+
+// Why an upload is refused: the HTTP status and one line for the client (no server path).
+struct UploadRefusal {
+    int status = 400;
+    std::string message;
+};
+
+// Why `filename` cannot name an upload (400), or nullopt: it must be UTF-8, 1..255 bytes, with
+// no '/', '\\', NUL or other control characters.
+std::optional<std::string> uploadFilenameProblem(std::string_view filename);
+// The format's extension of `filename` in lower case (".nrrd", ".nii", ".nii.gz", ".mha",
+// ".zip"), or nullopt for any other (415).
+std::optional<std::string> uploadExtension(std::string_view filename);
+
+class UploadStore : public VolumeProvider {
+  public:
+    static constexpr std::string_view kPrefix = "upload:";
+
+    // Creates (or empties of its own leftovers) the upload folder; throws std::runtime_error
+    // naming the folder when it cannot be made private.
+    explicit UploadStore(const ServerConfig &config);
+    // Stops the worker and deletes every upload (and the folder when the store made it).
+    ~UploadStore() override;
+    UploadStore(const UploadStore &) = delete;
+    UploadStore &operator=(const UploadStore &) = delete;
+
+    // Called (without the store's lock, on whichever thread expired or evicted it) with the
+    // name of each upload that is gone.
+    void setForgetHook(std::function<void(const std::string &name)> hook);
+
+    std::string_view prefix() const override { return kPrefix; }
+    std::optional<protocol::ProtocolError> check(const std::string &name) const override;
+    std::filesystem::path fetch(const std::string &name, const FetchContext &context) override;
+
+    // One upload under way: its address slot and reserved room, released when the last
+    // reference goes; its folder is deleted then unless finish() kept it.
+    class Pending {
+      public:
+        ~Pending();
+        Pending(const Pending &) = delete;
+        Pending &operator=(const Pending &) = delete;
+        const std::filesystem::path &file() const { return file_; }
+        const std::string &filename() const { return filename_; }
+
+      private:
+        friend class UploadStore;
+        Pending() = default;
+        UploadStore *store_ = nullptr;
+        std::string id_, address_, filename_;
+        std::filesystem::path folder_, file_;
+        uint64_t reserved_ = 0;
+        bool kept_ = false;
+    };
+
+    // The request's head passed its checks (name, extension, token, length): reserve a slot
+    // of `address` (429 past --max-uploads-per-address) and room for `declaredBytes` when
+    // known (507 when even evicting every unused upload would not make it).
+    std::variant<std::shared_ptr<Pending>, UploadRefusal> begin(const std::string &address, const std::string &filename,
+                                                                std::optional<uint64_t> declaredBytes);
+
+    struct Accepted {
+        std::string volume;   // "upload:<id>"
+        std::string filename;
+        uint64_t bytes = 0;
+        double expiresInSeconds = 0;
+        std::array<int64_t, 3> dims{};
+        std::string voxelType;
+    };
+    using Result = std::variant<Accepted, UploadRefusal>;
+    // The body is all in pending->file() (`bytes` of it): parse it on the worker thread and
+    // keep it (201) or refuse it (422 naming the problem; 507 without room). `done` runs on the
+    // worker thread; it is dropped uncalled when the store stops first.
+    void finish(std::shared_ptr<Pending> pending, uint64_t bytes, std::function<void(Result)> done);
+
+    uint64_t maxUploadBytes() const { return maxUploadBytes_; }
+    const std::filesystem::path &folder() const { return folder_; }
+    // Uploads kept now (tests).
+    size_t count() const;
+
+  private:
+    struct Record {
+        std::filesystem::path folder, file;
+        std::string filename;
+        uint64_t bytes = 0;
+        std::chrono::steady_clock::time_point created, lastUse;
+    };
+    struct Job {
+        std::shared_ptr<Pending> pending;
+        uint64_t bytes = 0;
+        std::function<void(Result)> done;
+    };
+
+    void release(Pending &pending);
+    void work();
+    Result verify(Job &job);
+    // With mutex_ held: the ids of expired uploads, removed from the map (their folders are
+    // deleted and the hook told by the caller, outside the lock).
+    std::vector<std::pair<std::string, Record>> takeExpired(std::chrono::steady_clock::time_point now) const;
+    // With mutex_ held: evict unused uploads, least recently opened first, until `bytes` more
+    // fit; false (nothing evicted) when they cannot.
+    bool makeRoom(uint64_t bytes, std::vector<std::pair<std::string, Record>> &evicted);
+    void forgetAll(std::vector<std::pair<std::string, Record>> &gone) const;
+    std::string notFoundMessage(const std::string &name) const;
+    std::optional<std::string> idOf(const std::string &name) const;
+
+    const uint64_t maxUploadBytes_;
+    const int maxPerAddress_;
+    const uint64_t maxStorageBytes_;
+    const std::chrono::duration<double> ttl_;
+    const uint64_t maxLoadBytes_;
+    const double loadTimeoutS_;
+    std::filesystem::path folder_;
+    bool ownFolder_ = false;   // made here: removed whole at the end
+
+    mutable std::mutex mutex_;
+    mutable std::map<std::string, Record> uploads_;
+    std::map<std::string, int> active_;   // uploads under way per address
+    mutable uint64_t stored_ = 0;
+    uint64_t reserved_ = 0;
+    std::function<void(const std::string &)> forget_;
+    std::deque<Job> jobs_;
+    std::condition_variable wake_;
+    bool stopping_ = false;
+    std::thread worker_;
+};
+
+} // namespace volcast::server
