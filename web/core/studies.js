@@ -197,7 +197,7 @@ export function describeError(error, { volume = null, source = null } = {}) {
   const where = source ?? sourceOf(volume);
   const name = String(volume ?? "");
   if (name.startsWith("upload:") && code === "not_found") {
-    return { title: "This uploaded file has expired; open it again.", detail: "The server keeps an uploaded file for a limited time only." };
+    return { title: "This uploaded file has expired; open it again.", detail: said };
   }
   switch (code) {
     case "source_failed":

@@ -4,11 +4,12 @@
 // the page's address then reopens the upload while it lives; an expired (unknown) upload
 // says so in words; a file the server cannot read, one over the upload limit (the server
 // runs with --max-upload-mib 1) and one it does not open show why.
-// Saves open-file-drop.png (the drop overlay) and open-file.png in the artifacts.
+// Saves open-file-drop.png (the drop overlay) and open-file.png in the artifacts, and with
+// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 the first over web/doc/open-file-drop.png.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
-import { canvasSummary, screenshot, shownSeq, waitForFinal } from "./harness.mjs";
+import { canvasSummary, screenshot, shownSeq, updateDocScreenshot, waitForFinal } from "./harness.mjs";
 import { pageUnderTest } from "./page_setup.mjs";
 
 const UPLOAD_LIMIT_MIB = 1;   // the server's --max-upload-mib here: the big file below is over it
@@ -66,6 +67,7 @@ test("a NRRD dropped on the page is uploaded, opened, and drawn", async () => {
   watchUploads();
   const before = await shownSeq(page);
   await dropFile("ball.nrrd", smallNrrd(), { screenshotName: "open-file-drop.png" });
+  updateDocScreenshot("open-file-drop.png", "open-file-drop.png");
   const u = await waitForUploadEnd();
   assert.equal(u.state, "opened", `the upload ended ${u.state}: ${u.message}; banners: ${await bannerTexts()}`);
   assert.match(u.volume, /^upload:[0-9a-f]{32}$/, "the server's name for the upload");

@@ -4,7 +4,7 @@
 // --dicomweb pacs=<Orthanc's DICOMweb root>. The studies panel appears with the source;
 // a search by the start of the patient's name finds the study, which expands to its
 // series; a click retrieves and opens it, with progress, and a frame is drawn; the view
-// link reopens it in a new page; a search that matches nothing says so; a bad date is
+// link reopens it in a new page; a search by the start of the name (`doe` → `doe*`) finds it; a search that matches nothing says so; a bad date is
 // refused in the panel before any request; with Orthanc stopped a search says the archive
 // did not answer, in the panel, and the page carries on. The patient's name is shown and
 // never written to the browser's console.
@@ -61,16 +61,19 @@ test("the panel shows the server's DICOMweb source", async () => {
   assert.deepEqual(await page.$$eval("#study-source option", (o) => o.map((x) => x.value)), ["pacs"]);
 });
 
-test("a search by the start of the patient's name finds the study, which lists its series", async () => {
+// The page log of progress messages and of what the panel's progress line says.
+async function watchOpening() {
   await page.evaluate(() => {
     window.progressLog = [];
     window.volcast.session.on("progress", (p) => window.progressLog.push({ stage: p.stage, instances: p.instances ?? null, bytes: p.bytes ?? null, fraction: p.fraction }));
-    // What the panel says while the series comes: every text its progress line shows.
     window.openTexts = [];
     new MutationObserver(() => window.openTexts.push(document.querySelector("#study-open-status .text").textContent))
       .observe(document.getElementById("study-open-status"), { subtree: true, childList: true, characterData: true });
   });
-  const status = await search({ name: "doe", modality: "CT" });
+}
+
+// The one study found, as the list shows it, unfolded; returns its series buttons.
+async function checkFoundStudy(status) {
   assert.equal(status, "1 study");
   const study = page.locator("#study-list .study").first();
   assert.equal(await study.locator(".patient").textContent(), "DOE, JANE");
@@ -85,6 +88,11 @@ test("a search by the start of the patient's name finds the study, which lists i
   assert.equal(await s.getAttribute("data-volume"), volumeName());
   assert.deepEqual([await s.locator(".mod").textContent(), await s.locator(".desc").textContent(), await s.locator(".count").textContent()],
     ["CT", "Axial ball", `${SLICES} images`]);
+}
+
+test("a search by patient ID, date range and modality finds the study, which lists its series", async () => {
+  await watchOpening();
+  await checkFoundStudy(await search({ id: "VOLCAST-0001", date: "2024-01-01 – 2024-02-29", modality: "CT" }));
 });
 
 test("a click on the series retrieves it with progress, opens it, and draws a frame", async () => {
@@ -121,6 +129,10 @@ test("the view link reopens the DICOMweb series in a new page", async () => {
   } finally {
     await other.page.close();
   }
+});
+
+test("a search by the start of the patient's name, in lower case, finds the study", async () => {
+  await checkFoundStudy(await search({ name: "doe" }));
 });
 
 test("a search that matches nothing says so; a bad date is refused in the panel, before any request", async () => {
