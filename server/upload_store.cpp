@@ -342,8 +342,10 @@ void UploadStore::work() {
         forgetAll(gone);
         if (job) {
             Result result = verify(*job);
-            job->done(std::move(result));
-            job.reset();   // the Pending released without the lock held
+            // A refused upload's file is gone before the client hears of it.
+            auto done = std::move(job->done);
+            job.reset();
+            done(std::move(result));
         }
         lock.lock();
     }
