@@ -3,9 +3,11 @@
 // with POST /api/volumes and opened, and a frame is drawn; the same through "Open file…";
 // the page's address then reopens the upload while it lives; an expired (unknown) upload
 // says so in words; a file the server cannot read, one over the upload limit (the server
-// runs with --max-upload-mib 1) and one it does not open show why.
+// runs with --max-upload-mib 1) and one it does not open show why. The server runs with
+// --token and the page is opened with ?token=: uploads carry it, and one without is refused.
+// On a throttled connection the upload's progress shows over the view.
 // Saves open-file-drop.png (the drop overlay) and open-file.png in the artifacts, and with
-// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 the first over web/doc/open-file-drop.png.
+// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over web/doc/open-file-drop.png and open-file-progress.png.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
@@ -13,6 +15,7 @@ import { canvasSummary, screenshot, shownSeq, updateDocScreenshot, waitForFinal 
 import { pageUnderTest } from "./page_setup.mjs";
 
 const UPLOAD_LIMIT_MIB = 1;   // the server's --max-upload-mib here: the big file below is over it
+const TOKEN = "open-file-test-token";
 
 // An 8 × 8 × 8 uint8 NRRD: a bright ball (200) in the middle of dark voxels.
 function smallNrrd() {
@@ -26,7 +29,8 @@ function smallNrrd() {
 
 let page, problems, server;
 pageUnderTest({
-  serverOptions: () => ({ extraArgs: ["--max-upload-mib", String(UPLOAD_LIMIT_MIB)] }),
+  serverOptions: () => ({ extraArgs: ["--max-upload-mib", String(UPLOAD_LIMIT_MIB), "--token", TOKEN] }),
+  query: `?token=${TOKEN}`,
   finalFrame: true,
   ready: (s) => ({ page, problems, server } = s),
 });
@@ -34,7 +38,9 @@ pageUnderTest({
 // The uploads the page sends, as the server receives them (method, address, file name header).
 const uploads = [];
 const watchUploads = () => page.on("request", (r) => {
-  if (new URL(r.url()).pathname === "/api/volumes") uploads.push({ method: r.method(), url: r.url(), filename: r.headers()["x-volcast-filename"] });
+  if (new URL(r.url()).pathname === "/api/volumes") {
+    uploads.push({ method: r.method(), url: r.url(), filename: r.headers()["x-volcast-filename"], authorization: r.headers().authorization });
+  }
 });
 
 // Drop `bytes` as a file called `name` on the view, as a person dragging it from their desktop would.
@@ -71,7 +77,7 @@ test("a NRRD dropped on the page is uploaded, opened, and drawn", async () => {
   const u = await waitForUploadEnd();
   assert.equal(u.state, "opened", `the upload ended ${u.state}: ${u.message}; banners: ${await bannerTexts()}`);
   assert.match(u.volume, /^upload:[0-9a-f]{32}$/, "the server's name for the upload");
-  assert.deepEqual(uploads.at(-1), { method: "POST", url: `${server.url}api/volumes`, filename: "ball.nrrd" });
+  assert.deepEqual(uploads.at(-1), { method: "POST", url: `${server.url}api/volumes`, filename: "ball.nrrd", authorization: `Bearer ${TOKEN}` });
   assert.equal(await page.evaluate(() => window.volcast.session.volume?.name), u.volume);
   const frame = await waitForFinal(page, { afterSeq: before });
   assert.ok(frame.final);
@@ -104,7 +110,7 @@ test("'Open file…' takes a file through the file chooser the same way", async 
 
 test("a link to an upload the server no longer has says it expired, in words", async () => {
   const gone = `upload:${"0".repeat(32)}`;
-  await page.goto(`${server.url}#volume=${encodeURIComponent(gone)}`);
+  await page.goto(`${server.url}?token=${TOKEN}#volume=${encodeURIComponent(gone)}`);
   await page.waitForFunction(() => window.volcast?.session);
   await page.waitForSelector("#view-message[data-kind='error']", { timeout: 30000 });
   assert.equal(await page.textContent("#view-message-title"), "This uploaded file has expired; open it again.");
@@ -134,6 +140,48 @@ test("a file over the server's upload limit is refused with 413, and the page sa
   assert.match(u.message, /^big\.nrrd is over the server's upload limit/, u.message);
 });
 
+test("an upload without the server's token is refused with 401, in words", async () => {
+  const message = await page.evaluate(async () => {
+    const { Upload, uploadUrl } = await import("/core/upload.js");
+    const u = new Upload(new File([new Uint8Array(600)], "a.nrrd"), { url: uploadUrl(window.volcast.session.connection.url) });
+    const end = new Promise((resolve) => u.on("state", (s) => { if (s.state === "failed" || s.state === "opening") resolve(u.message || s.state); }));
+    u.start();
+    return end;
+  });
+  assert.match(message, /^The server needs a token to take uploads/, message);
+});
+
+test("on a slow connection the upload's progress shows over the view, then the volume opens", async () => {
+  const cdp = await page.context().newCDPSession(page);
+  await cdp.send("Network.enable");
+  // 300 kB/s up: the 885 kB file takes about 3 s, long enough to see the bar move.
+  await cdp.send("Network.emulateNetworkConditions", { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: 300000 });
+  try {
+    const header = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 96 96 96\nencoding: raw\n\n";
+    const voxels = Buffer.alloc(96 * 96 * 96);
+    for (let z = 0; z < 96; z++) for (let y = 0; y < 96; y++) for (let x = 0; x < 96; x++) {
+      voxels[(z * 96 + y) * 96 + x] = Math.hypot(x - 47.5, y - 47.5, z - 47.5) < 36 ? 120 + ((x + y + z) % 64) : 0;
+    }
+    const [chooser] = await Promise.all([page.waitForEvent("filechooser"), page.click("#open-file")]);
+    await chooser.setFiles({ name: "slow.nrrd", mimeType: "application/octet-stream", buffer: Buffer.concat([Buffer.from(header, "latin1"), voxels]) });
+    await page.waitForFunction(() => {
+      const u = window.volcast.opener.upload;
+      return u?.state === "uploading" && u.fraction > 0.2 && u.fraction < 0.9;
+    }, null, { timeout: 30000, polling: 50 });
+    assert.match(await page.textContent("#view-message-title"), /^Uploading slow\.nrrd$/);
+    assert.match(await page.textContent("#view-message-detail"), /^\d+ kB of 885 kB · \d+ %$/);
+    assert.equal(await page.textContent("#open-file"), "Cancel upload", "the button cancels the upload meanwhile");
+    await page.evaluate(() => document.getElementById("errors").replaceChildren());   // earlier tests' banners, for a clean picture
+    await screenshot(page, "open-file-progress.png");
+    updateDocScreenshot("open-file-progress.png", "open-file-progress.png");
+  } finally {
+    await cdp.send("Network.emulateNetworkConditions", { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: -1 });
+  }
+  const u = await waitForUploadEnd();
+  assert.equal(u.state, "opened", u.message);
+  assert.equal(await page.textContent("#open-file"), "Open file…");
+});
+
 test("a file the server does not open is refused before any upload", async () => {
   const sent = uploads.length;
   await dropFile("notes.txt", Buffer.from("hello"));
@@ -144,5 +192,5 @@ test("a file the server does not open is refused before any upload", async () =>
 });
 
 test("no page errors", () => {
-  assert.deepEqual(problems.filter((p) => !/Failed to load resource: the server responded with a status of (404|413|422)/.test(p)), []);
+  assert.deepEqual(problems.filter((p) => !/Failed to load resource: the server responded with a status of (401|404|413|422)/.test(p)), []);
 });

@@ -17,8 +17,9 @@ import { ARTIFACTS, checkPrerequisites, launchBrowser, openPage, startServer, wa
 //   finalFrame      also wait for its first final frame
 //   setUp()         before the server starts (write a data folder); tearDown() after it stops
 //   ready(setup)    once the page is ready, with {server, browser, page, problems}
+//   query           the page address's query string ("?token=T"), for a server run with --token
 export function pageUnderTest({ serverOptions = () => ({}), volume = "builtin:demo", finalFrame = false,
-  setUp = () => {}, tearDown = () => {}, ready = () => {}, timeout = 240000 } = {}) {
+  setUp = () => {}, tearDown = () => {}, ready = () => {}, timeout = 240000, query = "" } = {}) {
   const missing = checkPrerequisites();
   if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
   const t = { server: null, browser: null, page: null, problems: null };
@@ -26,7 +27,7 @@ export function pageUnderTest({ serverOptions = () => ({}), volume = "builtin:de
     await setUp();
     t.server = await startServer(0, serverOptions());
     t.browser = await launchBrowser();
-    ({ page: t.page, problems: t.problems } = await openPage(t.browser.context, t.server.url));
+    ({ page: t.page, problems: t.problems } = await openPage(t.browser.context, `${t.server.url}${query}`));
     if (volume) await t.page.waitForFunction((n) => window.volcast.session.volume?.name === n, volume, { timeout: 60000 });
     if (finalFrame) await waitForFinal(t.page);
     ready(t);
