@@ -35,6 +35,10 @@ packages=(
   podman runc netavark iptables podman-compose debootstrap curl catatonit
   # Vectorised CPU ray casting: Highway's SIMD headers
   libhwy-dev
+  # Bringing your own scan: libcurl for DICOMweb (TLS verified against the system's CA
+  # store), libzip for an uploaded .zip of a DICOM series, and a real PACS for the tests:
+  # Orthanc with its DICOMweb plugin (docs/data-sources.md)
+  libcurl4-openssl-dev libzip-dev orthanc orthanc-dicomweb
 )
 # Node.js and npm only where the machine has none: a machine may already carry a newer Node.js
 # (NodeSource's, which bundles npm), and Debian's npm package conflicts with it.

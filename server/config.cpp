@@ -4,14 +4,78 @@
 
 #include <CLI/CLI.hpp>
 
+#include "protocol/client_messages.hpp"
+
+#include <algorithm>
 #include <cstdlib>
+#include <fstream>
 #include <iostream>
+#include <stdexcept>
 
 namespace volcast::server {
 
 #ifndef VOLCAST_DEFAULT_WEB_ROOT
 #define VOLCAST_DEFAULT_WEB_ROOT "web"
 #endif
+
+namespace {
+
+std::pair<std::string, std::string> splitPair(const std::string &item, const char *flag, const char *form) {
+    const size_t eq = item.find('=');
+    if (eq == std::string::npos || eq == 0 || eq + 1 == item.size())
+        throw std::invalid_argument(std::string(flag) + ": expected " + form + ", got \"" + item + "\"");
+    return {item.substr(0, eq), item.substr(eq + 1)};
+}
+
+} // namespace
+
+std::vector<DicomWebSourceConfig> parseDicomWebSources(const std::vector<std::string> &sources,
+                                                       const std::vector<std::string> &auth) {
+    std::vector<DicomWebSourceConfig> out;
+    for (const std::string &item : sources) {
+        if (item.empty()) continue;
+        auto [name, url] = splitPair(item, "--dicomweb", "NAME=URL");
+        if (auto problem = protocol::validateSourceName(name))
+            throw std::invalid_argument("--dicomweb: source name \"" + name + "\" " + *problem);
+        for (const auto &s : out)
+            if (s.name == name) throw std::invalid_argument("--dicomweb: source \"" + name + "\" is given twice");
+        if (!url.starts_with("http://") && !url.starts_with("https://"))
+            throw std::invalid_argument("--dicomweb " + name + ": the URL must start with http:// or https://");
+        for (unsigned char ch : url)
+            if (ch <= 0x20 || ch == 0x7f)
+                throw std::invalid_argument("--dicomweb " + name + ": the URL holds a space or control character");
+        const size_t authorityStart = url.find("//") + 2;
+        const std::string authority = url.substr(authorityStart, url.find('/', authorityStart) - authorityStart);
+        if (authority.find('@') != std::string::npos)
+            throw std::invalid_argument("--dicomweb " + name + ": the URL carries a user name or password; give "
+                                        "credentials in a file with --dicomweb-auth instead (never on the command line)");
+        if (authority.empty()) throw std::invalid_argument("--dicomweb " + name + ": the URL names no host");
+        while (url.size() > authorityStart + authority.size() + 1 && url.ends_with("/")) url.pop_back();
+        out.push_back({name, url, ""});
+    }
+    for (const std::string &item : auth) {
+        if (item.empty()) continue;
+        auto [name, file] = splitPair(item, "--dicomweb-auth", "NAME=FILE");
+        auto it = std::find_if(out.begin(), out.end(), [&](const auto &s) { return s.name == name; });
+        if (it == out.end())
+            throw std::invalid_argument("--dicomweb-auth: no --dicomweb source named \"" + name + "\"");
+        std::ifstream in(file);
+        if (!in) throw std::invalid_argument("--dicomweb-auth " + name + ": cannot read " + file);
+        std::string value;
+        std::getline(in, value);
+        while (!value.empty() && (value.back() == '\r' || value.back() == ' ' || value.back() == '\t')) value.pop_back();
+        if (value.empty())
+            throw std::invalid_argument("--dicomweb-auth " + name + ": " + file +
+                                        " is empty; it must hold an Authorization value such as \"Basic ...\" or "
+                                        "\"Bearer ...\" on its first line");
+        for (unsigned char ch : value)
+            if (ch < 0x20 || ch == 0x7f)
+                throw std::invalid_argument("--dicomweb-auth " + name + ": " + file +
+                                            " holds a control character on its first line");
+        it->authorization = value;
+    }
+    return out;
+}
 
 std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     ServerConfig c;
@@ -156,12 +220,36 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
                    "Private folder for uploads (made 0700; what it holds is deleted at start and at shutdown; "
                    "default: a new folder under $TMPDIR or /tmp)")
         ->envname("VOLCAST_UPLOAD_DIR");
+    std::vector<std::string> dicomWeb, dicomWebAuth;
+    double dicomWebCacheMiB = double(c.dicomWebCacheBytes >> 20);
+    app.add_option("--dicomweb", dicomWeb,
+                   "A DICOMweb source NAME=URL (the DICOMweb root); repeat for several (env: ','-separated)")
+        ->envname("VOLCAST_DICOMWEB")
+        ->delimiter(',');
+    app.add_option("--dicomweb-auth", dicomWebAuth,
+                   "NAME=FILE: the source's Authorization value (\"Basic ...\", \"Bearer ...\") is the first line "
+                   "of FILE; repeat for several (env: ','-separated)")
+        ->envname("VOLCAST_DICOMWEB_AUTH")
+        ->delimiter(',');
+    app.add_option("--dicomweb-timeout-s", c.dicomWebTimeoutS,
+                   "Seconds a DICOMweb search may take, and a retrieval may stall")
+        ->envname("VOLCAST_DICOMWEB_TIMEOUT_S")
+        ->check(CLI::Range(1.0, 3600.0));
+    app.add_option("--dicomweb-cache-mib", dicomWebCacheMiB, "Retrieved DICOMweb series kept on disk, MiB")
+        ->envname("VOLCAST_DICOMWEB_CACHE_MIB")
+        ->check(CLI::Range(0.0, 1e9));
     try {
         app.parse(argc, argv);
+        c.dicomWebSources = parseDicomWebSources(dicomWeb, dicomWebAuth);
     } catch (const CLI::ParseError &e) {
         exitCode = app.exit(e);
         return std::nullopt;
+    } catch (const std::invalid_argument &e) {
+        std::cerr << e.what() << "\n";
+        exitCode = 2;
+        return std::nullopt;
     }
+    c.dicomWebCacheBytes = uint64_t(dicomWebCacheMiB * 1024.0 * 1024.0);
     for (const auto &d : dataDirs)
         if (!d.empty()) c.dataDirs.emplace_back(d);
     c.webRoot = webRoot;

@@ -11,6 +11,13 @@
 
 namespace volcast::server {
 
+// A DICOMweb source (--dicomweb NAME=URL, --dicomweb-auth NAME=FILE; docs/data-sources.md).
+struct DicomWebSourceConfig {
+    std::string name;            // [A-Za-z0-9_-], at most 64: what find_studies and volume names use
+    std::string url;             // the DICOMweb root, http:// or https://, e.g. http://pacs:8042/dicom-web
+    std::string authorization;   // the Authorization header's value read from its file, or empty; never logged
+};
+
 struct ServerConfig {
     std::string bindAddress = "127.0.0.1";   // loopback: nothing outside this machine by default
     uint16_t port = 8080;                     // 0: any free port (tests)
@@ -59,7 +66,18 @@ struct ServerConfig {
     uint64_t maxUploadStorageBytes = uint64_t(8192) << 20; // all uploads kept; oldest unused evicted, else 507
     double uploadTtlSeconds = 3600;                        // an upload's life (--upload-ttl-min; seconds for tests)
     std::filesystem::path uploadDir;                       // empty: a new private folder under $TMPDIR or /tmp
+
+    // Bringing your own scan from a PACS: DICOMweb sources (docs/data-sources.md).
+    std::vector<DicomWebSourceConfig> dicomWebSources;
+    double dicomWebTimeoutS = 30;             // one search or metadata request; retrievals stall out after it
+    uint64_t dicomWebCacheBytes = uint64_t(4096) << 20;   // retrieved series kept on disk
 };
+
+// "NAME=URL" pairs and "NAME=FILE" credentials into sources; throws std::invalid_argument
+// naming what is wrong (an unknown name, a URL that is not http(s), a credential file that
+// cannot be read). The error never quotes a credential.
+std::vector<DicomWebSourceConfig> parseDicomWebSources(const std::vector<std::string> &sources,
+                                                       const std::vector<std::string> &auth);
 
 // Parse flags and environment. Returns nullopt after printing help or an error (exitCode set).
 std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode);

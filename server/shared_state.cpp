@@ -6,7 +6,23 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <stdexcept>
+
 namespace volcast::server {
+
+namespace {
+// A new folder only this process's user can read (mkdtemp makes it 0700), under $TMPDIR.
+std::filesystem::path privateTemporaryFolder(const std::string &stem) {
+    const char *tmp = std::getenv("TMPDIR");
+    std::string pattern = std::string(tmp && *tmp ? tmp : "/tmp") + "/" + stem + "-XXXXXX";
+    if (!::mkdtemp(pattern.data()))
+        throw std::runtime_error("cannot create a private folder " + pattern + ": " + std::strerror(errno));
+    return pattern;
+}
+} // namespace
 
 SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
     cl_ = openContextFor(DeviceChoice::parse(config_.device), config_.kernelCacheDir);
@@ -26,11 +42,33 @@ SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
     metrics_.setBackEnd(backEnd_, device_.type);
     registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, cl_, metrics_,
                                                  config_.loadTimeoutS);
+    registry_->addProvider(uploads_);
+    // An upload that expired or was evicted leaves memory too, once no session holds it.
+    uploads_->setForgetHook([registry = registry_.get()](const std::string &name) { registry->forget(name); });
+    if (!config_.dicomWebSources.empty()) {
+        std::vector<dicomweb::SourceConfig> sources;
+        for (const auto &s : config_.dicomWebSources) {
+            dicomweb::SourceConfig source;
+            source.name = s.name;
+            source.baseUrl = s.url;
+            source.authorization = s.authorization;
+            source.requestTimeoutSeconds = config_.dicomWebTimeoutS;
+            source.lowSpeedSeconds = config_.dicomWebTimeoutS;
+            sources.push_back(std::move(source));
+            spdlog::info("DICOMweb source {}: {}{}", s.name, s.url, s.authorization.empty() ? "" : " (with credentials)");
+        }
+        dicomWeb_ = std::make_shared<DicomWebProvider>(std::move(sources), privateTemporaryFolder("volcast-dicomweb"),
+                                                       config_.dicomWebCacheBytes);
+        registry_->addProvider(dicomWeb_);
+    }
     scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration, config_.defaultTargetFrameMs});
     slices_ = std::make_unique<SliceService>(config_.maxStillPixels);
 }
 
-SharedState::~SharedState() { stopWorkers(); }
+SharedState::~SharedState() {
+    stopWorkers();
+    uploads_->setForgetHook(nullptr);   // the registry goes first; the store may outlive it in its providers
+}
 
 void SharedState::stopWorkers() {
     if (scheduler_) scheduler_->stop();

@@ -12,6 +12,7 @@
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/opencl/opencl_context.hpp"
 #include "server/config.hpp"
+#include "server/dicomweb_provider.hpp"
 #include "server/metrics.hpp"
 #include "server/render_scheduler.hpp"
 #include "server/slice_service.hpp"
@@ -45,6 +46,8 @@ class SharedState {
     // Uploaded volumes (POST /api/volumes); also the registry's provider of "upload:" names.
     UploadStore &uploads() { return *uploads_; }
     std::shared_ptr<UploadStore> uploadStore() const { return uploads_; }
+    // The DICOMweb sources; null when none is configured.
+    DicomWebProvider *dicomWeb() { return dicomWeb_.get(); }
     const protocol::DeviceInfo &device() const { return device_; }
     protocol::ServerLimits limits() const;
     uint16_t port() const { return port_; }
@@ -87,6 +90,7 @@ class SharedState {
     std::shared_ptr<OpenClContext> cl_;   // null on the native CPU path
     std::string backEnd_;
     protocol::DeviceInfo device_;
+    std::shared_ptr<DicomWebProvider> dicomWeb_;
     std::unique_ptr<VolumeRegistry> registry_;
     std::unique_ptr<RenderScheduler> scheduler_;
     std::unique_ptr<SliceService> slices_;

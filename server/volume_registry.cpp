@@ -105,6 +105,28 @@ VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBy
 
 VolumeRegistry::~VolumeRegistry() { stop(); }
 
+void VolumeRegistry::addProvider(std::shared_ptr<VolumeProvider> provider) {
+    std::lock_guard lock(mutex_);
+    providers_.push_back(std::move(provider));
+}
+
+std::shared_ptr<VolumeProvider> VolumeRegistry::providerFor(const std::string &name) const {
+    std::lock_guard lock(mutex_);
+    for (const auto &p : providers_)
+        if (name.starts_with(p->prefix())) return p;
+    return nullptr;
+}
+
+void VolumeRegistry::forget(const std::string &name) {
+    std::lock_guard lock(mutex_);
+    if (auto it = loaded_.find(name); it != loaded_.end()) {
+        spdlog::info("dropping volume {} from memory: its source is gone", name);
+        loaded_.erase(it);
+        lastUse_.erase(name);
+        publishMemory();
+    }
+}
+
 void VolumeRegistry::stop() {
     stopRequested_ = true;   // the load in progress stops at its next step
     {
@@ -180,7 +202,14 @@ std::string VolumeRegistry::loadingNow() const {
 void VolumeRegistry::open(const std::string &name, Progress progressFn, Done done,
                           const std::shared_ptr<const VolumeEntry> &releasing) {
     fs::path path;
-    if (name.starts_with(kBuiltinPrefix)) {
+    const std::shared_ptr<VolumeProvider> provider = providerFor(name);
+    if (provider) {
+        if (auto problem = provider->check(name)) {
+            problem->requestType = "open_volume";
+            done(*problem);
+            return;
+        }
+    } else if (name.starts_with(kBuiltinPrefix)) {
         const auto names = builtinVolumeNames();
         if (std::find(names.begin(), names.end(), name.substr(kBuiltinPrefix.size())) == names.end()) {
             done(ProtocolError{ErrorCode::NotFound, "no built-in volume named \"" + name + "\"", nullptr, "open_volume"});
@@ -211,6 +240,7 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
         pending = std::make_shared<Pending>();
         pending->name = name;
         pending->path = path;
+        pending->provider = provider;
         queue_.push_back(pending);
         wake_.notify_all();
     }
@@ -231,6 +261,16 @@ void VolumeRegistry::progress(const std::string &name, protocol::ProgressStage s
     m.task = task;
     m.fraction = fraction;
     for (auto &t : targets) t(m);
+}
+
+void VolumeRegistry::progress(protocol::ProgressMessage message) {
+    std::vector<Progress> targets;
+    {
+        std::lock_guard lock(mutex_);
+        if (auto it = pending_.find(message.volume); it != pending_.end())
+            for (const auto &w : it->second->waiters) targets.push_back(w.progress);
+    }
+    for (auto &t : targets) t(message);
 }
 
 void VolumeRegistry::loaderLoop() {
@@ -308,6 +348,30 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
             sentTask = task;
             progress(p.name, ProgressStage::Loading, sentTask, fraction);
         };
+        if (p.provider) {
+            // Bytes from a browser or a PACS: fetched to a local file or folder first, then
+            // every file parsed in the child process before this one reads it.
+            FetchContext context;
+            double sentFetch = -1;
+            context.progress = [&](const FetchProgress &f) {
+                if (f.fraction < sentFetch + 0.01 && f.fraction < 1) return;
+                sentFetch = f.fraction;
+                protocol::ProgressMessage m;
+                m.volume = p.name;
+                m.stage = ProgressStage::Retrieving;
+                m.task = f.task;
+                m.fraction = std::clamp(f.fraction, 0.0, 1.0);
+                if (f.instancesDone && f.instancesTotal) m.instances = std::array<int64_t, 2>{*f.instancesDone, *f.instancesTotal};
+                m.bytes = f.bytes;
+                progress(std::move(m));
+            };
+            context.stopRequested = [this] { return stopRequested_.load(); };
+            context.timeLimitSeconds = loadTimeoutSeconds_;
+            context.maxFloat32Bytes = options.maxBytes;
+            p.path = p.provider->fetch(p.name, context);
+            options.parseInChild = true;
+            progress(p.name, ProgressStage::Loading, "", 0.0);
+        }
         LoadedVolume loaded = p.path.empty() ? loadSceneVolume(p.name, options) : loadSceneVolume(p.path.string(), options);
         holdNarrow(loaded.volume); // files already are; a built-in volume of integers too
         progress(p.name, ProgressStage::Loading, "", 1.0);
@@ -326,6 +390,9 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         entry->renderer = makeFrameRenderer(cl_, entry->volume);
         progress(p.name, ProgressStage::Uploading, "", 1.0);
         return entry;
+    } catch (const VolumeFetchError &e) {
+        spdlog::warn("fetching {}: {}", p.name, e.what());
+        return ProtocolError{e.code, e.what(), nullptr, "open_volume"};
     } catch (const VolumeTooLarge &e) {
         spdlog::warn("loading {}: {}", p.name, e.what());
         return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, uint64_t(double(e.bytes) * kMemoryFactor)));

@@ -20,6 +20,7 @@
 #include "renderer/opencl/opencl_context.hpp"
 #include "renderer/volume.hpp"
 #include "server/metrics.hpp"
+#include "server/volume_provider.hpp"
 
 #include <atomic>
 #include <condition_variable>
@@ -66,6 +67,13 @@ class VolumeRegistry {
                    Metrics &metrics, double loadTimeoutSeconds = 120);
     ~VolumeRegistry();   // stops the loader after its current load (which stops at its next step)
 
+    // Names carrying provider->prefix() are opened through it (uploads, DICOMweb), never
+    // listed. Add providers before the first open.
+    void addProvider(std::shared_ptr<VolumeProvider> provider);
+    // Drop a loaded volume from memory (an upload that expired): sessions that hold it keep
+    // it until they let go; the next open loads it again, or fails if it is gone for good.
+    void forget(const std::string &name);
+
     // Every volume a client may open: built-in ones and files with known extensions.
     std::vector<protocol::VolumeInfo> list() const;
     // Open `name` (already through validateVolumeName): at once if loaded, else joining or
@@ -92,12 +100,15 @@ class VolumeRegistry {
     };
     struct Pending {
         std::string name;
-        std::filesystem::path path;   // empty for built-ins
+        std::filesystem::path path;   // empty for built-ins; for a provider's volume, set once fetched
+        std::shared_ptr<VolumeProvider> provider;   // null for built-ins and data-folder files
         std::vector<Waiter> waiters;
     };
     void loaderLoop();
     Result load(Pending &pending);
     void progress(const std::string &name, protocol::ProgressStage stage, const std::string &task, double fraction);
+    void progress(protocol::ProgressMessage message);
+    std::shared_ptr<VolumeProvider> providerFor(const std::string &name) const;
     // The entries to evict so that `bytes` more fit, least recently opened first, or nothing
     // if they cannot be made to fit. Evictable: held by no one, or only by waiters releasing it.
     std::optional<std::vector<std::string>> planRoom(uint64_t bytes, const std::vector<Waiter> &waiters) const;
@@ -110,6 +121,7 @@ class VolumeRegistry {
     std::string forClients(std::string message, const Pending &pending) const;
 
     std::vector<std::filesystem::path> dataDirs_;   // canonical
+    std::vector<std::shared_ptr<VolumeProvider>> providers_;
     uint64_t budgetBytes_;
     double loadTimeoutSeconds_;
     std::atomic<bool> stopRequested_{false};   // read by the load in progress at each step

@@ -207,8 +207,10 @@ void WebsocketSession::handle(std::string_view text) {
                     protocol::VolumesMessage v;
                     v.id = id;
                     v.volumes = state_->registry().list();
+                    if (DicomWebProvider *sources = state_->dicomWeb()) v.sources = sources->sources();
                     sendMessage(v);
                 },
+                [&](const protocol::FindStudiesRequest &m) { onFindStudies(m); },
                 [&](const protocol::OpenVolumeRequest &m) { onOpenVolume(m); },
                 [&](const protocol::CameraRequest &m) {
                     if (!needVolume()) return;
@@ -327,6 +329,33 @@ void WebsocketSession::onOpenVolume(const protocol::OpenVolumeRequest &m) {
             });
         },
         volume_);   // the volume this session gives up: it may be evicted to make room
+}
+
+void WebsocketSession::onFindStudies(const protocol::FindStudiesRequest &m) {
+    DicomWebProvider *sources = state_->dicomWeb();
+    if (!sources)
+        return sendError({ErrorCode::NotFound,
+                          "this server has no DICOMweb source (volcast-server --dicomweb NAME=URL adds one)", m.id,
+                          "find_studies"});
+    // One search at a time per session: a user who searches again waits for the first answer,
+    // and one session cannot fill the search queue that every session shares.
+    if (searching_)
+        return sendError({ErrorCode::Busy, "a study search is under way for this session already; wait for its answer",
+                          m.id, "find_studies"});
+    searching_ = true;
+    auto weak = weak_from_this();
+    auto executor = ws_.get_executor();
+    const nlohmann::json id = m.id;
+    sources->findStudies(m, [weak, executor, id](DicomWebProvider::StudiesResult result) {
+        net::post(executor, [weak, id, result = std::move(result)]() mutable {
+            if (auto self = weak.lock())
+                self->guarded("find_studies", [&] {
+                    self->searching_ = false;
+                    if (auto *e = std::get_if<ProtocolError>(&result)) return self->sendError(std::move(*e));
+                    self->sendMessage(std::get<protocol::StudiesMessage>(result));
+                }, id);
+        });
+    });
 }
 
 void WebsocketSession::onOpened(nlohmann::json id, VolumeRegistry::Result result) {

@@ -86,6 +86,7 @@ class WebsocketSession : public std::enable_shared_from_this<WebsocketSession> {
     // Message handlers; each may throw SceneError (bad_field) or ProtocolError.
     void onHello(const protocol::HelloRequest &m);
     void onOpenVolume(const protocol::OpenVolumeRequest &m);
+    void onFindStudies(const protocol::FindStudiesRequest &m);   // answered from the search thread
     void onOpened(nlohmann::json id, VolumeRegistry::Result result);
     void joinScheduler();
     // Throws AdmissionError (too_large, naming the limit and its flag) when a view of
@@ -127,6 +128,7 @@ class WebsocketSession : public std::enable_shared_from_this<WebsocketSession> {
     // Session.
     bool helloDone_ = false;
     bool opening_ = false;
+    bool searching_ = false;        // a find_studies is waiting for its source
     std::shared_ptr<VolumeEntry> volume_;
     SessionScene scene_;
     bool interacting_ = false;
