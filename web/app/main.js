@@ -374,7 +374,7 @@ const SCENE_REQUESTS = ["camera", "viewport", "transfer_function", "quality_poli
 
 function describeVolume(v) {
   if (!v) return "";
-  const parts = [v.name];
+  const parts = [app.labels.get(v.name) ?? v.name];
   if (v.dims) parts.push(v.dims.join("×"));
   if (v.voxel_type) parts.push(v.voxel_type);
   if (v.spacing) parts.push(`spacing ${v.spacing.map((s) => Number(s.toPrecision(3))).join("×")}`);

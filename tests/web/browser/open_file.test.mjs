@@ -110,6 +110,7 @@ test("'Open file…' takes a file through the file chooser the same way", async 
 
 test("a link to an upload the server no longer has says it expired, in words", async () => {
   const gone = `upload:${"0".repeat(32)}`;
+  await page.goto("about:blank");   // else a link that differs in its fragment only is no new page
   await page.goto(`${server.url}?token=${TOKEN}#volume=${encodeURIComponent(gone)}`);
   await page.waitForFunction(() => window.volcast?.session);
   await page.waitForSelector("#view-message[data-kind='error']", { timeout: 30000 });

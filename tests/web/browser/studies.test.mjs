@@ -19,7 +19,12 @@ import { ctSeries } from "../lib/dicom.mjs";
 import { orthancMissing, startOrthanc } from "../lib/orthanc.mjs";
 
 const PATIENT = "DOE^JANE";
-const SLICES = 8;
+const SIDE = 48, SLICES = 32;   // a 48 × 48 × 32 series, 1 × 1 × 1.5 mm voxels: 147 kB
+// A hollow ball of bone (1000 HU) round soft tissue (60 HU) in air (−1000 HU), so CT bone shows a shell.
+const ball = (x, y, z) => {
+  const r = Math.hypot(x - 23.5, y - 23.5, (z - 15.5) * 1.5);
+  return r < 14 ? 60 : r < 19 ? 1000 : -1000;
+};
 
 let orthanc, series;
 let page, problems;
@@ -33,7 +38,8 @@ pageUnderTest({
     if (missing.length) throw new Error(`cannot run the studies test:\n  ${missing.join("\n  ")}`);
     orthanc = await startOrthanc();
     series = ctSeries({ patientName: PATIENT, patientId: "VOLCAST-0001", studyDate: "20240131",
-      studyDescription: "Synthetic head", seriesDescription: "Axial ball", slices: SLICES });
+      studyDescription: "Synthetic head", seriesDescription: "Axial ball", columns: SIDE, rows: SIDE, slices: SLICES,
+      spacing: [1, 1, 1.5], voxel: ball });
     await orthanc.store(series.files);
   },
   serverOptions: () => ({ extraArgs: ["--dicomweb", `pacs=${orthanc.dicomWeb}`] }),
@@ -112,6 +118,7 @@ test("a click on the series retrieves it with progress, opens it, and draws a fr
   assert.ok(texts.some((t) => /^Retrieving (\d+ of \d+ )?images/.test(t)), `the panel said what it was retrieving: ${JSON.stringify(texts)}`);
   assert.ok(await page.isHidden("#study-open-status"), "the progress line goes once the series is open");
   assert.equal(await page.locator("#study-list button.series.current").count(), 1, "the open series is marked");
+  await page.evaluate(() => document.getElementById("studies-card").scrollIntoView({ block: "start" }));
   await screenshot(page, "studies.png");
   updateDocScreenshot("studies.png", "studies.png");
 });
