@@ -115,12 +115,18 @@ void checkDate(const std::string &value) {
         throw DicomWebError(ErrorKind::BadQuery, "filter study_date range ends before it begins");
 }
 
+// A query value with only what must be escaped escaped: RFC 3986 allows sub-delimiters, ':',
+// '@', '/' and '?' in a query, and '^' (PersonName's separator) passes every HTTP stack we
+// know. Orthanc 1.10's DICOMweb plugin does not percent-decode QIDO values, so the wildcards
+// '*' and '?' and the '^' must go as they are to match there; '&', '=', '+', '#', '%', white
+// space and bytes outside ASCII are escaped (and then match nothing on such a server).
 std::string percentEncoded(std::string_view s) {
     static constexpr char kHex[] = "0123456789ABCDEF";
+    static constexpr std::string_view kAsIs = "-._~!$'()*,;:@/?^";
     std::string out;
     for (char c : s) {
         const auto u = static_cast<unsigned char>(c);
-        if (std::isalnum(u) || c == '-' || c == '.' || c == '_' || c == '~') {
+        if (u < 0x80 && (std::isalnum(u) || kAsIs.find(c) != std::string_view::npos)) {
             out += c;
         } else {
             out += '%';
@@ -161,6 +167,15 @@ std::string stringOf(const json &dataset, const char *tag) {
     if (v->is_string()) return cleanText(v->get<std::string>());
     if (v->is_number_integer()) return std::to_string(v->get<int64_t>());
     return {};
+}
+
+// A UI value: a JSON string that is a UID, else "" (a number is not taken as a UID).
+std::string uidOf(const json &dataset, const char *tag) {
+    const json *v = firstValue(dataset, tag);
+    if (!v || !v->is_string()) return {};
+    std::string uid = v->get<std::string>();
+    while (!uid.empty() && (uid.back() == ' ' || uid.back() == '\0')) uid.pop_back();  // DICOM's padding
+    return isUid(uid) ? uid : std::string();
 }
 
 // PersonName: the Alphabetic component group (Ideographic and Phonetic are not shown).
@@ -385,7 +400,7 @@ std::vector<StudyRecord> Client::findStudies(const StudyQuery &query) {
     for (const json &dataset : studies) {
         if (out.size() >= size_t(query.limit)) break;  // a server that ignores limit
         StudyRecord study;
-        study.studyUid = stringOf(dataset, "0020000D");
+        study.studyUid = uidOf(dataset, "0020000D");
         if (!isUid(study.studyUid)) {
             ++skipped;
             continue;
@@ -412,7 +427,7 @@ std::vector<StudyRecord> Client::findStudies(const StudyQuery &query) {
         }
         for (const json &dataset : series) {
             SeriesRecord record;
-            record.seriesUid = stringOf(dataset, "0020000E");
+            record.seriesUid = uidOf(dataset, "0020000E");
             if (!isUid(record.seriesUid)) continue;
             record.modality = stringOf(dataset, "00080060");
             record.description = stringOf(dataset, "0008103E");
@@ -517,7 +532,7 @@ RetrieveProgress Client::retrieveSeries(const std::string &studyUid, const std::
     };
     MultipartLimits limits;
     limits.maxParts = 100000;  // instance_NNNNN
-    limits.maxPartBytes = maxBytes;
+    limits.maxPartBytes = std::numeric_limits<uint64_t>::max();  // maxBytes bounds the whole series, below
 
     const auto onHead = [&](const ResponseHead &head) {
         ContentType type;

@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cmath>
+#include <deque>
 #include <exception>
 #include <mutex>
 #include <vector>
@@ -188,10 +190,34 @@ struct HttpClient::Transfer {
         return bytes;
     }
 
-    static int onProgress(void *user, curl_off_t, curl_off_t, curl_off_t, curl_off_t) {
+    // The low-speed limit, measured here rather than by curl: curl averages its speed over
+    // the last 5 seconds, so a transfer that stops dead failed only 5 s after its limit.
+    double lowSpeedSeconds = 0;
+    double lowSpeedBytesPerSecond = 0;
+    using Clock = std::chrono::steady_clock;
+    Clock::time_point started;
+    std::deque<std::pair<Clock::time_point, curl_off_t>> samples;  // (when, bytes moved so far)
+
+    void checkSpeed(curl_off_t moved) {
+        if (lowSpeedSeconds <= 0) return;
+        const auto now = Clock::now();
+        const auto window = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(lowSpeedSeconds));
+        samples.emplace_back(now, moved);
+        // Keep one sample at or before the window's start, to measure across the whole window.
+        while (samples.size() > 1 && samples[1].first <= now - window) samples.pop_front();
+        if (now - started < window || samples.front().first > now - window) return;
+        const double bytes = double(moved - samples.front().second);
+        if (bytes < lowSpeedBytesPerSecond * lowSpeedSeconds)
+            throw DicomWebError(ErrorKind::Timeout, sourceText + " timed out (" + pathText + "): less than " +
+                                                        std::to_string(long(lowSpeedBytesPerSecond)) + " bytes/s for " +
+                                                        std::to_string(lowSpeedSeconds).substr(0, 4) + " s");
+    }
+
+    static int onProgress(void *user, curl_off_t, curl_off_t downloaded, curl_off_t, curl_off_t uploaded) {
         auto &t = *static_cast<Transfer *>(user);
         try {
             t.checkCancelled();
+            t.checkSpeed(downloaded + uploaded);
         } catch (...) {
             t.error = std::current_exception();
             return 1;
@@ -280,10 +306,10 @@ uint64_t HttpClient::perform(const std::string &method, const std::string &first
         curl_easy_setopt(curl, CURLOPT_CONNECTTIMEOUT_MS, long(std::lround(options_.connectTimeoutSeconds * 1000)));
         if (options_.requestTimeoutSeconds > 0)
             curl_easy_setopt(curl, CURLOPT_TIMEOUT_MS, long(std::lround(options_.requestTimeoutSeconds * 1000)));
-        if (options_.lowSpeedSeconds > 0) {
-            curl_easy_setopt(curl, CURLOPT_LOW_SPEED_LIMIT, options_.lowSpeedBytesPerSecond);
-            curl_easy_setopt(curl, CURLOPT_LOW_SPEED_TIME, std::max(1L, long(std::ceil(options_.lowSpeedSeconds))));
-        }
+        t.lowSpeedSeconds = options_.lowSpeedSeconds;
+        t.lowSpeedBytesPerSecond = double(options_.lowSpeedBytesPerSecond);
+        t.started = Transfer::Clock::now();
+        t.samples.clear();
         // Compressed answers for buffered (JSON) bodies only; the bound applies to the decoded
         // bytes. Retrieval asks for none: a PACS compressing DICOM costs more than it saves.
         if (!t.streaming) {

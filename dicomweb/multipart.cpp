@@ -175,6 +175,8 @@ bool MultipartReader::stepPreamble() {
     const size_t at = buffer_.find(delimiter_);
     if (at != std::string::npos) {
         preambleBytes_ += at;
+        if (preambleBytes_ > limits_.maxPreambleBytes + 2)  // 2: the CRLF put in front
+            fail("multipart body has no delimiter in its first " + std::to_string(limits_.maxPreambleBytes) + " bytes");
         buffer_.erase(0, at + delimiter_.size());
         state_ = State::AfterDelimiter;
         return true;
@@ -184,14 +186,14 @@ bool MultipartReader::stepPreamble() {
         preambleBytes_ += buffer_.size() - keep;
         buffer_.erase(0, buffer_.size() - keep);
     }
-    if (preambleBytes_ > limits_.maxPreambleBytes)
+    if (preambleBytes_ > limits_.maxPreambleBytes + 2)
         fail("multipart body has no delimiter in its first " + std::to_string(limits_.maxPreambleBytes) + " bytes");
     return false;
 }
 
 bool MultipartReader::stepAfterDelimiter() {
     size_t i = 0;
-    if (buffer_.size() < 2) return false;
+    if (buffer_.empty() || (buffer_.size() == 1 && buffer_[0] == '-')) return false;
     if (buffer_[0] == '-' && buffer_[1] == '-') {
         state_ = State::Epilogue;
         buffer_.clear();
