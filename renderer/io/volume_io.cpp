@@ -1064,7 +1064,49 @@ void checkDicomFolderEntries(const fs::path &dir) {
 // loader compares each slice's file size with the length its pixel data element declares,
 // and that length with what rows, columns and bits allocated need. Encapsulated
 // (compressed) pixel data has no declared length and is left to GDCM's decoder.
-void checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need) {
+// Where one slice of a series lies, as its header says (absent values stay empty).
+struct SliceGeometry {
+    std::string file;
+    std::optional<Vec3d> position;                 // Image Position (Patient), mm
+    std::optional<std::array<double, 6>> orientation;   // Image Orientation (Patient): row, then column cosines
+    int64_t rows = 0, columns = 0;
+};
+
+// The numbers of a DS (decimal string) element, or nothing when it is absent or does not hold
+// exactly `count` finite numbers. Parsed here rather than by GDCM's attribute classes, whose
+// assertions a hostile value could reach.
+template <size_t N>
+std::optional<std::array<double, N>> decimalStrings(const gdcm::DataSet &ds, gdcm::Tag tag) {
+    if (!ds.FindDataElement(tag)) return std::nullopt;
+    const gdcm::ByteValue *value = ds.GetDataElement(tag).GetByteValue();
+    if (!value || value->GetLength() == 0 || value->GetLength() > 1024) return std::nullopt;
+    std::string text(value->GetPointer(), value->GetLength());
+    std::array<double, N> out{};
+    size_t count = 0, at = 0;
+    while (at <= text.size()) {
+        const size_t end = std::min(text.find('\\', at), text.size());
+        std::string item = text.substr(at, end - at);
+        item.erase(std::remove_if(item.begin(), item.end(), [](unsigned char c) { return c == ' ' || c == '\0'; }),
+                   item.end());
+        char *stop = nullptr;
+        const double x = std::strtod(item.c_str(), &stop);
+        if (item.empty() || *stop != '\0' || !std::isfinite(x) || count == N) return std::nullopt;
+        out[count++] = x;
+        at = end + 1;
+    }
+    if (count != N) return std::nullopt;
+    return out;
+}
+
+int64_t unsignedShort(const gdcm::DataSet &ds, gdcm::Tag tag) {
+    if (!ds.FindDataElement(tag)) return 0;
+    const gdcm::ByteValue *value = ds.GetDataElement(tag).GetByteValue();
+    if (!value || value->GetLength() != 2) return 0;
+    const auto *b = reinterpret_cast<const unsigned char *>(value->GetPointer());
+    return int64_t(b[0] | b[1] << 8);   // US in the little-endian transfer syntaxes GDCM reads here
+}
+
+SliceGeometry checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need) {
     const std::string name = file.filename().string();
     const gdcm::Tag pixelData(0x7fe0, 0x0010);
     gdcm::Reader reader;
@@ -1075,6 +1117,15 @@ void checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need) {
         fail(dir, fmt::format("slice '{}' is not a readable DICOM file (its header is damaged or cut short)", name));
     // The pixel data element starts after the file meta header and every element before it.
     const gdcm::File &dicom = reader.GetFile();
+    SliceGeometry geometry;
+    geometry.file = name;
+    {
+        const gdcm::DataSet &ds = dicom.GetDataSet();
+        if (const auto p = decimalStrings<3>(ds, gdcm::Tag(0x0020, 0x0032))) geometry.position = Vec3d{(*p)[0], (*p)[1], (*p)[2]};
+        geometry.orientation = decimalStrings<6>(ds, gdcm::Tag(0x0020, 0x0037));
+        geometry.rows = unsignedShort(ds, gdcm::Tag(0x0028, 0x0010));
+        geometry.columns = unsignedShort(ds, gdcm::Tag(0x0028, 0x0011));
+    }
     const bool implicitVr =
         dicom.GetHeader().GetDataSetTransferSyntax().GetNegociatedType() == gdcm::TransferSyntax::Implicit;
     uint64_t at = dicom.GetHeader().GetFullLength();
@@ -1096,13 +1147,13 @@ void checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need) {
     };
     if (size < at + 8) fail(dir, fmt::format("slice '{}' is truncated: it ends before its pixel data", name));
     // A layout this count does not follow (no preamble, say) is left to GDCM.
-    if (u16(0) != 0x7fe0 || u16(2) != 0x0010) return;
+    if (u16(0) != 0x7fe0 || u16(2) != 0x0010) return geometry;
     // Explicit VR (OB/OW/...: two letters, two reserved bytes, 32-bit length) or implicit.
     const bool explicitVr = !implicitVr && std::isupper(e[4]) && std::isupper(e[5]);
     if (explicitVr && size < at + 12)
         fail(dir, fmt::format("slice '{}' is truncated: it ends within its pixel data header", name));
     const uint32_t length = explicitVr ? u32(8) : u32(4);
-    if (length == 0xffffffffu) return;
+    if (length == 0xffffffffu) return geometry;
     const uint64_t start = at + (explicitVr ? 12 : 8);
     const uint64_t have = size > start ? size - start : 0;
     if (have < length)
@@ -1112,6 +1163,69 @@ void checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need) {
         fail(dir, fmt::format("slice '{}' is truncated: its pixel data declares {} bytes, but its rows, columns "
                               "and type need {}",
                               name, withThousands(length), withThousands(need)));
+    return geometry;
+}
+
+// The slices of one series must form one regular stack, as the volume that comes out of them
+// assumes: the same size and orientation, positions along the slice normal with even gaps and
+// none repeated, and no drift within the plane (a gantry tilt shears the stack, which an
+// orthonormal direction matrix cannot hold). Otherwise the picture would be wrong without a
+// word: a missing slice squeezes the anatomy, two stacks interleave. Slices are in the order
+// GDCM's series reader will read them. The tolerance, 0.01 mm or 1 % of the gap if larger,
+// is what 3D Slicer's DICOM import allows before it warns of irregular geometry (positions are
+// decimal strings of at most 16 characters, so rounding alone stays far below it).
+void checkSeriesGeometry(const fs::path &dir, const std::vector<SliceGeometry> &slices) {
+    if (slices.size() < 2) return;
+    const SliceGeometry &first = slices.front();
+    for (const SliceGeometry &s : slices)
+        if (s.rows != first.rows || s.columns != first.columns)
+            fail(dir, fmt::format("slice '{}' is {} x {} pixels where slice '{}' is {} x {}: the folder mixes images "
+                                  "of different sizes; it is not loaded",
+                                  s.file, s.columns, s.rows, first.file, first.columns, first.rows));
+    const auto located = std::count_if(slices.begin(), slices.end(),
+                                       [](const SliceGeometry &s) { return s.position && s.orientation; });
+    if (located == 0) return;   // no patient geometry at all (secondary capture): ITK's own spacing
+    for (const SliceGeometry &s : slices)
+        if (!s.position || !s.orientation)
+            fail(dir, fmt::format("slice '{}' has no image position or orientation where the others have them; "
+                                  "the stack cannot be placed, and it is not loaded",
+                                  s.file));
+    const auto &o = *first.orientation;
+    const Vec3d row{o[0], o[1], o[2]}, column{o[3], o[4], o[5]};
+    const Vec3d normal = cross(row, column);
+    if (std::abs(length(normal) - 1) > 1e-3)
+        fail(dir, fmt::format("slice '{}' has an image orientation whose row and column are not perpendicular unit "
+                              "vectors; it is not loaded",
+                              first.file));
+    for (const SliceGeometry &s : slices)
+        for (size_t i = 0; i < 6; ++i)
+            if (std::abs((*s.orientation)[i] - o[i]) > 1e-4)
+                fail(dir, fmt::format("slice '{}' is oriented differently from slice '{}': the folder mixes stacks "
+                                      "(or a scout image); it is not loaded",
+                                      s.file, first.file));
+    std::vector<double> gaps;
+    for (size_t i = 1; i < slices.size(); ++i) gaps.push_back(dot(*slices[i].position - *slices[i - 1].position, normal));
+    std::vector<double> sorted = gaps;
+    std::nth_element(sorted.begin(), sorted.begin() + ptrdiff_t(sorted.size() / 2), sorted.end());
+    const double typical = sorted[sorted.size() / 2];
+    const double tolerance = std::max(0.01, 0.01 * std::abs(typical));
+    for (size_t i = 0; i < gaps.size(); ++i) {
+        const SliceGeometry &a = slices[i], &b = slices[i + 1];
+        if (std::abs(gaps[i]) <= tolerance)
+            fail(dir, fmt::format("slices '{}' and '{}' lie at the same position: the folder holds a slice twice or "
+                                  "two stacks; it is not loaded",
+                                  a.file, b.file));
+        if (std::abs(gaps[i] - typical) > tolerance)
+            fail(dir, fmt::format("the gap between slices '{}' and '{}' is {:.4g} mm where the series' others are "
+                                  "{:.4g} mm: a slice is missing or the stack is irregular; it is not loaded",
+                                  a.file, b.file, std::abs(gaps[i]), std::abs(typical)));
+        const Vec3d step = *b.position - *a.position;
+        const Vec3d inPlane = step - normal * dot(step, normal);
+        if (length(inPlane) > tolerance)
+            fail(dir, fmt::format("slice '{}' is shifted {:.4g} mm within the plane from slice '{}': a tilted gantry "
+                                  "or sheared stack, which is not supported; it is not loaded",
+                                  b.file, length(inPlane), a.file));
+    }
 }
 
 // Bytes of one stored DICOM pixel (before ITK applies the rescale slope and intercept).
@@ -1257,7 +1371,9 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     // The stored pixels of one slice, before ITK's rescaling: rows x columns x stored size.
     const uint64_t sliceBytes = uint64_t(v.dims.x) * uint64_t(v.dims.y) * storedDicomSize(*io);
     progress(0.01, "checking slices");
-    for (const auto &file : files) checkDicomSlice(dir, fs::path(file), sliceBytes);
+    std::vector<SliceGeometry> geometry;
+    for (const auto &file : files) geometry.push_back(checkDicomSlice(dir, fs::path(file), sliceBytes));
+    checkSeriesGeometry(dir, geometry);
 
     using Image = itk::Image<float, 3>;
     auto reader = itk::ImageSeriesReader<Image>::New();

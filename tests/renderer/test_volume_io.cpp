@@ -1053,6 +1053,33 @@ TEST_F(VolumeIoTest, DicomSeriesWithATruncatedSlice) {
     expectLoadError(slice, {"truncated"});
 }
 
+// A series whose slices do not form one regular stack would load as a picture with the wrong
+// geometry and no word of it; the loader refuses it, naming the slices.
+Volume obliqueSeriesVolume() {
+    Volume src;
+    src.dims = {6, 5, 7};
+    src.spacing = {0.7, 0.7, 2.5};
+    src.origin = {10, -20, 30};
+    const double c = std::cos(0.4), s = std::sin(0.4);
+    src.direction.m = {c, 0, s, 0, 1, 0, -s, 0, c};
+    src.voxels.resize(src.voxelCount());
+    for (size_t i = 0; i < src.voxels.size(); ++i) src.voxels[i] = float(int(i) * 37 - 1024);
+    return src;
+}
+
+TEST_F(VolumeIoTest, DicomSeriesWithAMissingSliceIsRefusedNamingTheGap) {
+    saveDicomSeries(obliqueSeriesVolume(), dir / "series", VoxelType::Int16);
+    EXPECT_EQ(loadVolume(dir / "series").dims.z, 7) << "the whole oblique stack loads";
+    fs::remove(dir / "series" / "slice_0003.dcm");
+    expectLoadError(dir / "series", {"slice_0002.dcm", "slice_0004.dcm", "5 mm", "2.5 mm", "missing"});
+}
+
+TEST_F(VolumeIoTest, DicomSeriesWithASliceTwiceIsRefused) {
+    saveDicomSeries(obliqueSeriesVolume(), dir / "series", VoxelType::Int16);
+    fs::copy_file(dir / "series" / "slice_0004.dcm", dir / "series" / "slice_0004_again.dcm");
+    expectLoadError(dir / "series", {"same position"});
+}
+
 // ---------------------------------------------------------------------------------------
 // 3d. Detached data files stay in the header's folder and are regular files
 

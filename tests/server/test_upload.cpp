@@ -96,19 +96,11 @@ class Upload : public ::testing::Test {
         c.device = "cpu";
         return c;
     }
-    // Until the server wires the store into the registry itself.
-    static void wire(volcast::server::Server &s) {
-        auto &state = s.state();
-        state.registry().addProvider(state.uploadStore());
-        state.uploads().setForgetHook([&registry = state.registry()](const std::string &name) { registry.forget(name); });
-    }
-
     static void SetUpTestSuite() {
         tmp = fs::temp_directory_path() / ("volcast_upload_" + std::to_string(::getpid()));
         fs::remove_all(tmp);
         fs::create_directories(tmp / "web");
         server = std::make_unique<volcast::server::Server>(config());
-        wire(*server);
         volcast::test::startAndWaitReady(*server, kStartTimeout);
     }
     static void TearDownTestSuite() {
@@ -295,7 +287,6 @@ TEST_F(Upload, ExpiredUploadIsNotFoundAndDeleted) {
     auto c = config();
     c.uploadTtlSeconds = 0.5;
     volcast::server::Server shortLived(c);
-    wire(shortLived);
     volcast::test::startAndWaitReady(shortLived, kStartTimeout);
     const std::string nrrd = volumeFile(".nrrd");
     const auto x = rawExchange(shortLived.port(), uploadHead("brief.nrrd", nrrd.size()) + nrrd, kUploadTimeout);
