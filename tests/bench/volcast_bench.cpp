@@ -3,7 +3,9 @@
 //
 //   volcast-bench all --out out/bench
 //   volcast-bench peers --volume phantom.nrrd --size 512x512,800x600 --frames 5
+//   volcast-bench byos --out out/bench      # needs Debian's orthanc and orthanc-dicomweb
 
+#include "tests/bench/byos.hpp"
 #include "tests/bench/studies.hpp"
 
 #include <CLI/CLI.hpp>
@@ -89,7 +91,29 @@ int main(int argc, char **argv) {
     memory->add_option("--write-ct", writeCt, "Write a CT-like int16 NRRD of WxHxD to --volume instead, and stop");
     memory->add_option("--size", memorySize, "Square frame size")->check(CLI::Range(1, 8192))->capture_default_str();
 
+    ByosOptions byos;
+    auto *byosCommand = app.add_subcommand(
+        "byos", "Bring your own scan: first frame of a DICOMweb series against Orthanc serving it, and of an "
+                "uploaded .nii.gz against its parse time (a real Orthanc is started)");
+    byosCommand->add_option("--out", byos.out, "Output folder")->capture_default_str();
+    byosCommand->add_option("--rounds", byos.rounds, "Rounds, each timing every measurement once in turn")
+        ->check(CLI::Range(1, 100))
+        ->capture_default_str();
+    byosCommand->add_flag("--quick", byos.quick, "Tiny volumes, one round: checks that the study runs; its times mean nothing");
+
     CLI11_PARSE(app, argc, argv);
+    if (byosCommand->parsed()) {
+        // No OpenCL context of its own: the servers it starts open their own back end.
+        spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
+        spdlog::set_level(spdlog::level::warn);   // the servers' info lines would bury the progress
+        try {
+            byosStudy(byos);
+            return 0;
+        } catch (const std::exception &e) {
+            std::cerr << "volcast-bench: " << e.what() << std::endl;
+            return 1;
+        }
+    }
     if (memory->parsed()) {
         // No OpenCL: the memory study is the native path's.
         spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
