@@ -330,13 +330,15 @@ session.on("opened", ({ state, restored }) => {
 
 session.on("server_error", (e) => {
   // A volume the user brought (an upload, a PACS series): said in words, the server's reason after.
+  // A series clicked in the studies panel is answered there, not over the view too.
+  let saidInPanel = false;
   if (e.request_type === "open_volume" && isPrivateName(app.lastOpening)) {
     const said = describeError(e, { volume: app.lastOpening });
+    saidInPanel = studies.showOpenError(e, app.lastOpening);
     e = { ...e, message: [said.title, said.detail].filter(Boolean).join(" ") };
-    studies.showOpenError(e, app.lastOpening);
     opener.openFailed(said.title);
   }
-  errors.show(e);
+  if (!saidInPanel) errors.show(e);
   // A refused quality policy leaves the server's: show that, not the refused values.
   if (e.request_type === "quality_policy") {
     session.getState().then((s) => { quality.showState(s); orientation.showState(s.scene?.quality); }, () => {});

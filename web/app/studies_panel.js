@@ -23,6 +23,7 @@ export class StudiesPanel {
     this.searchSeq = 0;       // answers to an older search are dropped
     this.studies = [];
     this.opening = null;      // the volume name of the series being opened from here
+    this.clicked = null;      // the series last clicked here, until its open ends
     this.build();
     session.on("sources", (sources) => this.setSources(sources));
     session.on("progress", (p) => this.onProgress(p));
@@ -144,7 +145,7 @@ export class StudiesPanel {
       el("span", { className: "count muted", textContent: images }));
     button.dataset.volume = s.volume;
     const label = [formatPatientName(study.patient_name), s.modality, s.description].filter(Boolean).join(" · ");
-    button.addEventListener("click", () => this.onOpen(s.volume, label));
+    button.addEventListener("click", () => { this.clicked = s.volume; this.onOpen(s.volume, label); });
     return el("li", {}, button);
   }
 
@@ -172,17 +173,23 @@ export class StudiesPanel {
 
   onOpened(name) {
     for (const b of this.list.querySelectorAll("button.series")) b.classList.toggle("current", b.dataset.volume === name);
-    if (this.opening && name === this.opening) { this.opening = null; this.openStatus.hidden = true; }
+    if (this.opening && name === this.opening) { this.opening = null; this.openStatus.hidden = true; this.openStatus.title = ""; }
+    if (this.clicked === name) this.clicked = null;
   }
 
-  // A refused open of a series from here: said in the panel, in words.
+  // A refused open of a series: said in the panel, in words. True when it was a series
+  // clicked here (the panel is where the user looks; no banner needed over the view).
   showOpenError(e, volume) {
-    if (!sourceOf(volume)) return;
+    if (!sourceOf(volume)) return false;
     this.mark(volume, "opening", false);
     this.opening = null;
     const said = describeError(e, { volume });
     this.showOpen([said.title, said.detail].filter(Boolean), null, "error");
     this.openStatus.dataset.code = e.code ?? "";
+    this.openStatus.title = said.detail;   // the whole reason; the panel shows its first lines
+    const fromHere = this.clicked === volume && !this.card.hidden;
+    this.clicked = null;
+    return fromHere;
   }
 
   showOpen(text, fraction, kind = "info") {

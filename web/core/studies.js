@@ -193,9 +193,11 @@ export function sourceOf(volumeName) {
 // message follows, since it names what was wrong. {title, detail}.
 export function describeError(error, { volume = null, source = null } = {}) {
   const code = error?.code ?? "error";
-  const said = error?.message ?? error?.serverMessage ?? "";
-  const where = source ?? sourceOf(volume);
   const name = String(volume ?? "");
+  let said = error?.message ?? error?.serverMessage ?? "";
+  // The user knows which series they clicked: the server's reason without its leading name.
+  if (name && said.startsWith(`${name}: `)) said = said.slice(name.length + 2);
+  const where = source ?? sourceOf(volume);
   if (name.startsWith("upload:") && code === "not_found") {
     return { title: "This uploaded file has expired; open it again.", detail: said };
   }
@@ -208,7 +210,10 @@ export function describeError(error, { volume = null, source = null } = {}) {
       return { title: "There is no such volume on the server.", detail: said };
     case "bad_field": return { title: "The search was refused.", detail: said };
     case "busy": return { title: "The server is busy; try again in a moment.", detail: said };
-    case "load_failed": return { title: "The images could not be read as a volume.", detail: said };
+    case "load_failed":
+      // For a PACS series the server's reason says which: the archive unreachable, or the images unreadable.
+      if (where) return { title: `The series from "${where}" could not be opened.`, detail: said };
+      return { title: "The images could not be read as a volume.", detail: said };
     case "too_large": return { title: "This series is too large for the server.", detail: said };
     default: return { title: `${code}`, detail: said };
   }

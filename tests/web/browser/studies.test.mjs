@@ -5,8 +5,9 @@
 // a search by the start of the patient's name finds the study, which expands to its
 // series; a click retrieves and opens it, with progress, and a frame is drawn; the view
 // link reopens it in a new page; a search by the start of the name (`doe` → `doe*`) finds it; a search that matches nothing says so; a bad date is
-// refused in the panel before any request; with Orthanc stopped a search says the archive
-// did not answer, in the panel, and the page carries on. The patient's name is shown and
+// refused in the panel before any request; with Orthanc stopped, opening a series not
+// retrieved yet and a search say the archive did not answer, in the panel, and the page
+// carries on. The patient's name is shown and
 // never written to the browser's console.
 // Saves studies.png (the panel, the study open, its series drawn) in the artifacts, and
 // with VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over web/doc/studies.png.
@@ -41,6 +42,9 @@ pageUnderTest({
       studyDescription: "Synthetic head", seriesDescription: "Axial ball", columns: SIDE, rows: SIDE, slices: SLICES,
       spacing: [1, 1, 1.5], voxel: ball });
     await orthanc.store(series.files);
+    // A second patient's study, never opened: retrieving it once the archive is down must fail.
+    await orthanc.store(ctSeries({ patientName: "ROE^RICHARD", patientId: "VOLCAST-0002", studyDate: "20231105",
+      studyDescription: "Second study", seriesDescription: "Never opened", slices: 4 }).files);
   },
   serverOptions: () => ({ extraArgs: ["--dicomweb", `pacs=${orthanc.dicomWeb}`] }),
   tearDown: async () => { await orthanc?.stop(); },
@@ -153,9 +157,26 @@ test("a search that matches nothing says so; a bad date is refused in the panel,
   assert.equal(await page.evaluate(() => window.sentLog.filter((m) => m.type === "find_studies").length), sent);
 });
 
-test("with the archive down a search says so in the panel, and the page carries on", async () => {
+test("with the archive down, opening a series not yet retrieved says so in the panel", async () => {
+  assert.equal(await search({}), "2 studies");
+  const second = page.locator("#study-list .study", { hasText: "ROE, RICHARD" });
+  await second.locator(".study-head").click();
   await orthanc.stop();
   orthanc = null;
+  await second.locator("button.series").click();
+  await page.waitForSelector("#study-open-status[data-kind='error']", { timeout: 120000 });
+  const said = await page.textContent("#study-open-status");
+  // The words name the archive; the server's reason under them says it could not be reached.
+  assert.match(said, /^(The image archive "pacs" did not answer as expected\.|The series from "pacs" could not be opened\.)/, said);
+  assert.match(said, /unreachable|connect/i, said);
+  assert.equal((said.match(/could not be opened|did not answer/g) ?? []).length, 1, `said once: ${said}`);
+  assert.equal(await page.evaluate(() => window.volcast.session.volume?.name), volumeName(), "the open series stays open");
+  assert.equal(await page.locator("#errors .error[data-request-type='open_volume']").count(), 0, "said in the panel, not over the view too");
+  await page.evaluate(() => document.getElementById("studies-card").scrollIntoView({ block: "start" }));
+  await screenshot(page, "studies-archive-down.png");
+});
+
+test("with the archive down a search says so in the panel, and the page carries on", async () => {
   await search({ name: "doe" });
   assert.equal(await page.getAttribute("#study-status", "data-kind"), "error");
   assert.equal(await page.getAttribute("#study-status", "data-code"), "source_failed");

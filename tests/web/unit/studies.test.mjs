@@ -134,6 +134,8 @@ test("errors in words a user understands, the server's reason kept as the detail
   assert.equal(down.detail, "orthanc: connection refused");
   assert.match(describeError({ code: "not_found", message: "x" }, { source: "nope" }).title, /no image archive called "nope"/);
   assert.match(describeError({ code: "not_found", message: "x" }, { volume: "dicomweb:o/1/2" }).title, /no longer has this series/);
+  const unreachable = describeError({ code: "load_failed", message: "dicomweb:pacs/1/2: DICOMweb source 'pacs' is unreachable" }, { volume: "dicomweb:pacs/1/2" });
+  assert.deepEqual(unreachable, { title: 'The series from "pacs" could not be opened.', detail: "DICOMweb source 'pacs' is unreachable" });
   assert.equal(sourceOf("dicomweb:my-pacs/1.2/3.4"), "my-pacs");
   assert.equal(sourceOf("ct/head.nrrd"), null);
 });
