@@ -5,7 +5,7 @@
 
 import {
   COMMON_MODALITIES, QueryError, buildStudyQuery, describeError, formatPatientName, formatStudyDate, normaliseStudies,
-  progressText, sourceOf,
+  overallProgress, progressText, sourceOf,
 } from "../core/studies.js";
 
 const el = (tag, props = {}, ...children) => {
@@ -167,8 +167,7 @@ export class StudiesPanel {
 
   onProgress(p) {
     if (!this.opening || this.session.loading?.name !== this.opening) return;
-    const fraction = p.stage === "retrieving" && Array.isArray(p.instances) && p.instances[1] > 0 ? p.instances[0] / p.instances[1] : p.fraction;
-    this.showOpen(progressText(p), fraction);
+    this.showOpen(progressText(p), overallProgress(this.opening, p));   // the same bar as over the view
   }
 
   onOpened(name) {
