@@ -152,35 +152,63 @@ test("an upload without the server's token is refused with 401, in words", async
   assert.match(message, /^The server needs a token to take uploads/, message);
 });
 
-test("on a slow connection the upload's progress shows over the view, then the volume opens", async () => {
+// A 96³ NRRD of 885 kB: at 300 kB/s up it takes about 3 s, long enough to see the bar move.
+function slowNrrd() {
+  const header = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 96 96 96\nencoding: raw\n\n";
+  const voxels = Buffer.alloc(96 * 96 * 96);
+  for (let z = 0; z < 96; z++) for (let y = 0; y < 96; y++) for (let x = 0; x < 96; x++) {
+    voxels[(z * 96 + y) * 96 + x] = Math.hypot(x - 47.5, y - 47.5, z - 47.5) < 36 ? 120 + ((x + y + z) % 64) : 0;
+  }
+  return Buffer.concat([Buffer.from(header, "latin1"), voxels]);
+}
+
+// Run fn with the page's uploads throttled to 300 kB/s (Chromium's network emulation).
+async function throttled(fn) {
   const cdp = await page.context().newCDPSession(page);
   await cdp.send("Network.enable");
-  // 300 kB/s up: the 885 kB file takes about 3 s, long enough to see the bar move.
   await cdp.send("Network.emulateNetworkConditions", { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: 300000 });
-  try {
-    const header = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 96 96 96\nencoding: raw\n\n";
-    const voxels = Buffer.alloc(96 * 96 * 96);
-    for (let z = 0; z < 96; z++) for (let y = 0; y < 96; y++) for (let x = 0; x < 96; x++) {
-      voxels[(z * 96 + y) * 96 + x] = Math.hypot(x - 47.5, y - 47.5, z - 47.5) < 36 ? 120 + ((x + y + z) % 64) : 0;
-    }
-    const [chooser] = await Promise.all([page.waitForEvent("filechooser"), page.click("#open-file")]);
-    await chooser.setFiles({ name: "slow.nrrd", mimeType: "application/octet-stream", buffer: Buffer.concat([Buffer.from(header, "latin1"), voxels]) });
-    await page.waitForFunction(() => {
-      const u = window.volcast.opener.upload;
-      return u?.state === "uploading" && u.fraction > 0.2 && u.fraction < 0.9;
-    }, null, { timeout: 30000, polling: 50 });
+  try { return await fn(); } finally {
+    await cdp.send("Network.emulateNetworkConditions", { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: -1 });
+    await cdp.detach();
+  }
+}
+
+async function chooseSlowFile(name) {
+  const [chooser] = await Promise.all([page.waitForEvent("filechooser"), page.click("#open-file")]);
+  await chooser.setFiles({ name, mimeType: "application/octet-stream", buffer: slowNrrd() });
+  await page.waitForFunction(() => {
+    const u = window.volcast.opener.upload;
+    return u?.state === "uploading" && u.fraction > 0.2 && u.fraction < 0.9;
+  }, null, { timeout: 30000, polling: 50 });
+}
+
+test("on a slow connection the upload's progress shows over the view, then the volume opens", async () => {
+  await throttled(async () => {
+    await chooseSlowFile("slow.nrrd");
     assert.match(await page.textContent("#view-message-title"), /^Uploading slow\.nrrd$/);
     assert.match(await page.textContent("#view-message-detail"), /^\d+ kB of 885 kB · \d+ %$/);
     assert.equal(await page.textContent("#open-file"), "Cancel upload", "the button cancels the upload meanwhile");
     await page.evaluate(() => document.getElementById("errors").replaceChildren());   // earlier tests' banners, for a clean picture
     await screenshot(page, "open-file-progress.png");
     updateDocScreenshot("open-file-progress.png", "open-file-progress.png");
-  } finally {
-    await cdp.send("Network.emulateNetworkConditions", { offline: false, latency: 0, downloadThroughput: -1, uploadThroughput: -1 });
-  }
+  });
   const u = await waitForUploadEnd();
   assert.equal(u.state, "opened", u.message);
   assert.equal(await page.textContent("#open-file"), "Open file…");
+});
+
+test("'Cancel upload' stops an upload on its way; the open volume stays", async () => {
+  const before = await page.evaluate(() => window.volcast.session.volume?.name);
+  await throttled(async () => {
+    await chooseSlowFile("cancelled.nrrd");
+    await page.click("#open-file");
+    const u = await waitForUploadEnd();
+    assert.equal(u.state, "cancelled");
+  });
+  assert.ok((await bannerTexts()).some((t) => t === "upload: The upload of cancelled.nrrd was cancelled"), await bannerTexts());
+  assert.equal(await page.textContent("#open-file"), "Open file…");
+  assert.equal(await page.evaluate(() => window.volcast.session.volume?.name), before);
+  assert.ok(await page.isHidden("#view-message") || !/Uploading/.test(await page.textContent("#view-message-title")), "no upload message left over the view");
 });
 
 test("a file the server does not open is refused before any upload", async () => {
