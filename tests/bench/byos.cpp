@@ -319,6 +319,14 @@ json volcastOpensUpload(const test::OrthancProcess &orthanc, const fs::path &web
     return j;
 }
 
+// The 1-minute load average: above ~1 while a measurement runs alone (it uses one core and a
+// bit), so more says that other processes shared the 2 cores.
+double loadAverage() {
+    double one = kNaN;
+    std::ifstream("/proc/loadavg") >> one;
+    return one;
+}
+
 struct Summary {
     double median = kNaN, min = kNaN, max = kNaN;
 };
@@ -398,7 +406,7 @@ void byosStudy(const ByosOptions &options) {
         // Flipped every round: neither side always runs first.
         const bool referenceFirst = r % 2 == 0;
         std::cerr << "byos: round " << r + 1 << " of " << rounds << "\n";
-        json round = {{"round", r + 1}, {"reference_first", referenceFirst}};
+        json round = {{"round", r + 1}, {"reference_first", referenceFirst}, {"load_average_1min_before", number(loadAverage())}};
         const auto dicomweb = [&](bool reference) {
             if (reference) round["orthanc_serves"] = orthancServes(orthanc, study, series);
             else round["volcast_dicomweb"] = volcastOpensSeries(orthanc, work / "web", seriesName, seriesDims, viewport);
@@ -415,6 +423,7 @@ void byosStudy(const ByosOptions &options) {
         dicomweb(!referenceFirst);
         upload(referenceFirst);
         upload(!referenceFirst);
+        round["load_average_1min_after"] = number(loadAverage());
         roundsJson.push_back(round);
     }
 
