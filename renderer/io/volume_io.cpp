@@ -1562,7 +1562,141 @@ struct Child {
 
 // `dicom`: the file may reach GDCM (the messages say so); otherwise it is checked because the
 // caller asked for every file to be (LoadOptions::parseInChild).
-void checkInChild(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom) {
+// A progress line from the checker: the mark, the fraction, a space, the task.
+constexpr char kProgressMark = '\x1e';
+
+// A task name from the child, fit for the client: printable ASCII, one line, short.
+std::string quotableTask(std::string_view text) {
+    std::string out;
+    for (char c : text)
+        if (c >= 0x20 && c < 0x7f && out.size() < 64) out += c;
+    return out;
+}
+
+// What the checker hands back: the volume it loaded, so that the file is parsed once, in the
+// child, and never again in the caller. A fixed header, the file's modality, then the samples
+// as the volume holds them (narrow integers or float32). The caller reads it as it reads any
+// file from outside: a child that a hostile file took over could have written anything here,
+// so every field is checked and the statistics are computed again.
+struct CheckedHeader {
+    char magic[16] = "volcast-checked";
+    uint32_t version = 1;
+    int32_t sourceType = 0;
+    int64_t dims[3] = {0, 0, 0};
+    double spacing[3] = {1, 1, 1};
+    double origin[3] = {0, 0, 0};
+    double direction[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    int32_t narrowBytes = 4;
+    float narrowOffset = 0;
+    uint64_t nonFiniteReplaced = 0;
+    uint32_t orientationKnown = 0;
+    uint32_t modalityBytes = 0;
+};
+constexpr uint32_t kMaxCheckedModalityBytes = 64;
+
+void writeCheckedVolume(const Volume &v, const fs::path &to) {
+    CheckedHeader h;
+    h.sourceType = int32_t(v.sourceType);
+    for (int a = 0; a < 3; ++a) {
+        h.dims[a] = v.dims[a];
+        h.spacing[a] = v.spacing[a];
+        h.origin[a] = v.origin[a];
+    }
+    for (int i = 0; i < 9; ++i) h.direction[i] = v.direction.m[size_t(i)];
+    h.narrowBytes = v.narrow.bytes;
+    h.narrowOffset = v.narrow.offset;
+    h.nonFiniteReplaced = v.nonFiniteReplaced;
+    h.orientationKnown = v.orientationKnown ? 1 : 0;
+    const std::string modality = v.modality.substr(0, kMaxCheckedModalityBytes);
+    h.modalityBytes = uint32_t(modality.size());
+    // O_NOFOLLOW and no O_CREAT: the caller made the file, and only that file is written.
+    const int fd = ::open(to.c_str(), O_WRONLY | O_TRUNC | O_NOFOLLOW | O_CLOEXEC);
+    if (fd < 0) throw std::runtime_error("cannot open the result file: " + std::string(std::strerror(errno)));
+    const auto put = [&](const void *data, size_t bytes) {
+        const char *at = static_cast<const char *>(data);
+        while (bytes > 0) {
+            const ssize_t n = ::write(fd, at, std::min<size_t>(bytes, size_t(1) << 30));
+            if (n < 0 && errno == EINTR) continue;
+            if (n <= 0) {
+                ::close(fd);
+                throw std::runtime_error("cannot write the result file: " + std::string(std::strerror(errno)));
+            }
+            at += n;
+            bytes -= size_t(n);
+        }
+    };
+    put(&h, sizeof h);
+    put(modality.data(), modality.size());
+    if (v.narrow.bytes == 4) put(v.voxels.data(), v.voxels.size() * sizeof(float));
+    else put(v.narrowVoxels.data(), v.voxelCount() * size_t(v.narrow.bytes));
+    ::close(fd);
+}
+
+Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options) {
+    const auto damaged = [&](const std::string &what) -> Volume {
+        fail(path, "the parser in its separate process handed back a damaged result (" + what + "); it is not loaded");
+    };
+    std::ifstream in(from, std::ios::binary);
+    CheckedHeader h;
+    if (!in.read(reinterpret_cast<char *>(&h), sizeof h)) return damaged("short header");
+    if (std::memcmp(h.magic, CheckedHeader{}.magic, sizeof h.magic) != 0 || h.version != 1)
+        return damaged("not a result of this version");
+    if (h.sourceType < 0 || h.sourceType > int32_t(VoxelType::Float64)) return damaged("voxel type");
+    if (h.narrowBytes != 1 && h.narrowBytes != 2 && h.narrowBytes != 4) return damaged("sample width");
+    if (h.modalityBytes > kMaxCheckedModalityBytes || !std::isfinite(h.narrowOffset)) return damaged("modality");
+    Volume v;
+    for (int a = 0; a < 3; ++a) {
+        if (h.dims[a] < 1 || h.dims[a] > options.maxDimension) return damaged("dimensions");
+        v.dims[a] = h.dims[a];
+        v.spacing[a] = h.spacing[a];
+        v.origin[a] = h.origin[a];
+    }
+    checkShape(path, v.dims, options);
+    Mat3d direction;
+    for (int i = 0; i < 9; ++i) direction.m[size_t(i)] = h.direction[i];
+    v.direction = checkedGeometry(path, v.spacing, v.origin, direction);
+    v.sourceType = VoxelType(h.sourceType);
+    v.nonFiniteReplaced = size_t(h.nonFiniteReplaced);
+    v.orientationKnown = h.orientationKnown != 0;
+    v.modality.resize(h.modalityBytes);
+    if (!in.read(v.modality.data(), std::streamsize(h.modalityBytes))) return damaged("short modality");
+    const uint64_t sampleBytes = uint64_t(v.voxelCount()) * uint64_t(h.narrowBytes);
+    const uint64_t expected = sizeof h + h.modalityBytes + sampleBytes;
+    if (fileSize(from).value_or(0) != expected) return damaged("its size is not what its header says");
+    if (h.narrowBytes == 4) {
+        v.voxels.resize(v.voxelCount());
+        in.read(reinterpret_cast<char *>(v.voxels.data()), std::streamsize(sampleBytes));
+        replaceNonFinite(path, v.voxels);
+    } else {
+        v.narrow = {h.narrowBytes, h.narrowOffset};
+        v.narrowVoxels.resize(size_t(sampleBytes) + kNarrowSlack);
+        in.read(reinterpret_cast<char *>(v.narrowVoxels.data()), std::streamsize(sampleBytes));
+    }
+    if (!in) return damaged("short samples");
+    return v;
+}
+
+// A result file of the caller's, removed however the load ends.
+struct CheckedResultFile {
+    fs::path path;
+    CheckedResultFile() {
+        std::string pattern = (fs::temp_directory_path() / "volcast-checked-XXXXXX").string();
+        const int fd = ::mkostemp(pattern.data(), O_CLOEXEC);
+        if (fd < 0) throw std::runtime_error("cannot create a file for the parser's result: " + std::string(std::strerror(errno)));
+        ::close(fd);
+        path = pattern;
+    }
+    ~CheckedResultFile() {
+        std::error_code ec;
+        fs::remove(path, ec);
+    }
+    CheckedResultFile(const CheckedResultFile &) = delete;
+    CheckedResultFile &operator=(const CheckedResultFile &) = delete;
+};
+
+// The volume the child loaded, or nothing when it refused the file (the caller then repeats
+// the load here for the refusal's own words); any other end of the child fails the load.
+std::optional<Volume> checkInChild(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom) {
     const auto checker = dicomCheckerPath();
     if (!checker)
         fail(path, fmt::format("{}, which is first parsed in a separate process, but the DICOM checker '{}' "
@@ -1589,9 +1723,10 @@ void checkInChild(const fs::path &path, const LoadOptions &options, LoadProgress
     posix_spawnattr_setsigmask(&attr, &none);
     posix_spawnattr_setsigdefault(&attr, &all);
     posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+    const CheckedResultFile result;
     std::vector<std::string> args = {checker->string(), path.string(), std::to_string(options.maxBytes),
                                      std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds),
-                                     std::to_string(options.maxArchiveBytes)};
+                                     std::to_string(options.maxArchiveBytes), result.path.string()};
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -1606,17 +1741,35 @@ void checkInChild(const fs::path &path, const LoadOptions &options, LoadProgress
 
     // Wait, reading what it writes (GDCM's assertion, say) for the log; the progress call is
     // where the load's time limit and a stop request end the wait, and the child with it.
-    std::string said;
+    std::string said, line;
+    std::string task = dicom ? "checking DICOM in a separate process" : "checking the file in a separate process";
+    double fraction = 0;
     int status = 0;
     for (;;) {
-        progress(0, dicom ? "checking DICOM in a separate process" : "checking the file in a separate process");
+        progress(fraction, task);
         if (child.output >= 0) {
             pollfd p{child.output, POLLIN, 0};
             if (::poll(&p, 1, 100) > 0) {
                 char buffer[4096];
                 const ssize_t n = ::read(child.output, buffer, sizeof buffer);
                 if (n > 0) {
-                    said.append(buffer, size_t(n));
+                    // Lines starting with kProgressMark are the child's progress (its own
+                    // steps, slice by slice), passed on; the rest is what it said, for the log.
+                    for (ssize_t i = 0; i < n; ++i) {
+                        line += buffer[i];
+                        if (buffer[i] != '\n' && line.size() < 512) continue;
+                        if (line.starts_with(kProgressMark)) {
+                            char *end = nullptr;
+                            const double f = std::strtod(line.c_str() + 1, &end);
+                            if (end && *end == ' ' && std::isfinite(f)) {
+                                fraction = std::clamp(f, 0.0, 0.8);   // reading its result is the rest
+                                task = quotableTask(std::string_view(end + 1, line.size() - size_t(end + 1 - line.c_str())));
+                            }
+                        } else {
+                            said += line;
+                        }
+                        line.clear();
+                    }
                     if (said.size() > 4096) said.erase(0, said.size() - 4096);
                 } else if (n == 0) {
                     ::close(child.output);
@@ -1636,7 +1789,11 @@ void checkInChild(const fs::path &path, const LoadOptions &options, LoadProgress
             fail(path, fmt::format("lost the DICOM checker: {}", std::strerror(errno)));
         }
     }
-    if (WIFEXITED(status) && (WEXITSTATUS(status) == kCheckLoaded || WEXITSTATUS(status) == kCheckRefused)) return;
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckRefused) return std::nullopt;
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckLoaded) {
+        progress(0.8, "reading the parsed volume");
+        return readCheckedVolume(path, result.path, options);
+    }
     while (!said.empty() && std::isspace(static_cast<unsigned char>(said.back()))) said.pop_back();
     spdlog::warn("{}: the checker ({}) {}; it said: {}", path.string(), checker->string(),
                  WIFSIGNALED(status) ? "ended with " + signalName(WTERMSIG(status))
@@ -1673,16 +1830,18 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
         progress(0, "reading header");
         const bool folder = fs::is_directory(status);
         const bool zip = !folder && isZipName(path);
+        std::optional<Volume> checked;
         if (dicomInChild) {
             const bool dicom = folder || zip || (fileSize(path).value_or(0) > 0 && reachesGdcm(path));
-            if (dicom || options.parseInChild) checkInChild(path, options, progress, dicom);
+            if (dicom || options.parseInChild) checked = checkInChild(path, options, progress, dicom);
         }
-        Volume v = folder ? loadDicomFolder(path, options, progress)
-                   : zip  ? loadZippedSeries(path, options, progress)
-                          : loadImageFile(path, options, progress);
+        Volume v = checked ? std::move(*checked)
+                   : folder ? loadDicomFolder(path, options, progress)
+                   : zip    ? loadZippedSeries(path, options, progress)
+                            : loadImageFile(path, options, progress);
         v.name = displayName(path);
         progress(0.9, "statistics");
-        if (!v.voxels.empty()) v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
+        if (!checked && !v.voxels.empty()) v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
         computeStatistics(v);
         holdNarrow(v); // a float file (or a DICOM series, rescaled) whose samples are 8- or 16-bit integers
         progress(1, "statistics");
@@ -1754,10 +1913,11 @@ Volume loadVolume(const fs::path &path, const LoadOptions &options) {
 }
 
 int runDicomCheck(int argc, char **argv) {
-    if (argc != 5 && argc != 6) {
-        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES]\n"
+    if (argc < 5 || argc > 7) {
+        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT]]\n"
                              "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
-                             "DICOM away from the server); exit status 0 loaded, 1 refused, 3 out of memory.\n",
+                             "files from outside away from the server), and writes what it loaded to the existing "
+                             "file RESULT; exit status 0 loaded, 1 refused, 3 out of memory.\n",
                      kCheckerName);
         return kCheckUsage;
     }
@@ -1766,7 +1926,7 @@ int runDicomCheck(int argc, char **argv) {
         options.maxBytes = std::stoull(argv[2]);
         options.maxDimension = std::stoll(argv[3]);
         options.timeLimitSeconds = std::stod(argv[4]);
-        if (argc == 6) options.maxArchiveBytes = std::stoull(argv[5]);
+        if (argc >= 6) options.maxArchiveBytes = std::stoull(argv[5]);
     } catch (const std::exception &) {
         std::fprintf(stderr, "%s: bad limits '%s' '%s' '%s'\n", kCheckerName, argv[2], argv[3], argv[4]);
         return kCheckUsage;
@@ -1779,8 +1939,14 @@ int runDicomCheck(int argc, char **argv) {
     setLimit(RLIMIT_AS, checkerMemoryLimit(options));  // (AddressSanitizer reserves terabytes of it: not there)
 #endif
     setLimit(RLIMIT_CPU, checkerCpuLimit(options));
+    // The load's own progress, for the caller to pass on (checkInChild).
+    options.progress = [](double fraction, std::string_view task) {
+        std::printf("%c%.4f %.*s\n", kProgressMark, fraction, int(std::min<size_t>(task.size(), 64)), task.data());
+        std::fflush(stdout);
+    };
     try {
-        loadVolumeHere(argv[1], options, false);
+        const Volume v = loadVolumeHere(argv[1], options, false);
+        if (argc == 7) writeCheckedVolume(v, argv[6]);
         return kCheckLoaded;
     } catch (const LoadOutOfMemory &e) {
         std::fprintf(stderr, "%s\n", e.what());

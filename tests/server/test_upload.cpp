@@ -368,6 +368,41 @@ TEST(UploadParts, ParseInChildRefusesWhatCrashesTheCheckerAndTheCallerSurvives) 
     EXPECT_EQ(direct, "") << "a NRRD load without parseInChild went through the checker";
 }
 
+// The file is parsed once, in the child, which hands the volume back; a child that a hostile
+// file took over could hand back anything, so a damaged hand-back is refused, never trusted.
+TEST(UploadParts, ParseInChildTakesTheChildsVolumeAndRefusesADamagedOne) {
+    const fs::path dir = fs::temp_directory_path() / ("volcast_child_result_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    volcast::saveVolume(testVolume(), dir / "v.nrrd", {volcast::VoxelType::Int16, false});
+    volcast::LoadOptions options;
+    options.parseInChild = true;
+    const volcast::Volume direct = volcast::loadVolume(dir / "v.nrrd");
+    const volcast::Volume viaChild = volcast::loadVolume(dir / "v.nrrd", options);
+    EXPECT_EQ(viaChild.dims, direct.dims);
+    EXPECT_EQ(viaChild.spacing, direct.spacing);
+    EXPECT_EQ(viaChild.direction, direct.direction);
+    EXPECT_EQ(viaChild.sourceType, direct.sourceType);
+    EXPECT_EQ(viaChild.narrow.bytes, direct.narrow.bytes);
+    EXPECT_EQ(viaChild.narrowVoxels, direct.narrowVoxels) << "the same samples, bit for bit";
+    EXPECT_EQ(viaChild.histogram.counts, direct.histogram.counts);
+
+    // A checker that claims success and writes garbage where the volume should be (its last
+    // argument is the result file).
+    const fs::path liar = dir / "lying-checker.sh";
+    std::ofstream(liar) << "#!/bin/sh\nfor last; do :; done\nprintf 'volcast-checked\\000garbage' > \"$last\"\nexit 0\n";
+    fs::permissions(liar, fs::perms::owner_all);
+    ::setenv("VOLCAST_DICOM_CHECK", liar.c_str(), 1);
+    std::string message;
+    try {
+        volcast::loadVolume(dir / "v.nrrd", options);
+    } catch (const volcast::VolumeLoadError &e) {
+        message = e.what();
+    }
+    ::unsetenv("VOLCAST_DICOM_CHECK");
+    fs::remove_all(dir);
+    EXPECT_NE(message.find("damaged result"), std::string::npos) << "a damaged hand-back was not refused: " << message;
+}
+
 class ZipParts : public ::testing::Test {
   protected:
     fs::path dir;
