@@ -232,7 +232,8 @@ bool MultipartReader::stepHeaders() {
         if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
         if (!line.empty()) {
             scanned_ = nl + 1;
-            if (scanned_ > limits_.maxHeaderBytes) break;
+            if (scanned_ > limits_.maxHeaderBytes)
+                fail("the headers of " + partName() + " are longer than " + std::to_string(limits_.maxHeaderBytes) + " bytes");
             continue;
         }
         MultipartHeaders headers;
@@ -260,7 +261,10 @@ bool MultipartReader::stepHeaders() {
         if (callbacks_.partBegin) callbacks_.partBegin(headers);
         return true;
     }
-    if (buffer_.size() > limits_.maxHeaderBytes)
+    // The incomplete line will make the block too long unless it is the CR of the blank line
+    // that ends it (that line does not count): the same verdict however the body is chunked.
+    const bool maybeBlankLine = buffer_.size() == scanned_ + 1 && buffer_.back() == '\r';
+    if (buffer_.size() > limits_.maxHeaderBytes && !maybeBlankLine)
         fail("the headers of " + partName() + " are longer than " + std::to_string(limits_.maxHeaderBytes) + " bytes");
     return false;
 }

@@ -153,6 +153,19 @@ TEST(DicomWebMultipart, OverlongHeadersAreRefused) {
     EXPECT_NE(errorOf("b", manyLines, manyLines.size(), limits).find("longer than 1024 bytes"), std::string::npos);
 }
 
+TEST(DicomWebMultipart, HeadersEndingExactlyAtTheLimitPassWhateverTheChunks) {
+    // "X: 0123456789abcd\r\n" is 19 bytes, the limit; the blank line after it does not count,
+    // even when its CR arrives alone at the end of a chunk (found by fuzz_multipart).
+    MultipartLimits limits;
+    limits.maxHeaderBytes = 19;
+    const std::string body = "--b\r\nX: 0123456789abcd\r\n\r\nz\r\n--b--";
+    for (size_t chunk = 1; chunk <= body.size(); ++chunk)
+        EXPECT_EQ(errorOf("b", body, chunk, limits), "") << "chunks of " << chunk;
+    limits.maxHeaderBytes = 18;
+    for (size_t chunk = 1; chunk <= body.size(); ++chunk)
+        EXPECT_NE(errorOf("b", body, chunk, limits), "") << "chunks of " << chunk;
+}
+
 TEST(DicomWebMultipart, MalformedHeaderLinesAndDelimitersAreRefused) {
     EXPECT_NE(errorOf("b", "--b\r\nno colon here\r\n\r\nx\r\n--b--").find("not 'Name: value'"), std::string::npos);
     EXPECT_NE(errorOf("b", "--b\r\n continued: x\r\n\r\nx\r\n--b--").find("continuation line"), std::string::npos);
