@@ -480,6 +480,9 @@ RetrieveProgress Client::retrieveSeries(const std::string &studyUid, const std::
     const bool folderExisted = std::filesystem::exists(folder, ec);
     std::filesystem::create_directories(folder, ec);
     if (ec) throw DicomWebError(ErrorKind::Storage, folder.string() + " could not be created: " + ec.message());
+    // Files left from another retrieval would be loaded as part of this series.
+    if (folderExisted && !std::filesystem::is_empty(folder, ec))
+        throw DicomWebError(ErrorKind::Storage, folder.string() + " is not empty: a series is retrieved into an empty folder");
 
     RetrieveProgress state;
     state.instancesTotal = std::max<int64_t>(0, expectedInstances);

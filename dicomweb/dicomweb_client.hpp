@@ -73,7 +73,8 @@ class Client {
     SeriesSize seriesSize(const std::string &studyUid, const std::string &seriesUid);
 
     // WADO-RS multipart/related; type="application/dicom": each instance is written, as it
-    // arrives, to folder/instance_NNNNN.dcm (00000 first; the folder is created if missing).
+    // arrives, to folder/instance_NNNNN.dcm (00000 first). The folder must be empty or missing
+    // (it is then created); otherwise Storage.
     // At most maxBytes of DICOM data (past it: TooLarge); `progress` after each instance;
     // `cancelled` asked between chunks and while the transfer waits. With expectedInstances > 0
     // (from seriesSize), a series that arrives with a different count is BadResponse: never a

@@ -11,6 +11,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 using namespace volcast::dicomweb;
@@ -324,4 +325,17 @@ TEST(DicomWebHostile, PortWithNothingListeningIsUnreachable) {
         EXPECT_EQ(e.kind, ErrorKind::Unreachable) << e.what();
         EXPECT_CONTAINS(e.what(), "DICOMweb source 'nobody' is unreachable (GET /dicom-web/studies)");
     }
+}
+
+TEST(DicomWebHostile, FolderHoldingFilesIsRefusedBeforeAnyRequest) {
+    // Files of an earlier retrieval would be loaded as part of the new series.
+    HostileServer server([](int, const std::string &) { return multipartAnswer(kGoodPart + "--xyz--\r\n"); });
+    Folder folder;
+    fs::create_directories(folder.path);
+    std::ofstream(folder.path / "instance_00007.dcm") << "stale";
+    const DicomWebError e = retrieveError(server, folder.path);
+    EXPECT_EQ(e.kind, ErrorKind::Storage) << e.what();
+    EXPECT_CONTAINS(e.what(), "is not empty");
+    EXPECT_TRUE(server.requests().empty());
+    EXPECT_TRUE(fs::exists(folder.path / "instance_00007.dcm")) << "files it did not write are left alone";
 }
