@@ -315,6 +315,9 @@ uint64_t HttpClient::perform(const std::string &method, const std::string &first
         if (!t.streaming) {
             curl_easy_setopt(curl, CURLOPT_ACCEPT_ENCODING, "");
             curl_easy_setopt(curl, CURLOPT_MAXFILESIZE_LARGE, curl_off_t(t.maxBodyBytes));
+        } else {
+            // A series is hundreds of MiB: larger reads mean fewer callbacks, searches and writes.
+            curl_easy_setopt(curl, CURLOPT_BUFFERSIZE, 512L << 10);
         }
         curl_easy_setopt(curl, CURLOPT_WRITEFUNCTION, &Transfer::onWrite);
         curl_easy_setopt(curl, CURLOPT_WRITEDATA, &t);
