@@ -31,6 +31,11 @@ constexpr auto kBodyTimeout = std::chrono::seconds(30);
 // the connection, and the client could lose the answer before reading it.
 constexpr auto kLingerTimeout = std::chrono::seconds(2);
 constexpr size_t kLingerBytes = 1 << 20;
+// Free room in the read buffer while an upload's body arrives. Beast reads into the buffer's
+// free capacity (at least 512 bytes, at most 64 KiB a read): after a request head the buffer
+// has only a few hundred bytes, so a body read 512 bytes at a time (a read, a file write and a
+// timer re-arm each: ~50 MiB/s over loopback); with 64 KiB free every read takes Beast's most.
+constexpr size_t kUploadReadBytes = 64 * 1024;
 
 // Shown at / while web/ has no index.html yet.
 constexpr const char *kFallbackPage = R"(<!doctype html>
@@ -455,6 +460,7 @@ void BasicHttpSession<Stream>::startUpload() {
 
     upload_.emplace(std::move(*parser_));
     upload_->body_limit(limit);
+    buffer_.reserve(buffer_.size() + kUploadReadBytes);
     beast::error_code fec;
     upload_->get().body().open(pendingUpload_->file().c_str(), beast::file_mode::write_new, fec);
     if (fec) {
@@ -523,12 +529,18 @@ void BasicHttpSession<Stream>::onUploadBody(beast::error_code ec, size_t) {
     }
     if (!upload_->is_done()) return readUploadBody();
     upload_->get().body().close();
+    // The connection may stay open for more requests: the upload's read room goes back.
+    buffer_.shrink_to_fit();
     std::error_code sizeError;
     const uint64_t bytes = std::filesystem::file_size(pendingUpload_->file(), sizeError);
     // The answer comes back to this connection's strand; the parse never runs on a network thread.
+    // The callback moves its hold on this session into the posted handler: the store's worker
+    // must not drop the last reference, which could take the whole server state with it on
+    // the worker itself (whose destructor joins that very thread).
     state_->uploads().finish(std::move(pendingUpload_), sizeError ? 0 : bytes,
-                             [self = this->shared_from_this()](UploadStore::Result result) {
-                                 net::post(self->stream_.get_executor(), [self, result = std::move(result)]() mutable {
+                             [self = this->shared_from_this()](UploadStore::Result result) mutable {
+                                 auto executor = self->stream_.get_executor();
+                                 net::post(executor, [self = std::move(self), result = std::move(result)]() mutable {
                                      self->onUploadChecked(std::move(result));
                                  });
                              });

@@ -1764,6 +1764,7 @@ std::optional<Volume> checkInChild(const fs::path &path, const LoadOptions &opti
                             if (end && *end == ' ' && std::isfinite(f)) {
                                 fraction = std::clamp(f, 0.0, 0.8);   // reading its result is the rest
                                 task = quotableTask(std::string_view(end + 1, line.size() - size_t(end + 1 - line.c_str())));
+                                progress(fraction, task);   // each step, however many arrive at once
                             }
                         } else {
                             said += line;
