@@ -55,7 +55,10 @@ std::vector<DicomWebSourceConfig> parseDicomWebSources(const std::vector<std::st
     }
     for (const std::string &item : auth) {
         if (item.empty()) continue;
-        auto [name, file] = splitPair(item, "--dicomweb-auth", "NAME=FILE");
+        // Plain names, not a structured binding: the lambda below captures `name` (clang 14,
+        // which builds the fuzz targets, cannot capture bindings).
+        const auto pair = splitPair(item, "--dicomweb-auth", "NAME=FILE");
+        const std::string &name = pair.first, &file = pair.second;
         auto it = std::find_if(out.begin(), out.end(), [&](const auto &s) { return s.name == name; });
         if (it == out.end())
             throw std::invalid_argument("--dicomweb-auth: no --dicomweb source named \"" + name + "\"");
