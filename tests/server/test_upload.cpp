@@ -14,6 +14,7 @@
 #include "tests/server/server_fixture.hpp"
 
 #include <gtest/gtest.h>
+#include <spdlog/fmt/fmt.h>
 #include <zip.h>
 
 #include <boost/asio/write.hpp>
@@ -281,6 +282,37 @@ TEST_F(Upload, ThirdUploadAtOnceFromOneAddressIs429) {
     open.clear();
     std::this_thread::sleep_for(200ms);
     accepted("after.nrrd", volumeFile(".nrrd"));
+}
+
+TEST_F(Upload, LargeBodyIsStoredWholeAndAccepted) {
+    // 64 MiB: a body read in many pieces; every byte must land in the file, in order.
+    constexpr volcast::Vec3i kLargeDims{256, 256, 512};
+    const size_t voxels = size_t(kLargeDims.x) * size_t(kLargeDims.y) * size_t(kLargeDims.z);
+    std::string nrrd = fmt::format("NRRD0004\ntype: short\ndimension: 3\nsizes: {} {} {}\nencoding: raw\n"
+                                   "endian: little\n\n",
+                                   kLargeDims.x, kLargeDims.y, kLargeDims.z);
+    const size_t headerBytes = nrrd.size();
+    nrrd.resize(headerBytes + voxels * 2);
+    // No two neighbouring 64 KiB stretches alike: a piece lost, doubled or moved changes the file.
+    for (size_t i = 0; i < voxels; ++i) {
+        const auto v = uint16_t(((i * 40503u) >> 4) & 0x0fffu);
+        nrrd[headerBytes + 2 * i] = char(v & 0xff);
+        nrrd[headerBytes + 2 * i + 1] = char(v >> 8);
+    }
+    auto c = config();
+    c.maxUploadBytes = uint64_t(128) << 20;
+    volcast::server::Server s(c);
+    volcast::test::startAndWaitReady(s, kStartTimeout);
+    const auto x = rawExchange(s.port(), uploadHead("large.nrrd", nrrd.size()) + nrrd, kUploadTimeout);
+    ASSERT_EQ(statusOf(x), 201) << describe(x);
+    const json j = json::parse(x.response->body());
+    EXPECT_EQ(j.at("bytes"), nrrd.size()) << j;
+    EXPECT_EQ(j.at("dims"), json::array({kLargeDims.x, kLargeDims.y, kLargeDims.z})) << j;
+    std::vector<fs::path> stored;
+    for (const auto &e : fs::recursive_directory_iterator(s.state().uploads().folder()))
+        if (e.is_regular_file()) stored.push_back(e.path());
+    ASSERT_EQ(stored.size(), 1u) << "one upload, one file in the upload folder";
+    EXPECT_TRUE(readFile(stored.front()) == nrrd) << "the stored file differs from the body sent";
 }
 
 TEST_F(Upload, ExpiredUploadIsNotFoundAndDeleted) {
