@@ -1843,7 +1843,9 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
         v.name = displayName(path);
         progress(0.9, "statistics");
         if (!checked && !v.voxels.empty()) v.nonFiniteReplaced = replaceNonFinite(path, v.voxels);
-        computeStatistics(v);
+        // In the checker (dicomInChild false) they would be computed twice: its caller computes
+        // them again from the hand-back, which it does not trust.
+        if (dicomInChild) computeStatistics(v);
         holdNarrow(v); // a float file (or a DICOM series, rescaled) whose samples are 8- or 16-bit integers
         progress(1, "statistics");
         spdlog::debug("{}: loaded {} x {} x {} {} voxels, spacing {} {} {}, range {} .. {}", path.string(), v.dims.x,
