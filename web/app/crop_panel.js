@@ -1,8 +1,13 @@
-// The compositing mode (emission–absorption, maximum or minimum intensity projection) and
-// the crop box: six sliders, one per face, in the volume's own axes. Both travel in the
-// quality object of the protocol's quality_policy (docs/design.md's scene file:
-// quality.compositing, quality.crop in normalised box coordinates, 0 and 1 the outer faces
+// The compositing mode (emission–absorption, maximum or minimum intensity projection), the
+// projections' window/level, and the crop box: six sliders, one per face, in the volume's
+// own axes. All travel in the quality object of the protocol's quality_policy
+// (docs/design.md's scene file: quality.compositing, quality.projection_window {window,
+// level} in data units, quality.crop in normalised box coordinates, 0 and 1 the outer faces
 // of the outermost voxels), so every level the server renders keeps them.
+//
+// A MIP or MinIP is a greyscale picture windowed like a radiograph: level − window/2 black,
+// level + window/2 white (the transfer function plays no part). Its fields start at the
+// volume's value range, which is what the server uses while none is sent.
 
 export const COMPOSITING_MODES = [
   { value: "emission_absorption", label: "Emission–absorption" },
@@ -15,10 +20,14 @@ const MIN_GAP = 0.01;   // the smallest box the sliders allow, of the volume's e
 
 // The crop and compositing keys added to a quality object; the defaults are left out, as the
 // server writes them.
-export function withCompositingAndCrop(quality, compositing, crop) {
+// projectionWindow ({window, level} or null) goes with a projection only.
+export function withCompositingAndCrop(quality, compositing, crop, projectionWindow = null) {
   const q = { ...quality };
-  if (compositing && compositing !== "emission_absorption") q.compositing = compositing;
+  const projecting = compositing && compositing !== "emission_absorption";
+  if (projecting) q.compositing = compositing;
   else delete q.compositing;
+  if (projecting && projectionWindow) q.projection_window = { window: projectionWindow.window, level: projectionWindow.level };
+  else delete q.projection_window;
   const full = crop.min.every((v) => v === 0) && crop.max.every((v) => v === 1);
   if (full) delete q.crop; else q.crop = { min: [...crop.min], max: [...crop.max] };
   return q;
@@ -31,7 +40,11 @@ export class CropPanel {
     this.card = card;
     this.onChange = onChange;
     this.dragging = false;
+    this.projectionWindow = null;   // {window, level} the user set; null: the volume's range
+    this.range = [0, 1];            // the open volume's value range
+    this.shownListeners = [];       // onShown(fn): the crop handles redraw with the sliders
     this.build();
+    this.showWindow();
   }
 
   build() {
@@ -53,6 +66,26 @@ export class CropPanel {
     this.mode.addEventListener("change", () => this.onChange({ interactive: false }));
     modeRow.append(modeLabel, this.mode);
     card.append(modeRow);
+
+    // The projection's window/level: shown while a projection is chosen.
+    this.windowRow = document.createElement("div");
+    this.windowRow.className = "row";
+    this.windowRow.innerHTML = `<label for="projection-window">Window</label>
+      <input id="projection-window" type="number" step="any" min="0" title="Projection window (data units): the span from black to white">
+      <label for="projection-level" class="inline">Level</label>
+      <input id="projection-level" type="number" step="any" title="Projection level (data units): the value shown mid-grey">`;
+    card.append(this.windowRow);
+    this.windowInputs = { window: this.windowRow.querySelector("#projection-window"), level: this.windowRow.querySelector("#projection-level") };
+    for (const key of ["window", "level"]) {
+      this.windowInputs[key].addEventListener("change", () => {
+        const v = Number(this.windowInputs[key].value);
+        const current = this.effectiveWindow();
+        if (this.windowInputs[key].value.trim() === "" || !Number.isFinite(v) || (key === "window" && !(v > 0))) { this.showWindow(); return; }
+        this.setProjectionWindow({ ...current, [key]: v });
+        this.onChange({ interactive: false });
+      });
+    }
+    this.mode.addEventListener("change", () => this.showWindow());
 
     this.sliders = { min: [], max: [] };
     this.outputs = { min: [], max: [] };
@@ -102,6 +135,41 @@ export class CropPanel {
   }
 
   get compositing() { return this.mode.value; }
+  get projecting() { return this.mode.value !== "emission_absorption"; }
+
+  // The open volume: its range is the projection window while the user sets none.
+  setVolume(volume) {
+    const r = volume?.value_range;
+    this.range = Array.isArray(r) && r[1] > r[0] ? [r[0], r[1]] : [0, 1];
+    this.projectionWindow = null;
+    this.showWindow();
+  }
+
+  effectiveWindow() {
+    return this.projectionWindow ?? { window: this.range[1] - this.range[0], level: (this.range[0] + this.range[1]) / 2 };
+  }
+
+  setProjectionWindow(wl) {
+    this.projectionWindow = wl ? { window: wl.window, level: wl.level } : null;
+    this.showWindow();
+  }
+
+  // An Alt-drag in the 3D view while projecting windows the projection (as it windows the
+  // transfer function otherwise); next: core/window_level.js's step.
+  dragWindow(next, interactive) {
+    this.setProjectionWindow(next);
+    this.onChange({ interactive });
+  }
+
+  showWindow() {
+    this.windowRow.hidden = !this.projecting;
+    const wl = this.effectiveWindow();
+    // 4 significant digits: HU come out whole, grey values readable, never cut in the field.
+    this.windowInputs.window.value = String(Number(wl.window.toPrecision(4)));
+    this.windowInputs.level.value = String(Number(wl.level.toPrecision(4)));
+  }
+
+  onShown(fn) { this.shownListeners.push(fn); }
 
   get crop() {
     return {
@@ -122,13 +190,24 @@ export class CropPanel {
   showState(quality) {
     if (!quality) return;
     this.mode.value = quality.compositing ?? "emission_absorption";
+    const pw = quality.projection_window;
+    if (pw && pw.window > 0 && Number.isFinite(pw.level)) this.projectionWindow = { window: pw.window, level: pw.level };
+    this.showWindow();
     this.set(quality.crop ?? { min: [0, 0, 0], max: [1, 1, 1] });
   }
 
   show() {
     for (const side of ["min", "max"])
       for (let a = 0; a < 3; ++a) this.outputs[side][a].value = Number(this.sliders[side][a].value).toFixed(3);
+    for (const fn of this.shownListeners) fn(this.crop);
   }
 
-  decorate(quality) { return withCompositingAndCrop(quality, this.compositing, this.crop); }
+  // A crop from a handle dragged in the 3D view or a slice: the sliders follow, and it goes
+  // as a slider's edit does (interactive while the handle moves, final on release).
+  setFromHandle(crop, interactive) {
+    this.set(crop);
+    this.onChange({ interactive });
+  }
+
+  decorate(quality) { return withCompositingAndCrop(quality, this.compositing, this.crop, this.projectionWindow); }
 }

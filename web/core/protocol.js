@@ -74,15 +74,26 @@ export const requests = {
   close: () => ({ type: "close" }),
   // A plane of the open volume (protocol/README.md, `slice`): axis "axial" | "coronal" |
   // "sagittal", size in pixels; optional point/center (world mm), pixel_spacing, window, level.
-  slice: (axis, width, height, { point, center, pixelSpacing, window, level } = {}) => {
+  // slab: {thickness (mm), mode: "mip" | "minip" | "mean"}, a thick slab projected along the
+  // plane's normal; thickness 0 or absent is the plane alone.
+  slice: (axis, width, height, { point, center, pixelSpacing, window, level, slab } = {}) => {
     const m = { type: "slice", axis, width, height };
     if (point) m.point = point;
     if (center) m.center = center;
     if (pixelSpacing !== undefined) m.pixel_spacing = pixelSpacing;
     if (window !== undefined) m.window = window;
     if (level !== undefined) m.level = level;
+    if (slab && slab.thickness > 0) m.slab = { thickness: slab.thickness, mode: slab.mode };
     return m;
   },
+  // The volume's value at a world point (mm): answered by `probe` {inside, value, unit}.
+  probe: (point) => ({ type: "probe", point: [...point] }),
+  // Statistics of an ellipse or rectangle in a pane's plane: centre (world mm), radii [a, b]
+  // in mm along the pane's column and row directions. Answered by `roi_stats`.
+  roiStats: (axis, center, radii, shape = "ellipse") => ({ type: "roi_stats", axis, center: [...center], radii: [...radii], shape }),
+  // The surface point under pixel (x, y) of a width × height image of the current camera
+  // (pixel centres at +0.5, origin top left). Answered by `pick` {hit, point, opacity}.
+  pick: (x, y, width, height) => ({ type: "pick", x, y, width, height }),
 };
 
 // Requests whose effect shows in frames: a frame's `request` names the latest of them.
@@ -98,6 +109,9 @@ export const REPLY_TYPE = Object.freeze({
   open_volume: "state",
   get_state: "state",
   find_studies: "studies",
+  probe: "probe",
+  roi_stats: "roi_stats",
+  pick: "pick",
 });
 
 // ---------------------------------------------------------------------------------------

@@ -188,6 +188,17 @@ export class Session extends Emitter {
 
   getState() { return this.connection.request(requests.getState()); }
 
+  // Measurements (protocol/README.md's probe, roi_stats, pick): each resolves with the
+  // server's answer, rejects with ServerError (bad_state, bad_field) or when not connected.
+  // They never change the scene.
+  probe(point) { return this.measureRequest(requests.probe(point)); }
+  roiStats(axis, center, radii, shape) { return this.measureRequest(requests.roiStats(axis, center, radii, shape)); }
+  pick(x, y, width, height) { return this.measureRequest(requests.pick(x, y, width, height)); }
+  measureRequest(message) {
+    if (!this.ready) return Promise.reject(new Error("not connected to the server"));
+    return this.connection.request(message);
+  }
+
   // Send when connected; returns the id, or null when not connected (the wanted state is
   // kept and sent again after reconnecting).
   sendIfReady(message) {

@@ -143,7 +143,8 @@ test("server messages: lenient in, refusing only non-messages", () => {
 test("scene-changing requests and replies are the README's lists", () => {
   assert.deepEqual([...SCENE_CHANGING].sort(),
     ["camera", "clip_planes", "open_volume", "quality_policy", "still", "transfer_function", "viewport"]);
-  assert.deepEqual(REPLY_TYPE, { hello: "hello", list_volumes: "volumes", open_volume: "state", get_state: "state", find_studies: "studies" });
+  assert.deepEqual(REPLY_TYPE, { hello: "hello", list_volumes: "volumes", open_volume: "state", get_state: "state", find_studies: "studies",
+    probe: "probe", roi_stats: "roi_stats", pick: "pick" });
   // The README's transfer_function row lists the presets the server knows.
   for (const { name } of TF_PRESETS) assert.ok(readme.includes(`\`${name}\``), name);
 });
