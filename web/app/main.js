@@ -13,6 +13,8 @@ import { windowLevelStep } from "../core/window_level.js";
 import { OrientationControls } from "./orientation_marker.js";
 import { PresetPicker } from "./preset_picker.js";
 import { CropPanel } from "./crop_panel.js";
+import { CropHandles } from "./crop_handles.js";
+import { MeasureTools } from "./measure_tools.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
 import { SliceViews } from "./slice_views.js";
 import { StatsOverlay } from "./stats_overlay.js";
@@ -187,6 +189,8 @@ $("tf-preset").addEventListener("change", () => {
 });
 
 function windowLevelDrag(step) {
+  // A projection (MIP, MinIP) is windowed by its own W/L, not the transfer function.
+  if (crop.projecting) return crop.dragWindow(windowLevelStep(crop.effectiveWindow(), step.dx, step.dy, session.volume?.value_range ?? [0, 1]), true);
   const wl = tfEditor.windowLevel;
   if (!wl) return;
   const next = windowLevelStep(wl, step.dx, step.dy, session.volume?.value_range ?? [0, 1]);
@@ -304,6 +308,7 @@ session.on("opened", ({ state, restored }) => {
   applyPendingLink(volume);
   showTransferFunction(session.scene.transfer_function ?? state.scene?.transfer_function);
   quality.showState(state);
+  if (!restored) crop.setVolume(volume);
   crop.showState(state.scene?.quality);
   quality.setVolume(volume, session.scene.clip_planes, state.scene?.quality?.orientation_correction);
   showOpenVolume();
@@ -551,6 +556,9 @@ $("reset-view").addEventListener("click", resetView);
 
 // For the console and the browser tests: the session and the frame headers seen.
 const slices = new SliceViews(document, session, $("slices"), $("view"));
+// Crop handles first: a press on a handle is theirs before a measurement's.
+const cropHandles = new CropHandles(document, session, crop, slices, $("view"));
+const measure = new MeasureTools(document, session, slices, $("view"));
 
 // A volume the user brings: a series from a PACS (the studies panel), a file from their disk.
 function openBrought(name, label) {
@@ -564,7 +572,7 @@ const opener = new FileOpener(document, session, {
   changed: () => updateMessage(),
   error: (text) => errors.show({ code: "upload", message: text }),
 });
-window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene, orientation, slices, studies, opener };
+window.volcast = { session, view, tfEditor, frames, shown: null, savePng, saveScene, orientation, slices, studies, opener, crop, cropHandles, measure };
 
 // Closing the tab says goodbye, so the server frees the session at once.
 window.addEventListener("pagehide", () => session.stop());
