@@ -121,3 +121,120 @@ export function describeCorrection(m) {
     return `${axis[c]}→${m[r][c] < 0 ? "−" : ""}${axis[r]}`;
   }).join(", ");
 }
+
+// --- labels that never claim what the file does not say -----------------------------------
+//
+// A file that names no patient axes (volume object `orientation_known: false`) is drawn in
+// its own axes taken as if they were L, P, S; nothing on the page may then call a direction
+// left, anterior or superior, because nobody knows. Labels use the file's axes (+x, −y, …)
+// until the user sets the orientation by hand: a flip or quarter turn of the volume, or
+// "Treat as LPS" / "Treat as RAS". From then on the corrected axes are the user's statement
+// of the patient axes, and labels are anatomical, said to be set by hand.
+
+// Each patient direction's name among the file's own axes (world axes before any correction).
+export const FILE_AXIS_LABELS = Object.freeze({ L: "+x", R: "−x", P: "+y", A: "−y", S: "+z", I: "−z" });
+
+// The corrections behind "Treat as LPS" and "Treat as RAS": the file's x, y, z are taken as
+// the patient's left, posterior, superior (nothing moves), or as right, anterior, superior
+// (x and y mirrored into LPS world space, as the loader does for a file in RAS).
+export const TREAT_AS = Object.freeze({
+  lps: { label: "Treat as LPS", title: "Take the file's x, y, z as the patient's left, posterior, superior", matrix: [[1, 0, 0], [0, 1, 0], [0, 0, 1]] },
+  ras: { label: "Treat as RAS", title: "Take the file's x, y, z as the patient's right, anterior, superior", matrix: [[-1, 0, 0], [0, -1, 0], [0, 0, 1]] },
+});
+
+const sameMatrix = (a, b) => JSON.stringify(a) === JSON.stringify(b);
+
+// How the labels of a volume may speak:
+//   "file"   the file names its patient axes: anatomical letters;
+//   "hand"   it does not, but the user set them by hand (a correction, or a treat-as choice);
+//   "axes"   it does not and nobody has: the file's axes.
+// setByHand: the user chose "Treat as …" (a correction other than the identity is always by hand).
+export function anatomySource(volume, correction = null, setByHand = false) {
+  if (volume && volume.orientation_known !== false) return "file";
+  if (setByHand || !isIdentityCorrection(correction)) return "hand";
+  return "axes";
+}
+
+export const isAnatomical = (source) => source !== "axes";
+
+// A patient direction's label: its letter where labels may be anatomical, else the file's axis.
+export const directionLabel = (letter, anatomical) => (anatomical ? letter : FILE_AXIS_LABELS[letter]);
+
+// The treat-as choice a correction made by hand amounts to: "lps", "ras" or null (another
+// correction, or none made by hand).
+export function treatAsOf(correction, setByHand) {
+  if (!setByHand) return null;
+  const m = correction ?? IDENTITY_CORRECTION;
+  return Object.keys(TREAT_AS).find((k) => sameMatrix(TREAT_AS[k].matrix, m)) ?? null;
+}
+
+// The letters on the four edges of each slice pane (web/app/slice_views.js's layout, in
+// world space after the correction: axial and coronal have the patient's right on the
+// image's left; axial has anterior, coronal and sagittal superior at the top; sagittal has
+// anterior on the left). Anatomical where the file names its axes or the user set them by
+// hand, else the file's axes ("−x" on the left of the axial pane).
+const PANE_EDGES = Object.freeze({
+  axial: { left: "R", right: "L", top: "A", bottom: "P" },
+  coronal: { left: "R", right: "L", top: "S", bottom: "I" },
+  sagittal: { left: "A", right: "P", top: "S", bottom: "I" },
+});
+
+export function paneEdgeLetters(volume, correction = null, setByHand = false) {
+  const anatomical = isAnatomical(anatomySource(volume, correction, setByHand));
+  const out = {};
+  for (const [pane, edges] of Object.entries(PANE_EDGES)) {
+    out[pane] = Object.fromEntries(Object.entries(edges).map(([edge, letter]) => [edge, directionLabel(letter, anatomical)]));
+  }
+  return out;
+}
+
+// The standard views' button text and tooltip: anatomical names, or where the eye is along
+// the file's axes ("From −y").
+export function standardViewLabel(name, anatomical) {
+  const v = STANDARD_VIEWS[name];
+  if (anatomical) return { label: v.label, title: `${v.label} view` };
+  const axis = v.eye.findIndex((x) => x !== 0);
+  const from = `${v.eye[axis] > 0 ? "+" : "−"}${"xyz"[axis]}`;
+  const up = v.up.findIndex((x) => x !== 0);
+  return { label: `From ${from}`, title: `View from ${from} along the file's axes, ${v.up[up] > 0 ? "+" : "−"}${"xyz"[up]} up (the file names no patient axes)` };
+}
+
+// A correction step's button text and tooltip, in the file's axes where labels may not name anatomy.
+const STEP_AXES = Object.freeze({
+  "flip-lr": ["Flip x", "Mirror the volume along x"], "flip-ap": ["Flip y", "Mirror the volume along y"],
+  "flip-si": ["Flip z", "Mirror the volume along z"], "turn-si": ["Turn 90° about z", "Turn the volume a quarter turn about z"],
+  "turn-ap": ["Turn 90° about y", "Turn the volume a quarter turn about y"], "turn-lr": ["Turn 90° about x", "Turn the volume a quarter turn about x"],
+});
+export function correctionStepLabel(name, anatomical) {
+  const step = CORRECTION_STEPS[name];
+  if (anatomical) return { label: step.label, title: step.title };
+  const [label, title] = STEP_AXES[name];
+  return { label, title: `${title}; the patient axes are then set by hand` };
+}
+
+// The letters at the four edges of a 3D image seen with `camera`: the direction nearest
+// each of the image's right, left, top and bottom, anatomical or in the file's axes.
+export function imageEdgeLabels(camera, anatomical) {
+  const axes = projectAxes(camera);
+  const best = (score) => axes.reduce((b, a) => (score(a) > score(b) ? a : b)).label;
+  const name = (letter) => directionLabel(letter, anatomical);
+  return { right: name(best((a) => a.x)), left: name(best((a) => -a.x)), top: name(best((a) => a.y)), bottom: name(best((a) => -a.y)) };
+}
+
+// World millimetres per image pixel at the camera's target (the volume's centre): exact for
+// an orthographic camera, at the target's depth only for a perspective one.
+export function mmPerPixelAtTarget(camera, imageHeight) {
+  if (!(imageHeight > 0)) return null;
+  if (camera.projection === "orthographic") return camera.height / imageHeight;
+  const d = vec.length(vec.sub(camera.target, camera.eye));
+  return (2 * d * Math.tan((camera.fov_y_deg * Math.PI) / 360)) / imageHeight;
+}
+
+// A scale bar's length: the largest 1, 2 or 5 × 10^k mm that fits in maxPixels.
+export function scaleBarLength(mmPerPixel, maxPixels) {
+  if (!(mmPerPixel > 0) || !(maxPixels > 0)) return null;
+  const most = mmPerPixel * maxPixels;
+  const decade = 10 ** Math.floor(Math.log10(most));
+  const mm = [5, 2, 1].map((f) => f * decade).find((v) => v <= most);
+  return { mm, pixels: mm / mmPerPixel };
+}

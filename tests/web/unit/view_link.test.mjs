@@ -23,6 +23,37 @@ test("a view comes back from its link exactly (numbers of up to 7 significant di
   back.forEach((x, i) => assert.ok(Math.abs(x - odd.camera.eye[i]) <= 5e-7 * Math.abs(odd.camera.eye[i])));
 });
 
+// The rest of the view: everything that decides what the reader sees.
+const full = {
+  ...view,
+  orientation: { correction: [[0, -1, 0], [-1, 0, 0], [0, 0, 1]], setByHand: true },
+  crop: { min: [0, 0.125, 0.2], max: [1, 0.875, 0.55] },
+  clip_planes: [{ point: [10.5, -20, 30], normal: [0, 0, -1] }, { point: [0, 0, 0], normal: [0.6, 0.8, 0] }],
+  compositing: "mip",
+  projection_window: { window: 400, level: 40 },
+  slice_window: { window: 2000, level: -600.5 },
+  crosshair: [1.5, -3.25, 40],
+  slab: { thickness: 12.5, mode: "minip" },
+};
+
+test("the whole view comes back from its link: orientation, crop, clip planes, compositing, windows, crosshair, slab", () => {
+  const link = formatViewLink(full);
+  assert.deepEqual(parseViewLink(`#${link}`), { view: full, error: null });
+  assert.ok(link.length < MAX_LINK_CHARS);
+  // "Treat as LPS": no correction, the axes set by hand; the identity is not written.
+  const lps = { volume: "a.nrrd", orientation: { correction: [[1, 0, 0], [0, 1, 0], [0, 0, 1]], setByHand: true } };
+  assert.equal(formatViewLink(lps), "volume=a.nrrd&axes=hand");
+  assert.deepEqual(parseViewLink(formatViewLink(lps)).view, lps);
+  // A flip of a file that names its axes: a correction, not set by hand.
+  const flip = { volume: "a.nrrd", orientation: { correction: [[-1, 0, 0], [0, 1, 0], [0, 0, 1]], setByHand: false } };
+  assert.deepEqual(parseViewLink(formatViewLink(flip)).view, flip);
+  // No correction and nothing set by hand is no orientation key at all: the page resets it.
+  assert.equal(formatViewLink({ volume: "a.nrrd", orientation: { correction: lps.orientation.correction, setByHand: false } }), "volume=a.nrrd");
+  // A slab of 0 mm (the plane itself) and emission–absorption are carried as chosen.
+  const plain = { volume: "a.nrrd", compositing: "emission_absorption", slab: { thickness: 0, mode: "mean" } };
+  assert.deepEqual(parseViewLink(formatViewLink(plain)).view, plain);
+});
+
 test("no fragment is no view and no error", () => {
   assert.deepEqual(parseViewLink(""), { view: null, error: null });
   assert.deepEqual(parseViewLink("#"), { view: null, error: null });
@@ -53,7 +84,34 @@ test("hostile or broken links are refused whole, saying why", () => {
     [withParam("tf", "1,0,0,0,0;1,0,0,0,0"), /values must increase/],
     [withParam("opacity_unit", "-1"), /positive/],
     [`${good}&volume=other`, /volume given twice/],
-    ["constructor=1&__proto__=2", /names no volume/],
+    ["constructor=1&__proto__=2", /unknown key "constructor"/],
+    [withParam("orientation", "1,0,0,0,1,0,0,0"), /orientation: needs 9 numbers/],
+    [withParam("orientation", "1,0,0,0,2,0,0,0,1"), /-1, 0 or 1/],
+    [withParam("orientation", "1,0,0,1,0,0,0,0,1"), /column 1 must have one non-zero/],
+    [withParam("orientation", "1,1,0,0,0,0,0,0,1"), /row 1 must have one non-zero/],
+    [withParam("orientation", "0.5,0,0,0,1,0,0,0,1"), /-1, 0 or 1/],
+    [withParam("axes", "lps"), /axes: the only value is "hand"/],
+    [withParam("crop", "0,0,0,1,1"), /crop: needs 6 numbers/],
+    [withParam("crop", "0,0,-0.1,1,1,1"), /\[0, 1\]/],
+    [withParam("crop", "0,0,0.5,1,1,0.5"), /min must be below its max/],
+    [withParam("crop", "0,0,NaN,1,1,1"), /not a number/],
+    [withParam("clip", "0,0,0,0,0,0"), /normal is zero/],
+    [withParam("clip", "0,0,0,0,0"), /needs 6 numbers/],
+    [withParam("clip", Array.from({ length: 7 }, () => "0,0,0,0,0,1").join(";")), /at most 6 planes/],
+    [withParam("compositing", "xray"), /compositing: must be one of/],
+    [withParam("compositing", ""), /compositing: must be one of/],
+    [withParam("projection_window", "0,40"), /window must be positive/],
+    [withParam("projection_window", "-400,40"), /window must be positive/],
+    [withParam("slice_window", "400"), /needs 2 numbers/],
+    [withParam("slice_window", "400,1e13"), /out of range/],
+    [withParam("crosshair", "1,2"), /crosshair: needs 3 numbers/],
+    [withParam("crosshair", "1,2,Infinity"), /not a number/],
+    [withParam("slab", "10"), /thickness and a mode/],
+    [withParam("slab", "-1,mip"), /thickness must be 0 to/],
+    [withParam("slab", "20000,mip"), /thickness must be 0 to/],
+    [withParam("slab", "10,max"), /mode must be one of mip, minip, mean/],
+    [withParam("slab", "10,mip,1"), /thickness and a mode/],
+    [`${formatViewLink(full)}&crop=0,0,0,1,1,1`, /crop given twice/],
   ];
   for (const [fragment, why] of cases) {
     const r = parseViewLink(fragment);
