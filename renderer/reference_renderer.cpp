@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -209,6 +210,7 @@ class RayIntegrator {
             color_[0] += t * entry.r;
             color_[1] += t * entry.g;
             color_[2] += t * entry.b;
+            if (markDepth_ && !markT_) markT_ = pieceStart_ + sa * pieceLength_;
             od_ = std::numeric_limits<double>::infinity();
             ++intervals_;
             done_ = true;
@@ -218,6 +220,11 @@ class RayIntegrator {
     }
 
     void setRayLength(double length) { tolDensity_ = tolerance_ / std::max(length, 1e-300); }
+    // Records where the optical depth first reaches `depth` (opacity 1 − e^−depth), as a ray
+    // parameter: sub-piece parameters s map to t = start + s·length of the current piece.
+    void setMark(double depth) { markDepth_ = depth; }
+    void setPiece(double start, double length) { pieceStart_ = start, pieceLength_ = length; }
+    std::optional<double> markT() const { return markT_; }
     // Shading: (diffuse factor, specular term) at piece parameter s, or none for unlit colour.
     void setLight(const std::function<void(double s, double &diffuse, double &specular)> *light) { light_ = light; }
     bool done() const { return done_; }
@@ -268,14 +275,21 @@ class RayIntegrator {
         const double t = transmittance();
         const double h = (sb - sa) * worldPerS;
         if ((t * err <= tolDensity_ * h && coarse.od <= kMaxRuleDepth) || depth >= kMaxDepth) {
-            apply(fine, t * err);
+            apply(fine, t * err, sa, sb);
             return;
         }
         adapt(valueAt, sa, mid, worldPerS, left, depth + 1);
         if (!done_) adapt(valueAt, mid, sb, worldPerS, right, depth + 1);
     }
 
-    void apply(const Segment &s, double err) {
+    void apply(const Segment &s, double err, double sa, double sb) {
+        // The interval is accepted, so τ is resolved on it to the tolerance: the crossing is
+        // placed by the optical depth growing linearly across it (exact for constant τ, and
+        // off by at most the interval's length otherwise).
+        if (markDepth_ && !markT_ && od_ + s.od >= *markDepth_) {
+            const double f = s.od > 0 ? std::clamp((*markDepth_ - od_) / s.od, 0.0, 1.0) : 0.0;
+            markT_ = pieceStart_ + (sa + f * (sb - sa)) * pieceLength_;
+        }
         const double t = transmittance();
         for (int k = 0; k < 3; ++k) color_[k] += t * s.c[k];
         od_ += s.od;
@@ -307,6 +321,9 @@ class RayIntegrator {
     double error_ = 0;
     uint64_t intervals_ = 0;
     bool done_ = false;
+    std::optional<double> markDepth_;
+    std::optional<double> markT_;
+    double pieceStart_ = 0, pieceLength_ = 0;
 };
 
 // Largest opacity the transfer function takes on [lo, hi] (it is piecewise linear).
@@ -394,7 +411,33 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
     double t0, t1;
     if (!clipRay(ray, clipPlanes, t0, t1)) return {};
     if (compositing_ != Compositing::EmissionAbsorption) return project(ray, t0, t1, tolerance, stats);
+    return emission(ray, t0, t1, tolerance, stats, std::nullopt, nullptr);
+}
 
+RayPick ReferenceRenderer::pick(const Ray &ray, std::span<const ClipPlane> clipPlanes, double threshold,
+                                double tolerance) const {
+    if (!(threshold > 0 && threshold < 1)) throw std::invalid_argument("pick: the opacity threshold must be in (0, 1)");
+    RayPick out;
+    double t0, t1;
+    if (!clipRay(ray, clipPlanes, t0, t1)) return out;
+    std::optional<double> t;
+    if (compositing_ != Compositing::EmissionAbsorption) {
+        double at = 0;
+        out.opacity = project(ray, t0, t1, tolerance, nullptr, &at).color.a;
+        if (out.opacity >= threshold) t = at;
+    } else {
+        out.opacity = emission(ray, t0, t1, tolerance, nullptr, -std::log1p(-threshold), &t).color.a;
+    }
+    if (t) {
+        out.hit = true;
+        out.t = *t;
+        out.point = ray.origin + ray.dir * *t;
+    }
+    return out;
+}
+
+RayIntegral ReferenceRenderer::emission(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats,
+                                        std::optional<double> markDepth, std::optional<double> *markT) const {
     const Vec3d p0 = placement_.indexFromWorld(ray.origin);
     const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
 
@@ -419,6 +462,7 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
 
     RayIntegrator integrator(tf_, opacityUnit_, tolerance);
     integrator.setRayLength(t1 - t0);
+    if (markDepth) integrator.setMark(*markDepth);
     PiecePolynomial poly;
     poly.degree = reconstruction_ == Reconstruction::Linear ? 3 : kMaxDegree;
     std::vector<double> roots;
@@ -428,6 +472,7 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
         const double ta = splits[piece], tb = splits[piece + 1];
         if (!(tb > ta)) continue;
         const double len = tb - ta;
+        integrator.setPiece(ta, len);
         auto indexAt = [&](double s) { return p0 + dq * (ta + s * len); };
 
         // Fit v on the piece: exact for trilinear (degree 3) and cubic B-spline (degree 9).
@@ -489,6 +534,7 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
         stats->intervals += integrator.intervals();
         stats->analyticFitError = std::max(stats->analyticFitError, fitError);
     }
+    if (markT) *markT = integrator.markT();
     return integrator.result();
 }
 
@@ -500,7 +546,7 @@ RayIntegral ReferenceRenderer::integrate(const Ray &ray, std::span<const ClipPla
 // whose coefficients cannot beat the best value found are dropped. The value is exact to
 // that tolerance, not sampled: a thin peak between samples is found wherever it is.
 RayIntegral ReferenceRenderer::project(const Ray &ray, double t0, double t1, double tolerance,
-                                       ReferenceStats *stats) const {
+                                       ReferenceStats *stats, double *where) const {
     const Vec3d p0 = placement_.indexFromWorld(ray.origin);
     const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
     std::vector<double> splits{t0, t1};
@@ -526,12 +572,17 @@ RayIntegral ReferenceRenderer::project(const Ray &ray, double t0, double t1, dou
     poly.degree = reconstruction_ == Reconstruction::Linear ? 3 : kMaxDegree;
     const int m = poly.degree;
     double best = -std::numeric_limits<double>::infinity();
+    double bestT = t0;   // where along the ray the best value lies
+    const auto offer = [&](double value, double t) {
+        if (value > best) best = value, bestT = t;
+    };
     double worstGap = 0; // largest upper bound − best over accepted pieces
     uint64_t pieces = 0;
     double fitError = 0;
     struct Pending {
         double b[kMaxDegree + 1];
         int depth;
+        double lo, hi;   // the sub-piece, in the piece's parameter s
     };
     std::vector<Pending> stack;
     for (size_t piece = 0; piece + 1 < splits.size(); ++piece) {
@@ -546,11 +597,13 @@ RayIntegral ReferenceRenderer::project(const Ray &ray, double t0, double t1, dou
             fitError = std::max(fitError, std::fabs(poly(sCheck) - sign * valueAtIndex(p0 + dq * (ta + sCheck * len))));
         }
         // The ends are values of the field: candidates at once.
-        best = std::max({best, values[0], values[m]});
+        offer(values[0], ta);
+        offer(values[m], tb);
         const double scale = std::max({1.0, std::fabs(values[0]), std::fabs(values[m])});
         const double valueTolerance = 1e-12 * scale;
         stack.clear();
         Pending first{};
+        first.hi = 1;
         std::copy(poly.bern, poly.bern + m + 1, first.b);
         stack.push_back(first);
         while (!stack.empty()) {
@@ -558,13 +611,17 @@ RayIntegral ReferenceRenderer::project(const Ray &ray, double t0, double t1, dou
             stack.pop_back();
             ++pieces;
             const double upper = *std::max_element(p.b, p.b + m + 1);
-            best = std::max({best, p.b[0], p.b[m]}); // the end coefficients are values
+            offer(p.b[0], ta + p.lo * len); // the end coefficients are values
+            offer(p.b[m], ta + p.hi * len);
             if (upper <= best + valueTolerance || p.depth >= kMaxRootDepth) {
                 worstGap = std::max(worstGap, upper - best);
                 continue;
             }
             Pending left{}, right{};
             left.depth = right.depth = p.depth + 1;
+            left.lo = p.lo;
+            left.hi = right.lo = 0.5 * (p.lo + p.hi);
+            right.hi = p.hi;
             double work[kMaxDegree + 1];
             std::copy(p.b, p.b + m + 1, work);
             for (int r = 0; r <= m; ++r) {
@@ -577,6 +634,7 @@ RayIntegral ReferenceRenderer::project(const Ray &ray, double t0, double t1, dou
         }
     }
     const double value = sign * best;
+    if (where) *where = bestT;
     const Rgba c = tf_.evaluate(value);
     RayIntegral r;
     r.color = {c.r * c.a, c.g * c.a, c.b * c.a, c.a};

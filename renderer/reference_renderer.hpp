@@ -20,6 +20,7 @@
 
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 
 namespace volcast {
@@ -44,6 +45,14 @@ struct RayIntegral {
     double errorEstimate = 0;
 };
 
+// What one ray shows at a picked pixel (ReferenceRenderer::pick).
+struct RayPick {
+    bool hit = false;     // the accumulated opacity reached the threshold
+    double t = 0;         // ray parameter (world units along the unit direction) where it first did
+    Vec3d point;          // world position there
+    double opacity = 0;   // the ray's final accumulated opacity
+};
+
 class ReferenceRenderer {
   public:
     // A sampled volume, reconstructed trilinearly or by the prefiltered cubic B-spline
@@ -58,6 +67,11 @@ class ReferenceRenderer {
                           ReferenceStats *stats = nullptr) const;
     Image render(const Camera &camera, int width, int height, std::span<const ClipPlane> clipPlanes,
                  const ReferenceOptions &options, ReferenceStats *stats = nullptr) const;
+    // Where the ray's accumulated opacity first reaches `threshold` (in (0, 1)): for
+    // emission–absorption the point where the optical depth reaches −ln(1 − threshold), placed
+    // within one accepted integration interval; for MIP / MinIP, whose pixel is the extreme
+    // value's colour, the position of that extreme when its opacity reaches the threshold.
+    RayPick pick(const Ray &ray, std::span<const ClipPlane> clipPlanes, double threshold, double tolerance) const;
 
     // Gradient Phong shading (quality.shading), off by default.
     void setShading(bool on) { shading_ = on; }
@@ -84,7 +98,12 @@ class ReferenceRenderer {
 
   private:
     double valueAtIndex(const Vec3d &indexPos) const;
-    RayIntegral project(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats) const;
+    RayIntegral project(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats,
+                        double *where = nullptr) const;
+    // Emission–absorption on [t0, t1]; with markDepth, *markT gets where the optical depth
+    // first reaches it (nullopt: never).
+    RayIntegral emission(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats,
+                         std::optional<double> markDepth, std::optional<double> *markT) const;
 
     const Volume &volume_;
     TransferFunction tf_;

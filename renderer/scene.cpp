@@ -220,11 +220,26 @@ OrientationCorrection parseOrientationCorrection(const json &j, const std::strin
     return c;
 }
 
+ProjectionWindow parseProjectionWindow(const json &j, const std::string &path) {
+    const Fields f(j, path, {"window", "level"});
+    ProjectionWindow w;
+    w.window = number(f.require("window"), f.pathOf("window"));
+    w.level = number(f.require("level"), f.pathOf("level"));
+    check(w.window > 0, f.pathOf("window"), "must be > 0 (data units)");
+    // The ramp's two ends must be distinct finite numbers: a window far below the level's
+    // precision, or ends past the double range, would make no ramp at all.
+    const double lo = w.level - w.window / 2, hi = w.level + w.window / 2;
+    check(std::isfinite(lo) && std::isfinite(hi), f.pathOf("window"),
+          "puts the window's ends beyond finite numbers around this level");
+    check(lo < hi, f.pathOf("window"), "is too small to be told apart at this level");
+    return w;
+}
+
 Quality parseQuality(const json &j) {
     const Fields f(j, "quality",
                    {"step", "jitter", "preintegrated", "interpolation", "boundary_segment",
                     "early_termination", "empty_space_skipping", "mip_level", "image_scale",
-                    "shading", "seed", "compositing", "crop", "orientation_correction"});
+                    "shading", "seed", "compositing", "projection_window", "crop", "orientation_correction"});
     Quality q;
     f.optional("step", q.step, number);
     f.optional("jitter", q.jitter, boolean);
@@ -243,6 +258,7 @@ Quality parseQuality(const json &j) {
 
     f.optional("compositing", q.compositing,
                [](const json &v, const std::string &p) { return choice(v, p, kCompositings); });
+    if (const json *w = f.find("projection_window")) q.projectionWindow = parseProjectionWindow(*w, f.pathOf("projection_window"));
     f.optional("crop", q.crop, parseCrop);
     f.optional("orientation_correction", q.orientationCorrection, parseOrientationCorrection);
 
@@ -355,6 +371,8 @@ ojson qualityJson(const Quality &q) {
     // Written only where they differ from the default, so that scenes and frame headers
     // without them read as before.
     if (q.compositing != Compositing::EmissionAbsorption) out["compositing"] = nameOf(q.compositing, kCompositings);
+    if (q.projectionWindow)
+        out["projection_window"] = {{"window", q.projectionWindow->window}, {"level", q.projectionWindow->level}};
     if (!q.crop.full()) out["crop"] = {{"min", toJson(q.crop.min)}, {"max", toJson(q.crop.max)}};
     if (!q.orientationCorrection.identity()) {
         const auto &m = q.orientationCorrection.m;
@@ -444,7 +462,26 @@ Scene loadSceneFile(const std::filesystem::path &file) {
     }
 }
 
+TransferFunction projectionTransferFunction(const std::optional<ProjectionWindow> &window, const ValueRange &range) {
+    double lo, hi;
+    if (window) {
+        lo = window->level - window->window / 2;
+        hi = window->level + window->window / 2;
+    } else if (range.max > range.min) {
+        lo = range.min;
+        hi = range.max;
+    } else {
+        lo = range.min - 0.5;
+        hi = range.min + 0.5;
+    }
+    TransferFunction tf;
+    tf.points = {{lo, 0, 0, 0, 1}, {hi, 1, 1, 1, 1}};
+    return tf;
+}
+
 TransferFunction resolvedTransferFunction(const Scene &scene, const ValueRange &range) {
+    if (scene.quality.compositing != Compositing::EmissionAbsorption)
+        return projectionTransferFunction(scene.quality.projectionWindow, range);
     if (scene.transferFunctionPreset.empty()) return scene.transferFunction;
     TransferFunction tf = presetTransferFunction(scene.transferFunctionPreset, range);
     tf.opacityUnit = scene.transferFunction.opacityUnit;

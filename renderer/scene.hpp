@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -20,8 +21,17 @@ namespace volcast {
 enum class Interpolation { Linear, Cubic };
 
 // How samples along a ray make a pixel: the emission–absorption integral, or the maximum /
-// minimum of the field along the ray mapped through the transfer function (MIP / MinIP).
+// minimum of the field along the ray (MIP / MinIP) shown as windowed grey (ProjectionWindow).
 enum class Compositing { EmissionAbsorption, Maximum, Minimum };
+
+// The grey window of a MIP / MinIP (quality.projection_window), in data units: the extreme
+// value v along a ray shows as grey clamp((v − (level − window/2)) / window, 0, 1), opaque.
+// Unset: the volume's value range. Emission–absorption ignores it.
+struct ProjectionWindow {
+    double window = 1;   // > 0
+    double level = 0;
+    bool operator==(const ProjectionWindow &) const = default;
+};
 
 // Six axis-aligned planes in the volume's own axes, in normalised box coordinates: 0 and 1
 // are the outer faces of the outermost voxels' cells, so index = −1/2 + f·n on an axis of n
@@ -50,6 +60,7 @@ struct Quality {
     // set by the protocol's quality_policy: the compositing mode, the crop box and the
     // user's correction of the patient orientation (orientation_correction.hpp).
     Compositing compositing = Compositing::EmissionAbsorption;
+    std::optional<ProjectionWindow> projectionWindow;
     CropBox crop;
     OrientationCorrection orientationCorrection;
     bool operator==(const Quality &) const = default;
@@ -108,9 +119,18 @@ nlohmann::json qualityToJson(const Quality &quality);
 nlohmann::json clipPlanesToJson(const std::vector<ClipPlane> &planes);
 nlohmann::json sceneToJsonValue(const Scene &scene);   // sceneToJson as a value
 
-// The scene's transfer function, with a range-relative preset placed on the loaded
-// volume's value range (range is ignored when the scene has points).
+// The transfer function a renderer is given for this scene: for emission–absorption the
+// scene's own, with a range-relative preset placed on the loaded volume's value range (range
+// is ignored when the scene has points); for MIP / MinIP the projection's grey ramp
+// (projectionTransferFunction), whatever the scene's transfer function. Every back end, the
+// reference, volcast-render and the server take their transfer function from here, so a
+// projection is windowed alike everywhere.
 TransferFunction resolvedTransferFunction(const Scene &scene, const ValueRange &range);
+
+// The grey ramp of a projection: black at level − window/2, white at level + window/2, opacity
+// 1 throughout (a projection's pixel is opaque wherever its ray crosses the drawn box), clamped
+// outside. Without a window: the value range (window 1 around a constant volume's value).
+TransferFunction projectionTransferFunction(const std::optional<ProjectionWindow> &window, const ValueRange &range);
 
 struct SceneError : std::invalid_argument {
     using std::invalid_argument::invalid_argument;

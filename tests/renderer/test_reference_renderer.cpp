@@ -315,5 +315,85 @@ TEST(ReferenceRenderer, CommandLineReproducesTheClosedFormConstantBoxTo1e6) {
         }
 }
 
+
+// Picking on a constant box: the optical depth grows linearly along the chord, so the opacity
+// 1 − (1 − a)^(L/u) reaches one half after L* = u·ln ½ / ln(1 − a). τ is constant, so the
+// crossing's placement inside its interval is exact: only rounding remains (1e-9 mm). Rays
+// whose chord is shorter than L* never get there: no hit, their final opacity as the closed form.
+TEST(ReferencePick, ConstantBoxReachesOneHalfWhereTheClosedFormSays) {
+    const SyntheticVolume box = makeConstantBox({12, 9, 15}, {1.0, 1.5, 0.8}, 100);
+    const double a = 0.2, unit = 0.9;
+    const ReferenceRenderer ref(box.volume, constantTf(0.9, 0.5, 0.2, a, unit), Reconstruction::Linear);
+    const RayGenerator rays(obliqueCamera(box.volume), 24, 20);
+    const double lStar = unit * std::log(0.5) / std::log1p(-a);
+    int hits = 0, misses = 0;
+    for (int y = 0; y < 20; ++y)
+        for (int x = 0; x < 24; ++x) {
+            const Ray ray = rays.pixelRay(x, y);
+            const double L = chordLength(box.volume, ray);
+            const RayPick pick = ref.pick(ray, {}, 0.5, 1e-9);
+            EXPECT_NEAR(pick.opacity, -std::expm1(L / unit * std::log1p(-a)), 1e-12);
+            // A ray grazing the box by less than 1e-9 of L* could go either way.
+            if (std::fabs(L - lStar) < 1e-9) continue;
+            ASSERT_EQ(pick.hit, L > lStar) << x << "," << y << " chord " << L;
+            if (!pick.hit) {
+                misses += L > 0;
+                continue;
+            }
+            ++hits;
+            // The entry point: where the chord starts, from the exit side's length.
+            double t0 = 0, t1 = std::numeric_limits<double>::infinity();
+            for (int k = 0; k < 3; ++k) {
+                const double lo = box.volume.origin[k] - 0.5 * box.volume.spacing[k];
+                const double hi = box.volume.origin[k] + (double(box.volume.dims[k]) - 0.5) * box.volume.spacing[k];
+                double ta = (lo - ray.origin[k]) / ray.dir[k], tb = (hi - ray.origin[k]) / ray.dir[k];
+                if (ta > tb) std::swap(ta, tb);
+                t0 = std::max(t0, ta);
+                t1 = std::min(t1, tb);
+            }
+            EXPECT_NEAR(pick.t, t0 + lStar, 1e-9);
+            EXPECT_NEAR(length(pick.point - (ray.origin + ray.dir * (t0 + lStar))), 0, 1e-9);
+        }
+    EXPECT_GT(hits, 40);
+    EXPECT_GT(misses, 0) << "some corner rays are too short to reach one half";
+}
+
+// An opaque box (a = 1) is half opaque at its surface; a clip plane moves that surface.
+TEST(ReferencePick, OpaqueSurfaceAndClipPlane) {
+    const SyntheticVolume box = makeConstantBox({10, 10, 10}, {1, 1, 1}, 50);
+    const ReferenceRenderer ref(box.volume, constantTf(1, 1, 1, 1.0, 1.0), Reconstruction::Linear);
+    // Straight down −z through the middle: the top face is at z = 9.5.
+    const Ray ray{{4.5, 4.5, 50}, {0, 0, -1}};
+    RayPick pick = ref.pick(ray, {}, 0.5, 1e-7);
+    ASSERT_TRUE(pick.hit);
+    EXPECT_NEAR(pick.point.z, 9.5, 1e-12);
+    EXPECT_EQ(pick.opacity, 1.0);
+    const ClipPlane cut{{0, 0, 3}, {0, 0, -1}};   // keeps z <= 3
+    pick = ref.pick(ray, std::span<const ClipPlane>(&cut, 1), 0.5, 1e-7);
+    ASSERT_TRUE(pick.hit);
+    EXPECT_NEAR(pick.point.z, 3, 1e-12);
+    // A ray beside the box: no hit, opacity 0.
+    pick = ref.pick({{40, 4.5, 50}, {0, 0, -1}}, {}, 0.5, 1e-7);
+    EXPECT_FALSE(pick.hit);
+    EXPECT_EQ(pick.opacity, 0.0);
+    EXPECT_THROW(ref.pick(ray, {}, 1.0, 1e-7), std::invalid_argument);
+}
+
+// Under MIP the pick is where the ray's maximum lies: for a ray through a Gaussian blob's
+// centre that is the centre, within the trilinear field's flat top (a voxel's tenth here:
+// the samples around the peak are symmetric, so the reconstruction peaks at the centre).
+TEST(ReferencePick, MipPicksTheMaximum) {
+    const SyntheticVolume blob = makeGaussianBlob({25, 25, 25}, {1, 1, 1}, 4, 900);
+    TransferFunction tf;
+    tf.points = {{0, 0, 0, 0, 1}, {900, 1, 1, 1, 1}};
+    ReferenceRenderer ref(blob.volume, tf, Reconstruction::Linear);
+    ref.setCompositing(Compositing::Maximum);
+    const Vec3d c = blob.volume.center();
+    const Ray ray{c + Vec3d{0, 0, 60}, {0, 0, -1}};
+    const RayPick pick = ref.pick(ray, {}, 0.5, 1e-7);
+    ASSERT_TRUE(pick.hit);
+    EXPECT_EQ(pick.opacity, 1.0);
+    EXPECT_NEAR(length(pick.point - c), 0, 0.1);
+}
 } // namespace
 } // namespace volcast

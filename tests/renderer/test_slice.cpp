@@ -10,6 +10,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 
 namespace volcast {
@@ -250,6 +251,177 @@ TEST(Slice, ExtremeRequestsAreErrorsOrBackgroundNeverNaN) {
     const SliceImage one = sampleSlice(v, slicePlane(v, b));
     ASSERT_EQ(one.inside[0], 1);
     EXPECT_NEAR(one.values[0], ramp(v.center()), 1e-4);
+}
+
+
+// A slab of the linear ramp: trilinear reconstruction is exact inside the samples, so the
+// mean over planes placed symmetrically about the slice is the slice's own value, and the
+// maximum / minimum are the values on the slab's two faces (the ramp rises 0.5 per mm along
+// +z, the axial normal). Only rounding remains: 1e-4 of values near 40 in float.
+TEST(Slab, LinearRampMeanIsTheCentreAndTheExtremesAreTheFaces) {
+    const Volume v = makeVolume({8, 6, 9}, {1, 2, 3}, {10, 20, 30}, Mat3d::identity(), ramp);
+    SliceRequestGeometry g;
+    g.axis = SliceAxis::Axial;
+    g.point = {13.3, 25.1, 42.2};
+    g.width = 20;
+    g.height = 15;
+    g.pixelSpacing = 0.3;
+    const SlicePlane plane = slicePlane(v, g);
+    const double t = 4;
+    EXPECT_EQ(slabPlaneCount(v, t), 9) << "4 mm at half of the smallest spacing (1 mm): 8 gaps, 9 planes";
+    const SliceImage mip = sampleSlab(v, plane, {t, SlabMode::Maximum});
+    const SliceImage minip = sampleSlab(v, plane, {t, SlabMode::Minimum});
+    const SliceImage mean = sampleSlab(v, plane, {t, SlabMode::Mean});
+    int checked = 0;
+    for (int r = 0; r < plane.height; ++r)
+        for (int c = 0; c < plane.width; ++c) {
+            const Vec3d w = plane.worldAt(c, r);
+            // Only pixels whose column stays within the sample centres (x in [10, 17], y in [20, 30]).
+            if (w.x < 10 || w.x > 17 || w.y < 20 || w.y > 30) continue;
+            const size_t at = size_t(r * plane.width + c);
+            ASSERT_TRUE(mip.inside[at] && minip.inside[at] && mean.inside[at]);
+            EXPECT_NEAR(mean.values[at], ramp(w), 1e-4);
+            EXPECT_NEAR(mip.values[at], ramp(w + Vec3d{0, 0, t / 2}), 1e-4);
+            EXPECT_NEAR(minip.values[at], ramp(w - Vec3d{0, 0, t / 2}), 1e-4);
+            ++checked;
+        }
+    EXPECT_GT(checked, 100);
+    // Thickness 0 is the plane itself, bit for bit.
+    const SliceImage plain = sampleSlice(v, plane);
+    const SliceImage zero = sampleSlab(v, plane, {0, SlabMode::Mean});
+    EXPECT_EQ(plain.values, zero.values);
+    EXPECT_EQ(plain.inside, zero.inside);
+}
+
+TEST(Slab, ThicknessLimitsAreClearErrors) {
+    const Volume v = makeVolume({8, 8, 8}, {1, 1, 1}, {0, 0, 0}, Mat3d::identity(), ramp);
+    const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+    for (double t : {-1.0, nan, inf}) EXPECT_THROW(slabPlaneCount(v, t), std::invalid_argument) << t;
+    // 1023 gaps of 0.5 mm is the thickest slab: 511.5 mm.
+    EXPECT_EQ(slabPlaneCount(v, 511.5), kMaxSlabPlanes);
+    EXPECT_GT(slabPlaneCount(v, 512), kMaxSlabPlanes);
+    EXPECT_GT(slabPlaneCount(v, 1e300), kMaxSlabPlanes) << "no integer overflow";
+    SliceRequestGeometry g;
+    g.point = v.center();
+    g.width = 16;
+    g.height = 16;
+    const SlicePlane plane = slicePlane(v, g);
+    try {
+        sampleSlab(v, plane, {1e6, SlabMode::Maximum});
+        ADD_FAILURE() << "no error for a slab of 1e6 mm";
+    } catch (const std::length_error &e) {
+        EXPECT_NE(std::string(e.what()).find("1024"), std::string::npos) << e.what();
+    }
+    g.width = g.height = 4096;   // 2^24 pixels x 17 planes: over 2^28 samples
+    EXPECT_THROW(sampleSlab(v, slicePlane(v, g), {8, SlabMode::Mean}), std::length_error);
+}
+
+// The probe is the slices' reconstruction at one point: exact on the ramp inside the samples,
+// nothing outside the cell box, an error for a point that is not finite.
+TEST(Probe, ValueIsTheRampInsideAndNothingOutside) {
+    const Volume v = makeVolume({8, 6, 5}, {1, 2, 3}, {10, 20, 30}, Mat3d::identity(), ramp);
+    for (const Vec3d &p : {Vec3d{13.3, 25.1, 35.2}, Vec3d{10, 20, 30}, Vec3d{17, 30, 42}}) {
+        const auto value = probeValue(v, p);
+        ASSERT_TRUE(value.has_value());
+        EXPECT_NEAR(*value, ramp(p), 1e-4) << "float voxels of values near 40";
+    }
+    // The cell box ends half a voxel past the outermost samples: x = 17.5 is inside, 17.6 not.
+    EXPECT_TRUE(probeValue(v, {17.5, 25, 35}).has_value());
+    EXPECT_FALSE(probeValue(v, {17.6, 25, 35}).has_value());
+    EXPECT_FALSE(probeValue(v, {1e300, -1e300, 0}).has_value());
+    EXPECT_THROW(probeValue(v, {std::numeric_limits<double>::quiet_NaN(), 0, 0}), std::invalid_argument);
+    // A flip of the first axis (orientation correction) moves the volume: the probe follows it
+    // as the slices do. The flipped volume's x runs the other way about the box's centre.
+    OrientationCorrection flip;
+    flip.m = {-1, 0, 0, 0, 1, 0, 0, 0, 1};
+    const auto flipped = probeValue(v, {13.3, 25.1, 35.2}, flip);
+    const auto mirrored = probeValue(v, {2 * v.center().x - 13.3, 25.1, 35.2});
+    ASSERT_TRUE(flipped && mirrored);
+    EXPECT_NEAR(*flipped, *mirrored, 1e-4);
+}
+
+// ROI statistics on the ramp, against closed forms. A rectangle of half sides a, b made of
+// whole grid cells (h = min(1/2, min(a, b)/8) = 0.25 mm here) has area 4ab exactly; the values
+// at its cell centres are c + gu·u + gv·v with u, v on symmetric grids of 2N points spaced h,
+// so the mean is the centre's value, the population variance (gu²(4Nu² − 1) + gv²(4Nv² − 1))·h²/12,
+// and the extremes c ± (|gu|(Nu − ½) + |gv|(Nv − ½))·h. Float voxels: 1e-4.
+TEST(RoiStats, RectangleOnARampMatchesClosedForms) {
+    const Volume v = makeVolume({8, 6, 5}, {1, 2, 3}, {10, 20, 30}, Mat3d::identity(), ramp);
+    RoiGeometry roi;
+    roi.axis = SliceAxis::Axial;   // column +x (gu = 2), row +y (gv = −3)
+    roi.center = {13.3, 25.1, 35.2};
+    roi.a = 2;
+    roi.b = 3;
+    roi.shape = RoiShape::Rectangle;
+    const RoiStats s = roiStats(v, roi);
+    const double h = 0.25, nu = 8, nv = 12, gu = 2, gv = -3;
+    EXPECT_DOUBLE_EQ(s.spacing, h);
+    EXPECT_EQ(s.samples, int64_t(2 * nu * 2 * nv));
+    EXPECT_NEAR(s.area, 4 * roi.a * roi.b, 1e-12);
+    const double c = ramp(roi.center);
+    EXPECT_NEAR(s.mean, c, 1e-4);
+    EXPECT_NEAR(s.std, std::sqrt((gu * gu * (4 * nu * nu - 1) + gv * gv * (4 * nv * nv - 1)) * h * h / 12), 1e-4);
+    const double spread = (std::abs(gu) * (nu - 0.5) + std::abs(gv) * (nv - 0.5)) * h;
+    EXPECT_NEAR(s.min, c - spread, 1e-4);
+    EXPECT_NEAR(s.max, c + spread, 1e-4);
+}
+
+// An ellipse on a constant volume: every sample is the constant, the standard deviation 0;
+// the area is πab to within the cells the boundary cuts (at most 2 · perimeter · h).
+// Where the ellipse passes the volume's edge only the part inside counts, and an ellipse
+// beside the volume has no samples.
+TEST(RoiStats, EllipseAreaAndTheVolumesEdge) {
+    const Volume v = makeVolume({40, 40, 4}, {0.5, 0.5, 2}, {0, 0, 0}, Mat3d::identity(),
+                                [](const Vec3d &) { return 42.0; });
+    RoiGeometry roi;
+    roi.axis = SliceAxis::Axial;
+    roi.center = {10, 10, 3};
+    roi.a = 5;
+    roi.b = 3;
+    const RoiStats s = roiStats(v, roi);
+    const double h = s.spacing;
+    EXPECT_DOUBLE_EQ(h, 0.25);
+    const double perimeter = std::numbers::pi * (3 * (roi.a + roi.b) - std::sqrt((3 * roi.a + roi.b) * (roi.a + 3 * roi.b)));
+    EXPECT_NEAR(s.area, std::numbers::pi * roi.a * roi.b, 2 * perimeter * h);
+    EXPECT_NEAR(s.mean, 42, 1e-9);
+    EXPECT_NEAR(s.std, 0, 1e-9);
+    EXPECT_EQ(s.min, 42);
+    EXPECT_EQ(s.max, 42);
+    // Centred on the volume's edge x = −0.25 (cell box): half the ellipse is inside.
+    roi.center = {-0.25, 10, 3};
+    const RoiStats half = roiStats(v, roi);
+    EXPECT_NEAR(half.area, s.area / 2, perimeter * h);
+    roi.center = {100, 10, 3};
+    const RoiStats none = roiStats(v, roi);
+    EXPECT_EQ(none.samples, 0);
+    EXPECT_EQ(none.area, 0);
+}
+
+TEST(RoiStats, AbsurdRegionsAreClearErrors) {
+    const Volume v = makeVolume({8, 8, 8}, {1, 1, 1}, {0, 0, 0}, Mat3d::identity(), ramp);
+    const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+    RoiGeometry roi;
+    roi.center = v.center();
+    roi.a = roi.b = 2;
+    for (double r : {0.0, -1.0, nan, inf}) {
+        RoiGeometry bad = roi;
+        bad.b = r;
+        EXPECT_THROW(roiStats(v, bad), std::invalid_argument) << r;
+    }
+    RoiGeometry bad = roi;
+    bad.center = {0, inf, 0};
+    EXPECT_THROW(roiStats(v, bad), std::invalid_argument);
+    // Huge radii are cut to the volume: the whole 8 x 8 mm section, 64 mm².
+    bad = roi;
+    bad.a = bad.b = 1e12;
+    bad.shape = RoiShape::Rectangle;
+    const RoiStats all = roiStats(v, bad);
+    EXPECT_NEAR(all.area, 64, 1e-9);
+    // A sliver far thinner than a voxel takes a grid so fine it would pass the sample bound.
+    bad = roi;
+    bad.a = 1e3;
+    bad.b = 1e-6;
+    EXPECT_THROW(roiStats(v, bad), std::length_error);
 }
 
 } // namespace
