@@ -127,6 +127,55 @@ ClientMessage readSlice(const json &root, const RequestId &id, const Limits &) {
     return detail::readSliceRequest(root, id);
 }
 
+ClientMessage readProbe(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "point"});
+    ProbeRequest m;
+    m.id = id;
+    m.point = detail::readVec3(f.require("point"), "point");
+    return m;
+}
+
+ClientMessage readRoiStats(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "axis", "center", "radii", "shape"});
+    RoiStatsRequest m;
+    m.id = id;
+    m.axis = detail::readSliceAxis(f.require("axis"), "axis");
+    m.center = detail::readVec3(f.require("center"), "center");
+    const json &radii = detail::array(f.require("radii"), "radii");
+    if (radii.size() != 2) badField("radii", "must have 2 numbers (mm along the pane's column and row), got " +
+                                                 std::to_string(radii.size()));
+    for (size_t i = 0; i < 2; ++i) {
+        m.radii[i] = detail::number(radii[i], detail::element("radii", i));
+        if (!(m.radii[i] > 0)) badField(detail::element("radii", i), "must be > 0 mm, got " + radii[i].dump());
+    }
+    if (const json *shape = f.find("shape")) {
+        m.shape = detail::string(*shape, "shape", 64);
+        if (m.shape != "ellipse" && m.shape != "rectangle")
+            badField("shape", "must be \"ellipse\" or \"rectangle\", got " +
+                                  json(quotableText(m.shape, detail::kMaxQuotedBytes)).dump());
+    }
+    return m;
+}
+
+// The same bound as a scene's image side (renderer/scene.hpp's kMaxImageSide).
+constexpr int kMaxPickImageSide = 16384;
+
+ClientMessage readPick(const json &root, const RequestId &id, const Limits &) {
+    const Fields f(root, "", {"type", "id", "x", "y", "width", "height"});
+    PickRequest m;
+    m.id = id;
+    m.width = int(detail::integer(f.require("width"), "width", 1, kMaxPickImageSide));
+    m.height = int(detail::integer(f.require("height"), "height", 1, kMaxPickImageSide));
+    m.x = detail::number(f.require("x"), "x");
+    m.y = detail::number(f.require("y"), "y");
+    if (!(m.x >= 0 && m.x <= m.width))
+        badField("x", "must be in [0, width] = [0, " + std::to_string(m.width) + "] pixels, got " + f.require("x").dump());
+    if (!(m.y >= 0 && m.y <= m.height))
+        badField("y", "must be in [0, height] = [0, " + std::to_string(m.height) + "] pixels, got " +
+                          f.require("y").dump());
+    return m;
+}
+
 bool isDigits(std::string_view s) {
     return std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
 }
@@ -209,6 +258,9 @@ constexpr std::array<ReaderEntry, std::variant_size_v<ClientMessage>> kReaders{{
     {CloseRequest::kType, readBare<CloseRequest>},
     {SliceRequest::kType, readSlice},
     {FindStudiesRequest::kType, readFindStudies},
+    {ProbeRequest::kType, readProbe},
+    {RoiStatsRequest::kType, readRoiStats},
+    {PickRequest::kType, readPick},
 }};
 
 std::string knownTypes() {
@@ -248,6 +300,11 @@ json fieldsOf(const FindStudiesRequest &m) {
     add("accession_number", m.filters.accessionNumber);
     return {{"source", m.source}, {"filters", std::move(filters)}, {"limit", m.limit}};
 }
+json fieldsOf(const ProbeRequest &m) { return {{"point", m.point}}; }
+json fieldsOf(const RoiStatsRequest &m) {
+    return {{"axis", m.axis}, {"center", m.center}, {"radii", m.radii}, {"shape", m.shape}};
+}
+json fieldsOf(const PickRequest &m) { return {{"x", m.x}, {"y", m.y}, {"width", m.width}, {"height", m.height}}; }
 // The requests with no fields of their own.
 template <class Request>
 json fieldsOf(const Request &) {

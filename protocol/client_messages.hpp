@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cstddef>
 #include <optional>
 #include <string>
@@ -160,6 +161,38 @@ struct GetStateRequest {
     bool operator==(const GetStateRequest &) const = default;
 };
 
+// The volume's value at one world point (mm, the patient frame the slices use), by the
+// slices' trilinear reconstruction. Answered by a probe message; changes nothing.
+struct ProbeRequest {
+    static constexpr std::string_view kType = "probe";
+    RequestId id;
+    std::array<double, 3> point{};   // finite
+    bool operator==(const ProbeRequest &) const = default;
+};
+
+// Statistics of the values in an ellipse or rectangle on a slice pane's plane. Answered by a
+// roi_stats message; changes nothing.
+struct RoiStatsRequest {
+    static constexpr std::string_view kType = "roi_stats";
+    RequestId id;
+    std::string axis;                  // "axial", "coronal" or "sagittal"
+    std::array<double, 3> center{};    // world mm, finite
+    std::array<double, 2> radii{};     // mm, finite and > 0: along the pane's column, row
+    std::string shape = "ellipse";     // "ellipse" or "rectangle" (half sides)
+    bool operator==(const RoiStatsRequest &) const = default;
+};
+
+// Where the ray through one pixel of the session's current view first becomes half opaque.
+// Answered by a pick message; changes nothing.
+struct PickRequest {
+    static constexpr std::string_view kType = "pick";
+    RequestId id;
+    double x = 0, y = 0;     // pixels from the image's top-left corner; pixel centres at +0.5
+    int width = 0;           // the image the client shows the view in, pixels
+    int height = 0;
+    bool operator==(const PickRequest &) const = default;
+};
+
 struct CloseRequest {
     static constexpr std::string_view kType = "close";
     RequestId id;
@@ -170,7 +203,8 @@ using ClientMessage =
     std::variant<HelloRequest, ListVolumesRequest, OpenVolumeRequest, CameraRequest,
                  InteractionStartRequest, InteractionEndRequest, ViewportRequest,
                  TransferFunctionRequest, QualityPolicyRequest, ClipPlanesRequest,
-                 StillRequest, GetStateRequest, CloseRequest, SliceRequest, FindStudiesRequest>;
+                 StillRequest, GetStateRequest, CloseRequest, SliceRequest, FindStudiesRequest, ProbeRequest,
+                 RoiStatsRequest, PickRequest>;
 
 // The wire "type" of each request, e.g. "open_volume".
 std::string_view messageType(const ClientMessage &message);

@@ -106,6 +106,23 @@ json fieldsOf(const StateMessage &m) {
             {"interacting", m.interacting}};
 }
 
+json nullable(const std::optional<double> &v) { return v ? json(*v) : json(nullptr); }
+json nullable(const std::optional<std::string> &v) { return v ? json(*v) : json(nullptr); }
+
+json fieldsOf(const ProbeMessage &m) {
+    return {{"point", m.point}, {"inside", m.inside}, {"value", nullable(m.value)}, {"unit", nullable(m.unit)}};
+}
+
+json fieldsOf(const RoiStatsMessage &m) {
+    return {{"samples", m.samples},      {"area_mm2", m.areaMm2},      {"mean", nullable(m.mean)},
+            {"std", nullable(m.std)},    {"min", nullable(m.min)},     {"max", nullable(m.max)},
+            {"unit", nullable(m.unit)}};
+}
+
+json fieldsOf(const PickMessage &m) {
+    return {{"hit", m.hit}, {"point", m.point ? json(*m.point) : json(nullptr)}, {"opacity", m.opacity}};
+}
+
 json fieldsOf(const ProtocolError &m) {
     return {{"code", errorCodeName(m.code)},
             {"message", m.message},
@@ -310,6 +327,50 @@ ServerMessage readState(const Fields &f, RequestId id) {
     return m;
 }
 
+std::optional<double> optionalNumber(const Fields &f, std::string_view key) {
+    const json &v = f.require(key);
+    if (v.is_null()) return std::nullopt;
+    return detail::number(v, f.pathOf(key));
+}
+
+std::optional<std::string> optionalText(const Fields &f, std::string_view key) {
+    const json *v = f.find(key);
+    if (!v || v->is_null()) return std::nullopt;
+    return detail::string(*v, f.pathOf(key), kAnyLength);
+}
+
+ServerMessage readProbe(const Fields &f, RequestId id) {
+    ProbeMessage m;
+    m.id = std::move(id);
+    m.point = numbers<3>(f.require("point"), "point");
+    m.inside = detail::boolean(f.require("inside"), "inside");
+    m.value = optionalNumber(f, "value");
+    m.unit = optionalText(f, "unit");
+    return m;
+}
+
+ServerMessage readRoiStats(const Fields &f, RequestId id) {
+    RoiStatsMessage m;
+    m.id = std::move(id);
+    m.samples = detail::integer(f.require("samples"), "samples", 0, std::numeric_limits<int64_t>::max());
+    m.areaMm2 = detail::number(f.require("area_mm2"), "area_mm2");
+    m.mean = optionalNumber(f, "mean");
+    m.std = optionalNumber(f, "std");
+    m.min = optionalNumber(f, "min");
+    m.max = optionalNumber(f, "max");
+    m.unit = optionalText(f, "unit");
+    return m;
+}
+
+ServerMessage readPick(const Fields &f, RequestId id) {
+    PickMessage m;
+    m.id = std::move(id);
+    m.hit = detail::boolean(f.require("hit"), "hit");
+    if (const json &p = f.require("point"); !p.is_null()) m.point = numbers<3>(p, "point");
+    m.opacity = detail::number(f.require("opacity"), "opacity");
+    return m;
+}
+
 ServerMessage readError(const Fields &f, RequestId id) {
     ProtocolError m;
     m.requestId = std::move(id);
@@ -361,6 +422,9 @@ ServerMessage parseServerMessage(std::string_view text) {
         if (type == StateMessage::kType) return readState(f, std::move(id));
         if (type == StudiesMessage::kType) return readStudies(f, std::move(id));
         if (type == ProtocolError::kType) return readError(f, std::move(id));
+        if (type == ProbeMessage::kType) return readProbe(f, std::move(id));
+        if (type == RoiStatsMessage::kType) return readRoiStats(f, std::move(id));
+        if (type == PickMessage::kType) return readPick(f, std::move(id));
         detail::fail(ErrorCode::UnknownType, "unknown message type " + json(type).dump());
     } catch (const detail::ReadError &e) {
         throw DecodeError(std::string("server message: ") + e.what());

@@ -180,8 +180,43 @@ struct StateMessage {
     bool operator==(const StateMessage &) const = default;
 };
 
-using ServerMessage =
-    std::variant<ServerHello, VolumesMessage, ProgressMessage, StateMessage, StudiesMessage, ProtocolError>;
+// The answer to probe: the value at the point, null outside the volume. unit "HU" when the
+// volume's values are Hounsfield units (a CT), else null: raw data units.
+struct ProbeMessage {
+    static constexpr std::string_view kType = "probe";
+    RequestId id;
+    std::array<double, 3> point{};
+    bool inside = false;
+    std::optional<double> value;
+    std::optional<std::string> unit;
+    bool operator==(const ProbeMessage &) const = default;
+};
+
+// The answer to roi_stats. With samples = 0 (the region misses the volume) the statistics are
+// null. std is the population standard deviation of the samples.
+struct RoiStatsMessage {
+    static constexpr std::string_view kType = "roi_stats";
+    RequestId id;
+    int64_t samples = 0;
+    double areaMm2 = 0;
+    std::optional<double> mean, std, min, max;
+    std::optional<std::string> unit;
+    bool operator==(const RoiStatsMessage &) const = default;
+};
+
+// The answer to pick: the world point where the pixel's ray first reached opacity 1/2
+// (null when it never did), and the ray's final opacity.
+struct PickMessage {
+    static constexpr std::string_view kType = "pick";
+    RequestId id;
+    bool hit = false;
+    std::optional<std::array<double, 3>> point;
+    double opacity = 0;
+    bool operator==(const PickMessage &) const = default;
+};
+
+using ServerMessage = std::variant<ServerHello, VolumesMessage, ProgressMessage, StateMessage, StudiesMessage,
+                                   ProtocolError, ProbeMessage, RoiStatsMessage, PickMessage>;
 
 std::string_view messageType(const ServerMessage &message);
 

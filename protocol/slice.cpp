@@ -33,19 +33,29 @@ uint32_t readUint32LE(std::span<const uint8_t> b) {
     return uint32_t(b[0]) | uint32_t(b[1]) << 8 | uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24;
 }
 
+constexpr std::array<std::string_view, 3> kSlabModes = {"mip", "minip", "mean"};
+
 } // namespace
 
 namespace detail {
 
+std::array<double, 3> readVec3(const json &j, const std::string &path) { return vec3(j, path); }
+
+std::string readSliceAxis(const json &j, const std::string &path) {
+    std::string axis = string(j, path, 64);
+    if (std::find(kAxes.begin(), kAxes.end(), axis) == kAxes.end())
+        badField(path, "must be \"axial\", \"coronal\" or \"sagittal\", got " +
+                           json(quotableText(axis, kMaxQuotedBytes)).dump());
+    return axis;
+}
+
 SliceRequest readSliceRequest(const json &root, const RequestId &id) {
     const Fields f(root, "",
-                   {"type", "id", "axis", "point", "center", "width", "height", "pixel_spacing", "window", "level"});
+                   {"type", "id", "axis", "point", "center", "width", "height", "pixel_spacing", "window", "level",
+                    "slab"});
     SliceRequest m;
     m.id = id;
-    m.axis = string(f.require("axis"), "axis", 64);
-    if (std::find(kAxes.begin(), kAxes.end(), m.axis) == kAxes.end())
-        badField("axis", "must be \"axial\", \"coronal\" or \"sagittal\", got " +
-                             json(quotableText(m.axis, kMaxQuotedBytes)).dump());
+    m.axis = readSliceAxis(f.require("axis"), "axis");
     if (const json *p = f.find("point")) m.point = vec3(*p, "point");
     if (const json *c = f.find("center")) m.center = vec3(*c, "center");
     m.width = int(integer(f.require("width"), "width", 1, kMaxSliceSide));
@@ -59,6 +69,19 @@ SliceRequest readSliceRequest(const json &root, const RequestId &id) {
         if (!(*m.window > 0)) badField("window", "must be > 0, got " + w->dump());
     }
     if (const json *l = f.find("level")) m.level = number(*l, "level");
+    if (const json *slab = f.find("slab")) {
+        const Fields sf(object(*slab, "slab"), "slab", {"thickness", "mode"});
+        SliceSlab s;
+        s.thickness = number(sf.require("thickness"), sf.pathOf("thickness"));
+        if (!(s.thickness >= 0)) badField(sf.pathOf("thickness"), "must be >= 0 mm, got " + sf.require("thickness").dump());
+        if (const json *mode = sf.find("mode")) {
+            s.mode = string(*mode, sf.pathOf("mode"), 64);
+            if (std::find(kSlabModes.begin(), kSlabModes.end(), s.mode) == kSlabModes.end())
+                badField(sf.pathOf("mode"), "must be \"mip\", \"minip\" or \"mean\", got " +
+                                                json(quotableText(s.mode, kMaxQuotedBytes)).dump());
+        }
+        m.slab = s;
+    }
     return m;
 }
 
@@ -69,6 +92,7 @@ json sliceRequestFields(const SliceRequest &m) {
     if (m.pixelSpacing) j["pixel_spacing"] = *m.pixelSpacing;
     if (m.window) j["window"] = *m.window;
     if (m.level) j["level"] = *m.level;
+    if (m.slab) j["slab"] = {{"thickness", m.slab->thickness}, {"mode", m.slab->mode}};
     return j;
 }
 
@@ -91,11 +115,15 @@ std::vector<uint8_t> encodeSlice(const SliceHeader &h, std::span<const uint8_t> 
     requireFinite(h.renderMs, "render_ms");
     for (const auto *v : {&h.origin, &h.column, &h.row, &h.point})
         for (double x : *v) requireFinite(x, "origin, column, row and point");
-    const json header{{"request", h.request},   {"axis", h.axis},   {"width", h.width},
-                      {"height", h.height},     {"format", h.format}, {"pixel_spacing", h.pixelSpacing},
-                      {"origin", h.origin},     {"column", h.column}, {"row", h.row},
-                      {"point", h.point},       {"window", h.window}, {"level", h.level},
-                      {"render_ms", h.renderMs}, {"image_bytes", pixels.size()}};
+    json header{{"request", h.request},   {"axis", h.axis},   {"width", h.width},
+                {"height", h.height},     {"format", h.format}, {"pixel_spacing", h.pixelSpacing},
+                {"origin", h.origin},     {"column", h.column}, {"row", h.row},
+                {"point", h.point},       {"window", h.window}, {"level", h.level},
+                {"render_ms", h.renderMs}, {"image_bytes", pixels.size()}};
+    if (h.slab) {
+        requireFinite(h.slab->thickness, "slab.thickness");
+        header["slab"] = {{"thickness", h.slab->thickness}, {"mode", h.slab->mode}, {"planes", h.slabPlanes}};
+    }
     const std::string text = header.dump();
     std::vector<uint8_t> out(kFramePreambleBytes + text.size() + pixels.size());
     std::copy(kSliceMagic.begin(), kSliceMagic.end(), out.begin());
@@ -138,6 +166,15 @@ DecodedSlice decodeSlice(std::span<const uint8_t> message) {
         h.level = detail::number(f.require("level"), "level");
         h.renderMs = detail::number(f.require("render_ms"), "render_ms");
         imageBytes = detail::unsignedInteger(f.require("image_bytes"), "image_bytes");
+        if (const json *slab = f.find("slab")) {
+            const Fields sf(*slab, "slab", {}, Fields::Unknown::Ignore);
+            SliceSlab s;
+            s.thickness = detail::number(sf.require("thickness"), sf.pathOf("thickness"));
+            s.mode = detail::string(sf.require("mode"), sf.pathOf("mode"), 64);
+            h.slab = s;
+            if (sf.find("planes"))
+                h.slabPlanes = int(detail::integer(sf.require("planes"), sf.pathOf("planes"), 1, 1 << 20));
+        }
     } catch (const detail::ReadError &e) {
         throw DecodeError(std::string("slice header: ") + e.what());
     } catch (const detail::FieldError &e) {

@@ -31,6 +31,14 @@ inline constexpr std::array<uint8_t, 4> kSliceMagic = {'V', 'C', 'S', '1'};
 // max_image_pixels bound it further.
 inline constexpr int kMaxSliceSide = 16384;
 
+// A thick slab (slice's "slab"): planes across [−thickness/2, +thickness/2] mm along the
+// slice's normal, combined per pixel. Thickness 0 is the plane itself.
+struct SliceSlab {
+    double thickness = 0;       // mm, finite, >= 0
+    std::string mode = "mip";   // "mip", "minip" or "mean"
+    bool operator==(const SliceSlab &) const = default;
+};
+
 struct SliceRequest {
     static constexpr std::string_view kType = "slice";
     RequestId id;
@@ -42,6 +50,7 @@ struct SliceRequest {
     std::optional<double> pixelSpacing;             // mm per pixel; default: fit the volume
     std::optional<double> window;                   // data units; default: the value range
     std::optional<double> level;
+    std::optional<SliceSlab> slab;                  // absent: the plane
     bool operator==(const SliceRequest &) const = default;
 };
 
@@ -50,6 +59,11 @@ namespace detail {
 // Throws ReadError (bad_field naming the field).
 SliceRequest readSliceRequest(const nlohmann::json &root, const RequestId &id);
 nlohmann::json sliceRequestFields(const SliceRequest &m);
+// Shared by the readers of probe, roi_stats and slice: three finite numbers, bad_field naming
+// the path otherwise.
+std::array<double, 3> readVec3(const nlohmann::json &j, const std::string &path);
+// Whether `axis` is "axial", "coronal" or "sagittal"; bad_field naming `path` otherwise.
+std::string readSliceAxis(const nlohmann::json &j, const std::string &path);
 } // namespace detail
 
 // The header of a slice message. Pixel (c, r), row 0 at the top, shows the volume at world
@@ -68,6 +82,9 @@ struct SliceHeader {
     double window = 1;
     double level = 0;
     double renderMs = 0;
+    // The request's slab, echoed with the number of planes sampled; absent for a plain slice.
+    std::optional<SliceSlab> slab;
+    int slabPlanes = 1;
     bool operator==(const SliceHeader &) const = default;
 };
 

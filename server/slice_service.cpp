@@ -1,6 +1,7 @@
 #include "server/slice_service.hpp"
 
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -16,6 +17,11 @@ constexpr std::string_view kType = protocol::SliceRequest::kType;
 
 Vec3d vec(const std::array<double, 3> &a) { return {a[0], a[1], a[2]}; }
 std::array<double, 3> arr(const Vec3d &v) { return {v.x, v.y, v.z}; }
+std::string num(double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.6g", v);
+    return buf;
+}
 } // namespace
 
 SliceService::SliceService(int64_t maxPixels) : maxPixels_(maxPixels), thread_([this] { loop(); }) {}
@@ -52,12 +58,34 @@ SliceService::Prepared SliceService::prepare(const Volume &volume, const protoco
     p.level = request.level.value_or(wl.level);
     if (!(std::isfinite(p.window) && p.window > 0)) throw std::invalid_argument("window: must be a finite number > 0");
     if (!std::isfinite(p.level)) throw std::invalid_argument("level: must be a finite number");
+    if (request.slab) {
+        p.slab = request.slab;
+        const auto mode = parseSlabMode(request.slab->mode);
+        if (!mode) throw std::invalid_argument("slab.mode: must be \"mip\", \"minip\" or \"mean\"");
+        p.samplingSlab = Slab{request.slab->thickness, *mode};
+        p.slabPlanes = slabPlaneCount(volume, request.slab->thickness);
+        // The limits are checked here, on the caller's thread, so that too_large comes at once:
+        // a zero-pixel probe of sampleSlab's checks without sampling anything.
+        const double smallest = volume.smallestSpacing();
+        if (p.slabPlanes > kMaxSlabPlanes)
+            throw std::length_error("slab.thickness: " + num(request.slab->thickness) + " mm needs more than " +
+                                    std::to_string(kMaxSlabPlanes) + " planes " + num(smallest / 2) +
+                                    " mm apart (half the smallest voxel spacing); the most is " +
+                                    num((kMaxSlabPlanes - 1) * smallest / 2) + " mm");
+        const int64_t samples = int64_t(p.plane.width) * p.plane.height * p.slabPlanes;
+        if (samples > kMaxSlabSamples)
+            throw std::length_error("slab: " + std::to_string(p.slabPlanes) + " planes of " +
+                                    std::to_string(p.plane.width) + " x " + std::to_string(p.plane.height) +
+                                    " pixels are " + std::to_string(samples) + " samples, over the limit of " +
+                                    std::to_string(kMaxSlabSamples) + "; ask for a smaller image or a thinner slab");
+    }
     return p;
 }
 
 std::vector<uint8_t> SliceService::render(const Volume &volume, const Prepared &p, const protocol::RequestId &request) {
     const auto start = std::chrono::steady_clock::now();
-    const SliceImage image = sampleSlice(volume, p.plane, p.correction);
+    const SliceImage image = p.slab ? sampleSlab(volume, p.plane, p.samplingSlab, p.correction)
+                                    : sampleSlice(volume, p.plane, p.correction);
     const std::vector<uint8_t> grey = windowToGray8(image, p.window, p.level);
     protocol::SliceHeader h;
     h.request = request;
@@ -71,6 +99,8 @@ std::vector<uint8_t> SliceService::render(const Volume &volume, const Prepared &
     h.point = arr(p.point);
     h.window = p.window;
     h.level = p.level;
+    h.slab = p.slab;
+    h.slabPlanes = p.slabPlanes;
     h.renderMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return protocol::encodeSlice(h, grey);
 }
@@ -92,17 +122,38 @@ std::optional<ProtocolError> SliceService::submit(uint64_t session, std::shared_
         job.prepared = prepare(*volume, request, correction);
     } catch (const std::invalid_argument &e) {
         return refuse(ErrorCode::BadField, e.what());
+    } catch (const std::length_error &e) {
+        return refuse(ErrorCode::TooLarge, e.what());
     }
     job.session = session;
     job.volume = std::move(volume);
     job.id = request.id;
     job.reply = std::move(reply);
+    return enqueue(std::move(job), kType);
+}
+
+std::optional<ProtocolError> SliceService::submitTask(uint64_t session, const protocol::RequestId &id,
+                                                      std::string_view type, std::function<Answer()> work,
+                                                      Reply reply) {
+    Job job;
+    job.session = session;
+    job.id = id;
+    job.reply = std::move(reply);
+    job.work = std::move(work);
+    job.type = std::string(type);
+    return enqueue(std::move(job), type);
+}
+
+std::optional<ProtocolError> SliceService::enqueue(Job job, std::string_view type) {
+    const auto refuse = [&](ErrorCode code, std::string message) {
+        return ProtocolError{code, std::move(message), job.id, std::string(type)};
+    };
     {
         std::lock_guard lock(mutex_);
         if (stopping_) return refuse(ErrorCode::Busy, "the server is stopping");
-        size_t &queued = queuedPerSession_[session];
+        size_t &queued = queuedPerSession_[job.session];
         if (queued >= kMaxQueuedPerSession)
-            return refuse(ErrorCode::Busy, std::to_string(queued) + " slices of this session are waiting (at most " +
+            return refuse(ErrorCode::Busy, std::to_string(queued) + " slices and measurements of this session are waiting (at most " +
                                                std::to_string(kMaxQueuedPerSession) +
                                                "); wait for their answers before asking for more");
         ++queued;
@@ -123,12 +174,12 @@ void SliceService::loop() {
             queue_.pop_front();
         }
         Answer answer;
+        const std::string type = job.work ? job.type : std::string(kType);
         try {
-            answer = render(*job.volume, job.prepared, job.id);
+            answer = job.work ? job.work() : render(*job.volume, job.prepared, job.id);
         } catch (const std::exception &e) {
             // Out of memory for a large slice, or a bug: an answer all the same.
-            answer = ProtocolError{ErrorCode::RenderFailed, std::string("slice failed: ") + e.what(), job.id,
-                                   std::string(kType)};
+            answer = ProtocolError{ErrorCode::RenderFailed, type + " failed: " + e.what(), job.id, type};
         }
         {
             std::lock_guard lock(mutex_);

@@ -12,6 +12,10 @@
 // have at most kMaxQueuedPerSession slices queued (more get `busy`), so no session can fill
 // the queue for the others. Checks that need no work (the fields, the pixel limit) happen
 // on the caller's thread, so a bad request is refused at once.
+//
+// The same thread answers the session's other measurements that read the volume on the host
+// (roi_stats, pick: submitTask): like a slice they take milliseconds to a second, must not
+// hold up the session's strand, and share the per-session bound.
 
 #include "protocol/errors.hpp"
 #include "protocol/slice.hpp"
@@ -37,7 +41,8 @@ class SliceService {
     static constexpr size_t kMaxQueuedPerSession = 6;   // three panes, twice over
     // The slice message, or the error answering the request. Runs on the worker thread
     // (or, for a request dropped by stop(), not at all); must only post.
-    using Answer = std::variant<std::vector<uint8_t>, protocol::ProtocolError>;
+    // A slice message (binary), an error, or a JSON text message (the answer of a task).
+    using Answer = std::variant<std::vector<uint8_t>, protocol::ProtocolError, std::string>;
     using Reply = std::function<void(Answer)>;
 
     // maxPixels: the most width x height of one slice (the server's --max-still-pixels).
@@ -54,6 +59,11 @@ class SliceService {
     std::optional<protocol::ProtocolError> submit(uint64_t session, std::shared_ptr<const Volume> volume,
                                                   const protocol::SliceRequest &request, Reply reply,
                                                   const OrientationCorrection &correction = {});
+    // Queues `work` for the worker; reply then runs once with what it returns (an exception it
+    // throws becomes render_failed naming `type`). Refused with busy like a slice.
+    std::optional<protocol::ProtocolError> submitTask(uint64_t session, const protocol::RequestId &id,
+                                                      std::string_view type, std::function<Answer()> work,
+                                                      Reply reply);
     // Drops the queued requests (unanswered: their sessions are going) and joins the worker.
     void stop();
 
@@ -65,7 +75,11 @@ class SliceService {
         double level = 0;
         Vec3d point;
         OrientationCorrection correction;
+        std::optional<protocol::SliceSlab> slab;   // as asked; the planes below
+        Slab samplingSlab;
+        int slabPlanes = 1;
     };
+    // A slab over the limits throws std::length_error (too_large).
     static Prepared prepare(const Volume &volume, const protocol::SliceRequest &request,
                             const OrientationCorrection &correction = {});
     // The whole answer on the calling thread: the slice message's bytes.
@@ -79,7 +93,10 @@ class SliceService {
         Prepared prepared;
         protocol::RequestId id;
         Reply reply;
+        std::function<Answer()> work;   // a task instead of a slice
+        std::string type;
     };
+    std::optional<protocol::ProtocolError> enqueue(Job job, std::string_view type);
     void loop();
 
     int64_t maxPixels_;

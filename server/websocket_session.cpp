@@ -2,6 +2,9 @@
 
 #include "protocol/protocol.hpp"
 #include "renderer/io/volume_source.hpp"
+#include "renderer/presets.hpp"
+#include "renderer/reference_renderer.hpp"
+#include "renderer/slice.hpp"
 
 #include <boost/asio/post.hpp>
 #include <spdlog/fmt/fmt.h>
@@ -260,6 +263,15 @@ void WebsocketSession::handle(std::string_view text) {
                 [&](const protocol::SliceRequest &m) {
                     if (needVolume()) onSlice(m);
                 },
+                [&](const protocol::ProbeRequest &m) {
+                    if (needVolume()) onProbe(m);
+                },
+                [&](const protocol::RoiStatsRequest &m) {
+                    if (needVolume()) onRoiStats(m);
+                },
+                [&](const protocol::PickRequest &m) {
+                    if (needVolume()) onPick(m);
+                },
             },
             message);
     } catch (const SceneError &e) {
@@ -481,11 +493,107 @@ void WebsocketSession::onSlice(const protocol::SliceRequest &m) {
             if (!self) return;
             self->guarded("slice", [&] {
                 if (auto *bytes = std::get_if<std::vector<uint8_t>>(a.get())) self->sendBinary(std::move(*bytes));
-                else self->sendError(std::get<ProtocolError>(std::move(*a)));
+                else if (auto *e = std::get_if<ProtocolError>(a.get())) self->sendError(std::move(*e));
             });
         });
     }, scene_.scene().quality.orientationCorrection);   // slices show the volume where its frames do
     if (refusal) sendError(std::move(*refusal));
+}
+
+namespace {
+// "HU" when the volume's values are Hounsfield units: the modality chosen for it is CT in
+// Hounsfield units (not CT stored as grey values, renderer/presets.hpp); else raw data units (null).
+std::optional<std::string> valueUnit(const VolumeEntry &entry) {
+    if (chooseModality(*entry.volume, entry.name).hounsfield) return std::string("HU");
+    return std::nullopt;
+}
+} // namespace
+
+void WebsocketSession::onProbe(const protocol::ProbeRequest &m) {
+    // One trilinear sample: answered here, on the strand, at once.
+    protocol::ProbeMessage answer;
+    answer.id = m.id;
+    answer.point = m.point;
+    const std::optional<double> value = probeValue(
+        *volume_->volume, {m.point[0], m.point[1], m.point[2]}, scene_.scene().quality.orientationCorrection);
+    answer.inside = value.has_value();
+    answer.value = value;
+    answer.unit = valueUnit(*volume_);
+    sendMessage(answer);
+}
+
+void WebsocketSession::submitMeasurement(const nlohmann::json &id, std::string_view type,
+                                         std::function<SliceService::Answer()> work) {
+    auto weak = weak_from_this();
+    auto executor = ws_.get_executor();
+    auto refusal = state_->slices().submitTask(slot_, id, type, std::move(work),
+                                               [weak, executor](SliceService::Answer answer) {
+        net::post(executor, [weak, a = std::make_shared<SliceService::Answer>(std::move(answer))] {
+            auto self = weak.lock();
+            if (!self) return;
+            self->guarded("measurement", [&] {
+                if (auto *text = std::get_if<std::string>(a.get())) self->sendText(std::move(*text));
+                else if (auto *e = std::get_if<ProtocolError>(a.get())) self->sendError(std::move(*e));
+            });
+        });
+    });
+    if (refusal) sendError(std::move(*refusal));
+}
+
+void WebsocketSession::onRoiStats(const protocol::RoiStatsRequest &m) {
+    RoiGeometry roi;
+    roi.axis = parseSliceAxis(m.axis).value_or(SliceAxis::Axial);   // the parser allowed only the three
+    roi.center = {m.center[0], m.center[1], m.center[2]};
+    roi.a = m.radii[0];
+    roi.b = m.radii[1];
+    roi.shape = parseRoiShape(m.shape).value_or(RoiShape::Ellipse);
+    const nlohmann::json id = m.id;
+    submitMeasurement(id, "roi_stats", [volume = volume_->volume, roi, id, unit = valueUnit(*volume_),
+                                        correction = scene_.scene().quality.orientationCorrection]() -> SliceService::Answer {
+        RoiStats stats;
+        try {
+            stats = roiStats(*volume, roi, correction);
+        } catch (const std::invalid_argument &e) {
+            return ProtocolError{ErrorCode::BadField, e.what(), id, "roi_stats"};
+        } catch (const std::length_error &e) {
+            return ProtocolError{ErrorCode::TooLarge, e.what(), id, "roi_stats"};
+        }
+        protocol::RoiStatsMessage answer;
+        answer.id = id;
+        answer.samples = stats.samples;
+        answer.areaMm2 = stats.area;
+        if (stats.samples > 0) {
+            answer.mean = stats.mean;
+            answer.std = stats.std;
+            answer.min = stats.min;
+            answer.max = stats.max;
+        }
+        answer.unit = unit;
+        return protocol::toJsonText(answer);
+    });
+}
+
+void WebsocketSession::onPick(const protocol::PickRequest &m) {
+    const Scene &scene = scene_.scene();
+    // The ray is cast through the view the session's frames show: its camera, transfer function
+    // (the projection's grey ramp under MIP / MinIP), clip planes, crop box and orientation
+    // correction, trilinear. The client's image only gives the pixel's place and the aspect.
+    const Ray ray = RayGenerator(scene.camera, m.width, m.height).rayThrough(m.x, m.y);
+    const nlohmann::json id = m.id;
+    submitMeasurement(id, "pick", [volume = volume_->volume, ray, id, quality = scene.quality,
+                                   clip = scene.clipPlanes,
+                                   tf = resolvedTransferFunction(scene, volume_->volume->range)]() -> SliceService::Answer {
+        ReferenceRenderer reference(*volume, tf, Reconstruction::Linear);
+        reference.setQuality(quality);
+        // 1e-5 of opacity: the crossing is placed within one accepted interval, far finer than a voxel.
+        const RayPick pick = reference.pick(ray, clip, 0.5, 1e-5);
+        protocol::PickMessage answer;
+        answer.id = id;
+        answer.hit = pick.hit;
+        if (pick.hit) answer.point = std::array<double, 3>{pick.point.x, pick.point.y, pick.point.z};
+        answer.opacity = pick.opacity;
+        return protocol::toJsonText(answer);
+    });
 }
 
 void WebsocketSession::sendBinary(std::vector<uint8_t> bytes) {

@@ -33,6 +33,7 @@
 #include <boost/beast/websocket.hpp>
 
 #include <deque>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -74,6 +75,13 @@ class WebsocketSession : public std::enable_shared_from_this<WebsocketSession> {
     // A binary message other than a frame (a slice message): queued after the texts.
     void sendBinary(std::vector<uint8_t> bytes);
     void onSlice(const protocol::SliceRequest &m);   // server/slice_service.hpp answers it
+    // Measurements (protocol/README.md): a probe is answered at once; roi_stats and pick run on
+    // the slice service's thread (submitMeasurement), the session's scene as it is now.
+    void onProbe(const protocol::ProbeRequest &m);
+    void onRoiStats(const protocol::RoiStatsRequest &m);
+    void onPick(const protocol::PickRequest &m);
+    void submitMeasurement(const nlohmann::json &id, std::string_view type,
+                           std::function<SliceService::Answer()> work);
     void onFrame(RenderedFrame frame);
     void doWrite();
     void onWrite(boost::beast::error_code ec, size_t bytes);

@@ -28,12 +28,13 @@ from .messages import (CLIENT_TYPES, COMPOSITING_MODES, ERROR_CODES, PROTOCOL_VE
                        RequestId, ServerError, camera, clip_planes, close, dumps, get_state, hello,
                        interaction_end, interaction_start, list_volumes, open_volume, orbit_camera,
                        parse_server_message, preset, quality_automatic, quality_explicit, still,
-                       transfer_function, viewport, crop_box, with_compositing, find_studies)
+                       transfer_function, viewport, crop_box, with_compositing, find_studies,
+                       projection_window, probe, roi_stats, pick, ROI_SHAPES)
 from .nrrd import NRRD_TYPES, encode_nrrd, nrrd_bytes, nrrd_header
 from .studies import Series, Study, parse_studies
 from .upload import UploadError, http_endpoint, post_file, post_volume
-from .slices import (SLICE_AXES, SLICE_MAGIC, Slice, decode_slice, encode_slice, is_slice_message,
-                     slice_request)
+from .slices import (SLAB_MODES, SLICE_AXES, SLICE_MAGIC, Slice, decode_slice, encode_slice, is_slice_message,
+                     slab, slice_request)
 
 __version__ = "0.1.0"  # the project's version (CMakeLists.txt) and pyproject.toml's
 
@@ -47,7 +48,8 @@ __all__ = [
     "parse_server_message", "preset", "quality_automatic", "quality_explicit", "still",
     "transfer_function", "viewport", "COMPOSITING_MODES", "crop_box", "with_compositing",
     "SLICE_AXES", "SLICE_MAGIC", "Slice", "decode_slice", "encode_slice", "is_slice_message",
-    "slice_request", "find_studies", "Series", "Study", "parse_studies",
+    "slice_request", "find_studies", "projection_window", "probe", "roi_stats", "pick", "ROI_SHAPES",
+    "SLAB_MODES", "slab", "Series", "Study", "parse_studies",
     "NRRD_TYPES", "encode_nrrd", "nrrd_bytes", "nrrd_header",
     "UploadError", "http_endpoint", "post_file", "post_volume",
 ]

@@ -10,7 +10,7 @@ from typing import Any, Callable, Deque, Dict, List, Optional, Protocol, Sequenc
 
 from .frames import Frame, decode_frame
 from .messages import (MessageError, RequestId, ServerError, StudyDate, close, dumps, find_studies, hello,
-                       open_volume, parse_server_message)
+                       open_volume, parse_server_message, pick, probe, roi_stats)
 from .nrrd import encode_nrrd
 from .slices import Slice, decode_slice, is_slice_message, slice_request
 from .studies import Study, parse_studies
@@ -234,6 +234,21 @@ class Client:
                     **fields: Any) -> "Any":
         """request_slice's pixels as a height x width uint8 numpy array (needs numpy)."""
         return (await self.request_slice(axis, width, height, timeout=timeout, **fields)).to_numpy()
+
+    async def probe(self, point: Sequence[float], timeout: Optional[float] = None) -> Message:
+        """The `probe` answer for a world point: {"inside", "value", "unit", ...}; value None
+        outside the volume, unit "HU" for a CT in Hounsfield units, else None."""
+        return await self.request(probe(point), timeout=timeout)
+
+    async def roi_stats(self, axis: str, center: Sequence[float], radii: Sequence[float],
+                        shape: str = "ellipse", timeout: Optional[float] = None) -> Message:
+        """The `roi_stats` answer: samples, area_mm2, mean, std, min, max (None without samples), unit."""
+        return await self.request(roi_stats(axis, center, radii, shape), timeout=timeout)
+
+    async def pick(self, x: float, y: float, width: int, height: int, timeout: Optional[float] = None) -> Message:
+        """The `pick` answer for pixel position (x, y) of a width x height image of the view:
+        hit, point (world mm, None without a hit) and the ray's opacity."""
+        return await self.request(pick(x, y, width, height), timeout=timeout)
 
     async def _read(self, timeout: Optional[float]) -> Union[Message, Frame, Slice]:
         item = await self.receive(timeout)

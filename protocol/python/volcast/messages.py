@@ -19,9 +19,9 @@ ERROR_CODES = (
 CLIENT_TYPES = (
     "hello", "list_volumes", "open_volume", "camera", "interaction_start", "interaction_end",
     "viewport", "transfer_function", "quality_policy", "clip_planes", "still", "get_state",
-    "close", "slice", "find_studies",
+    "close", "slice", "find_studies", "probe", "roi_stats", "pick",
 )
-SERVER_TYPES = ("hello", "volumes", "progress", "state", "error", "studies")
+SERVER_TYPES = ("hello", "volumes", "progress", "state", "error", "studies", "probe", "roi_stats", "pick")
 
 RequestId = Union[int, str, None]
 
@@ -159,10 +159,21 @@ def crop_box(min: Sequence[float] = (0, 0, 0), max: Sequence[float] = (1, 1, 1))
     return {"min": lo, "max": hi}
 
 
+def projection_window(window: float, level: float) -> Dict[str, Any]:
+    """quality.projection_window: the grey window of a MIP / MinIP in data units; the extreme
+    value v along a ray shows as clamp((v - (level - window/2)) / window, 0, 1), opaque."""
+    w, l = float(window), float(level)
+    if not (math.isfinite(w) and w > 0) or not math.isfinite(l):
+        raise ValueError(f"projection_window: window must be finite and > 0 and level finite, got {window!r}, {level!r}")
+    return {"window": w, "level": l}
+
+
 def with_compositing(quality: Optional[Dict[str, Any]] = None, compositing: Optional[str] = None,
-                     crop: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+                     crop: Optional[Dict[str, Any]] = None,
+                     window: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
     """A copy of the quality switches with quality.compositing ("emission_absorption", "mip"
-    or "minip") and quality.crop (from crop_box) set, for quality_explicit/_automatic."""
+    or "minip"), quality.crop (from crop_box) and quality.projection_window (from
+    projection_window) set, for quality_explicit/_automatic."""
     q = dict(quality or {})
     if compositing is not None:
         if compositing not in COMPOSITING_MODES:
@@ -170,7 +181,44 @@ def with_compositing(quality: Optional[Dict[str, Any]] = None, compositing: Opti
         q["compositing"] = compositing
     if crop is not None:
         q["crop"] = crop
+    if window is not None:
+        q["projection_window"] = window
     return q
+
+
+def _point(point: Sequence[float], what: str) -> List[float]:
+    values = [float(v) for v in point]
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{what}: must be 3 finite numbers, got {point!r}")
+    return values
+
+
+def probe(point: Sequence[float], id: RequestId = None) -> Dict[str, Any]:
+    """The volume's value at a world (patient) point, mm; answered by a `probe` message."""
+    return _message("probe", id, point=_point(point, "probe: point"))
+
+
+ROI_SHAPES = ("ellipse", "rectangle")
+
+
+def roi_stats(axis: str, center: Sequence[float], radii: Sequence[float], shape: str = "ellipse",
+              id: RequestId = None) -> Dict[str, Any]:
+    """Statistics of the values in an ellipse (or rectangle of half sides) on a slice pane's
+    plane through center; radii (a, b) in mm along the pane's column and row directions."""
+    if axis not in ("axial", "coronal", "sagittal"):
+        raise ValueError(f"roi_stats: axis must be axial, coronal or sagittal, got {axis!r}")
+    if shape not in ROI_SHAPES:
+        raise ValueError(f"roi_stats: shape must be one of {ROI_SHAPES}, got {shape!r}")
+    r = [float(v) for v in radii]
+    if len(r) != 2 or not all(math.isfinite(v) and v > 0 for v in r):
+        raise ValueError(f"roi_stats: radii must be 2 finite numbers > 0, got {radii!r}")
+    return _message("roi_stats", id, axis=axis, center=_point(center, "roi_stats: center"), radii=r, shape=shape)
+
+
+def pick(x: float, y: float, width: int, height: int, id: RequestId = None) -> Dict[str, Any]:
+    """Where the ray through pixel position (x, y) (pixel centres at +0.5, origin top-left) of a
+    width x height image of the session's view first becomes half opaque."""
+    return _message("pick", id, x=float(x), y=float(y), width=int(width), height=int(height))
 
 
 def clip_planes(planes: List[Dict[str, Any]], id: RequestId = None) -> Dict[str, Any]:

@@ -24,14 +24,29 @@ MAX_SLICE_SIDE = 16384
 def slice_request(axis: str, width: int, height: int, point: Optional[Sequence[float]] = None,
                   center: Optional[Sequence[float]] = None, pixel_spacing: Optional[float] = None,
                   window: Optional[float] = None, level: Optional[float] = None,
-                  id: RequestId = None) -> Dict[str, Any]:
-    """A `slice` request. point/center are world (patient) mm; window/level data units."""
+                  id: RequestId = None, slab: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+    """A `slice` request. point/center are world (patient) mm; window/level data units;
+    slab (from slab()) makes it a thick slab."""
     if axis not in SLICE_AXES:
         raise ValueError(f"slice: axis must be one of {SLICE_AXES}, got {axis!r}")
     return _message("slice", id, axis=axis, width=width, height=height,
                     point=list(point) if point is not None else None,
                     center=list(center) if center is not None else None,
-                    pixel_spacing=pixel_spacing, window=window, level=level)
+                    pixel_spacing=pixel_spacing, window=window, level=level, slab=slab)
+
+
+SLAB_MODES = ("mip", "minip", "mean")
+
+
+def slab(thickness: float, mode: str = "mip") -> Dict[str, Any]:
+    """A slice's `slab`: planes across [-thickness/2, +thickness/2] mm along its normal,
+    combined by their maximum ("mip"), minimum ("minip") or mean; 0 is the plane itself."""
+    t = float(thickness)
+    if not (math.isfinite(t) and t >= 0):
+        raise ValueError(f"slab: thickness must be a finite number >= 0 mm, got {thickness!r}")
+    if mode not in SLAB_MODES:
+        raise ValueError(f"slab: mode must be one of {SLAB_MODES}, got {mode!r}")
+    return {"thickness": t, "mode": mode}
 
 
 @dataclass
@@ -48,6 +63,11 @@ class Slice:
     @property
     def width(self) -> int:
         return self.header["width"]
+
+    @property
+    def slab(self) -> Optional[Dict[str, Any]]:
+        """The request's slab with its number of planes, or None for a plain slice."""
+        return self.header.get("slab")
 
     @property
     def height(self) -> int:
