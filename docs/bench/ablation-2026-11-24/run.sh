@@ -1,5 +1,5 @@
 #!/bin/bash
-# Where the native path's time goes (docs/cpu_renderer.md, "What the march waits on"):
+# Where the native path's time goes (docs/cpu_renderer.md, "What a step costs"):
 # volcast-bench relinked with renderer/cpu/cpu_march.cpp changed one way at a time, then
 # Table 1's 4 MiB cell at 512² timed for every variant in turn, ROUNDS rounds.
 # Needs a Release build in build/ (README). Usage: run.sh [ROUNDS] [OUT]; TIME_ONLY=1 reuses
@@ -40,16 +40,12 @@ variant always-exp ablation-macros.patch -DABL_ALWAYS_EXP
 variant always-exact ablation-macros.patch -DABL_ALWAYS_EXACT
 variant fake-sample ablation-macros.patch -DABL_FAKE_SAMPLE
 variant avx2 '' '-DHWY_DISABLED_TARGETS=(HWY_AVX3|HWY_AVX3_DL)'
-variant geometry-mask geometry-mask.patch ''
-variant incremental-walls incremental-walls.patch ''
 variant one-division one-division-per-crossing.patch ''
-variant always-inline always-inline.patch ''
 variant two-packets two-packets-per-loop.patch ''
-variant two-packets-inlined two-packets-per-loop-inlined.patch ''
 fi
 
 names="base no-kahan no-polynomial reciprocal no-colour no-arithmetic branchless always-colour always-exp always-exact
-       fake-sample avx2 geometry-mask incremental-walls one-division always-inline two-packets two-packets-inlined"
+       fake-sample avx2 one-division two-packets"
 for r in $(seq 1 "$rounds"); do
     for v in $names; do
         "$out/bin/$v/volcast-bench" table1 --backend cpu --volumes small --sizes 512x512 --repeats 20 \
