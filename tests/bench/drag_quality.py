@@ -9,7 +9,7 @@ a later one). Then --keep of the interactive frames, spread evenly over the drag
 first --settle-s seconds (the ladder's timer has measured its levels by then), are compared
 with the final frame of their own camera, asked for at rest: PSNR of the JPEG the user saw
 against that PNG, both as 8-bit RGB over black (the protocol's composite for JPEG). That is
-the performance issue's interactive target: p95 motion-to-frame <= 40 ms with frames >= 30 dB.
+the interactive target (docs/service.md): p95 motion-to-frame <= 40 ms with frames >= 30 dB.
 
 Runs with Debian's /usr/bin/python3 and its python3-numpy and python3-pil (frame decoding:
 protocol/python/volcast/frames.py). A benchmark, not a test: run it on a quiet machine and

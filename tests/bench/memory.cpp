@@ -1,5 +1,5 @@
-// The memory a large scan takes on the native path (issue 14's "a 512×512×2000 16-bit CT fits
-// in ~1 GiB plus mips and bricks"): what the volume holds, what its renderer adds, and the
+// The memory a large scan takes on the native path (the target: "a 512×512×2000 16-bit CT
+// fits in ~1 GiB plus mips and bricks", docs/cpu_renderer.md): what the volume holds, what its renderer adds, and the
 // process's resident and peak memory, after loading and after frames.
 
 #include "renderer/cpu/cpu_renderer.hpp"

@@ -86,7 +86,7 @@ TEST(Utf8, QuotableTextShortensOnlyBetweenCodePoints) {
     }
 }
 
-// The crash of the issue: the text "é" (2 bytes) made the parser's message quote 0xC3 alone,
+// The crash this guards against: the text "é" (2 bytes) made the parser's message quote 0xC3 alone,
 // and serialising the error threw type_error 316 outside any catch.
 TEST(Utf8, AnswerToALoneEAcuteIsValidAndSaysMalformedJson) {
     const json answer = answerTo("\xC3\xA9");
@@ -136,7 +136,7 @@ TEST(Utf8, LongNonAsciiTextIsQuotedShortenedAtACodePoint) {
     EXPECT_NE(keyMessage.find(kEllipsis + ": unknown field"), std::string::npos) << keyMessage;
 }
 
-// The issue's fuzz found 26 crashes in 14 000 non-ASCII messages and none in 200 000 ASCII
+// A fuzzer found 26 crashes in 14 000 non-ASCII messages and none in 200 000 ASCII
 // ones. 20 000 seeded random messages built from JSON pieces and multi-byte characters
 // (whole, cut, or invalid), each of which must get an answer that serialises to valid JSON.
 TEST(Utf8, RandomNonAsciiMessagesAlwaysGetAValidAnswer) {

@@ -83,7 +83,7 @@ TEST(BSplinePrefilter, FloatAgreesWithDoubleToFloatPrecision) {
     bsplinePrefilterLine(d.data(), d.size(), 1);
     bsplinePrefilterLine(f.data(), f.size(), 1);
     // Float keeps ~1.2e-7 relative per operation; the recursion's gain is bounded by
-    // 1 / (1 − |z|)² ≈ 1.9, so a few 1e-7 on unit-size values; 1e-5 relative is the bound.
+    // 1 / (1 − |z|)² ≈ 1.9, so a few 1e-7 on unit-size values; 1e-5 relative is the required bound.
     for (size_t k = 0; k < d.size(); ++k) EXPECT_NEAR(f[k], d[k], 1e-5 * std::max(1.0, std::fabs(d[k])));
 }
 
@@ -103,7 +103,7 @@ std::vector<float> randomVolume(Vec3i dims, unsigned seed) {
     return v;
 }
 
-// Every coefficient of `got` within 1e-5 (the bound) relative to the volume's largest
+// Every coefficient of `got` within 1e-5 (the required bound) relative to the volume's largest
 // coefficient, of the simple float result and of the double one. Relative to the volume, not
 // to each coefficient: a coefficient near 0 is a difference of values ~100, so float rounding
 // of those values (~1e-5 absolute) is all it can be held to.

@@ -309,7 +309,7 @@ TEST(ReferenceRenderer, CommandLineReproducesTheClosedFormConstantBoxTo1e6) {
     for (int y = 0; y < 24; ++y)
         for (int x = 0; x < 24; ++x) {
             const double A = -std::expm1(chordLength(box.volume, rays.pixelRay(x, y)) * std::log1p(-a));
-            // The bound: 1e-6 (float32 EXR storage adds only ~6e-8).
+            // The required bound: 1e-6 (float32 EXR storage adds only ~6e-8).
             EXPECT_NEAR(img.pixel(x, y)[3], A, 1e-6);
             EXPECT_NEAR(img.pixel(x, y)[0], 0.8 * A, 1e-6);
         }

@@ -321,7 +321,7 @@ std::vector<Row> opacityCorrection(const Backend &be) {
     const Camera cam = orthographic({0.5, 0.5, -10}, {0, 0, 1}, {0, 1, 0}, 2);
     const auto rendererPtr = be.make(box);
     FrameRenderer &renderer = *rendererPtr;
-    // The bound: 1e-6 relative to the double value, 1e-12 absolute near 0, i.e.
+    // The required bound: 1e-6 relative to the double value, 1e-12 absolute near 0, i.e.
     // |Δ| / max(|want|, 1e-6) ≤ 1e-6.
     const std::string name = "opacity correction (Eq. 3), d/u 1e-6…1e4, a ∈ {0, 1e-9, 1e-7, 0.5, 1 − 1e-7, 1}";
     const std::string against = "closed form 1 − (1 − a)^(d/u), relative (absolute 1e-12 near 0)";
@@ -366,7 +366,7 @@ std::vector<Row> faintMedia(const Backend &be) {
     const Camera narrow = perspective({0.5, 0.5, -20}, {0.5, 0.5, 8000}, {0, 1, 0}, 0.05);
     const auto rendererPtr = be.make(box);
     FrameRenderer &renderer = *rendererPtr;
-    // The bound: 1 % relative. A plain float sum of 819,200 depths of 1e-9 rounds each
+    // The required bound: 1 % relative. A plain float sum of 819,200 depths of 1e-9 rounds each
     // addition by up to half an ulp of a sum near 8e-4, 2.9e-11 = 3 % of the term, mostly the
     // same way: 0.63 % in all was measured before the kernel compensated its sums.
     const std::string name = "faint media: a = 1e-7, step 0.01, chord 8192 voxels";

@@ -44,13 +44,13 @@ struct Backend {
 Backend openClBackend(OpenClContext &cl); // cl must outlive the renderers made
 Backend cpuBackend();                     // the native SIMD ray caster (renderer/cpu/)
 
-// One bullet of the issue: its rows, run on the given back end.
+// One stability case: its rows, run on the given back end.
 struct Case {
     std::string id; // a test name: OpacityCorrection, FaintMedia, …
     std::function<std::vector<Row>(const Backend &)> run;
 };
 
-// Every case of issue 4, in the issue's order.
+// Every case, in the order the table prints them.
 const std::vector<Case> &cases();
 
 // The README table: case, path, compared with, worst error seen, bound, NaN/Inf count.

@@ -12,7 +12,7 @@
 #include <memory>
 
 int main(int argc, char **argv) {
-    CLI::App app{"Run volcast's numerical-stability cases (issue 4) and print their table."};
+    CLI::App app{"Run volcast's numerical-stability cases and print their table."};
     std::string device, only, backend = "opencl";
     app.add_option("--backend", backend, "Back end: opencl (the OpenCL ray caster) or cpu (the native SIMD one)")
         ->check(CLI::IsMember({"opencl", "cpu"}));
