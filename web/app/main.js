@@ -14,6 +14,7 @@ import { OrientationControls } from "./orientation_marker.js";
 import { PresetPicker } from "./preset_picker.js";
 import { CropPanel } from "./crop_panel.js";
 import { CropHandles } from "./crop_handles.js";
+import { tooLargeWords } from "../core/limits.js";
 import { MeasureTools } from "./measure_tools.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
 import { SliceViews } from "./slice_views.js";
@@ -176,6 +177,7 @@ function onTfEdited(points, interactive) {
   $("tf-preset").value = "";
   if (!session.volume) return;
   if (interactive) { session.beginInteraction(); sendTf(app.tf); }
+  presetPicker.showMatching(app.tf.points);   // the note under the picker follows the curve shown
   else { sendTf.now(app.tf); if (!view.interacting) session.endInteraction(); }
 }
 
@@ -349,7 +351,7 @@ session.on("server_error", (e) => {
     session.getState().then((s) => { quality.showState(s); orientation.showState(s.scene?.quality); }, () => {});
   }
   if (e.request_type === "open_volume" && !session.volume) app.openError = e;
-  if ((e.code === "render_failed" || e.code === "internal") && !app.frameSinceOpen) app.renderError = e;
+  if ((e.code === "render_failed" || e.code === "internal" || e.code === "too_large") && !app.frameSinceOpen) app.renderError = e;
   updateMessage();
 });
 
@@ -419,6 +421,7 @@ function updateMessage() {
   if (!app.frameSinceOpen) {
     if (app.renderError) return message.show({ kind: "error", title: "The server could not render this view", detail: `${app.renderError.code}: ${app.renderError.message}` });
     return message.show({ title: `Rendering ${session.volume.name}…`, progress: true });
+    if (app.renderError?.code === "too_large") return message.show({ kind: "error", ...tooLargeWords(app.renderError) });
   }
   message.show(null);
 }

@@ -2,6 +2,7 @@
 // size, and a small chart of the error estimate against time while the view refines.
 
 import { describeFrame } from "../core/frame_facts.js";
+import { limitedLine } from "../core/limits.js";
 import { psnrOf } from "../core/protocol.js";
 
 export const STATS_REFRESH_MS = 250;   // ms between refreshes of the time-dependent numbers (fps)
@@ -13,6 +14,12 @@ export class StatsOverlay {
     this.$ = (id) => root.getElementById(id);
     this.stats = stats;
     this.chart = this.$("error-chart");
+    // What the automatic policy lowered to stay within the server's limits: a row of its own,
+    // shown only while the frame on screen says so.
+    const image = this.$("stat-image");
+    this.limitedTerm = Object.assign(root.createElement("dt"), { textContent: "lowered", hidden: true });
+    this.limited = Object.assign(root.createElement("dd"), { id: "stat-limited", hidden: true });
+    image.after(this.limitedTerm, this.limited);
     setInterval(() => this.refresh(), STATS_REFRESH_MS);
   }
 
@@ -38,6 +45,9 @@ export class StatsOverlay {
       const image = this.$("stat-image");
       image.textContent = image.title = d.image;
     }
+    const limited = limitedLine(h);
+    this.limited.textContent = this.limited.title = limited;
+    this.limited.hidden = this.limitedTerm.hidden = !limited;
     this.drawChart();
   }
 

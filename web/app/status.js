@@ -2,6 +2,8 @@
 // over the view whenever it has no current image to show (never a black canvas without
 // an explanation).
 
+import { tooLargeWords } from "../core/limits.js";
+
 export const ERROR_SHOW_MS = 20000;   // ms an error stays up unless dismissed
 export const MAX_ERRORS_SHOWN = 4;
 
@@ -47,7 +49,9 @@ export class ConnectionIndicator {
 export class ErrorList {
   constructor(root) { this.box = root.getElementById("errors"); }
 
-  // e: {code, message, request_type?}. Shown as the server wrote it: the code and its words.
+  // e: {code, message, request_type?}. Shown as the server wrote it: the code and its words;
+  // a picture over the server's limits in words about the picture (the server's message, which
+  // names the flag for scripts and operators, in the tooltip).
   show(e) {
     const item = document.createElement("div");
     item.className = "error";
@@ -60,7 +64,14 @@ export class ErrorList {
     code.textContent = e.code ?? "error";
     const text = document.createElement("span");
     text.className = "text";
-    text.textContent = e.request_type ? `${e.message} (${e.request_type})` : e.message;
+    if (e.code === "too_large") {
+      const words = tooLargeWords(e);
+      code.textContent = "too large";
+      text.textContent = [words.title, words.detail].filter(Boolean).join(". ");
+      text.title = e.message ?? "";
+    } else {
+      text.textContent = e.request_type ? `${e.message} (${e.request_type})` : e.message;
+    }
     const close = document.createElement("button");
     close.type = "button";
     close.textContent = "✕";

@@ -6,6 +6,7 @@
 import {
   addPoint, applyWindowLevel, evaluate, fromHex, movePoint, removePoint, setColor, toHex, windowLevelOf,
 } from "../core/transfer_function.js";
+import { displayNumber } from "../core/window_level.js";
 
 const PAD = { left: 8, right: 8, top: 8, bottom: 20 };   // CSS px around the plot; the bottom holds the colour bar
 const HIT_RADIUS_PX = 9;                                  // CSS px: how near a click must be to take a point
@@ -44,6 +45,7 @@ export class TransferFunctionEditor {
   // --- data in --------------------------------------------------------------------------
 
   setVolume(volume) {
+    this.hounsfield = volume?.modality?.hounsfield === true;   // W/L shown in whole HU
     const r = volume?.value_range ?? volume?.histogram?.range;
     this.range = r && r[1] > r[0] ? [r[0], r[1]] : [0, 1];
     this.histogram = volume?.histogram ?? null;
@@ -264,8 +266,8 @@ export class TransferFunctionEditor {
     }
     const wl = this.windowLevel;
     if (wl) {
-      if (active !== this.el.window) this.el.window.value = round(wl.window);
-      if (active !== this.el.level) this.el.level.value = round(wl.level);
+      if (active !== this.el.window) this.el.window.value = displayNumber(wl.window, { hounsfield: this.hounsfield });
+      if (active !== this.el.level) this.el.level.value = displayNumber(wl.level, { hounsfield: this.hounsfield });
     }
   }
 

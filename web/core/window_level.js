@@ -18,3 +18,13 @@ export function windowLevelStep({ window, level }, dxPx, dyPx, range) {
     level: level + dyPx * levelPerPx,
   };
 }
+
+// A window or level as the user reads it: whole Hounsfield units for CT in HU (radiology
+// windows are whole numbers), else three significant digits, but never finer than a whole
+// unit above 100 (176.896 → 177, 0.04567 → 0.0457, 12345.6 → 12346): short enough for its field.
+export function displayNumber(x, { hounsfield = false } = {}) {
+  const n = Number(x);
+  if (!Number.isFinite(n)) return n;
+  if (hounsfield || Math.abs(n) >= 100) return Math.round(n) + 0;   // + 0: no "-0"
+  return Number(n.toPrecision(3)) + 0;
+}
