@@ -1,6 +1,6 @@
 // Table 2: the cubic B-spline prefilter (bspline_prefilter.hpp), simple against
-// multithreaded against OpenCL, on 256³ and 512³, next to the memory-bandwidth bound the
-// issue sets: reading and writing the volume three times (one pass per axis).
+// multithreaded against OpenCL, on 256³ and 512³, next to the memory-bandwidth floor:
+// reading and writing the volume three times (one pass per axis).
 
 #include "renderer/bspline_prefilter.hpp"
 #include "renderer/opencl/bspline_prefilter_opencl.hpp"
