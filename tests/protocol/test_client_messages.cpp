@@ -72,11 +72,17 @@ std::vector<ClientMessage> everyRequest() {
             StillRequest{12, {{"width", 2048}, {"height", 2048}}},
             GetStateRequest{-13},
             CloseRequest{"bye"},
-            SliceRequest{14, "axial", std::nullopt, std::nullopt, 64, 32, std::nullopt, std::nullopt, std::nullopt},
+            SliceRequest{14, "axial", std::nullopt, std::nullopt, 64, 32, std::nullopt, std::nullopt, std::nullopt,
+                         std::nullopt},
             SliceRequest{"s", "sagittal", std::array<double, 3>{1, 2, 3}, std::array<double, 3>{0, -1, 0.5},
-                         512, 512, 0.25, 2000.0, 400.0},
+                         512, 512, 0.25, 2000.0, 400.0, std::nullopt},
             FindStudiesRequest{15, "pacs", {}, 100},
-            FindStudiesRequest{"f", "orthanc-1", {"DOE^J*", "12345", "20240101-", "CT", "A-77"}, 5}};
+            FindStudiesRequest{"f", "orthanc-1", {"DOE^J*", "12345", "20240101-", "CT", "A-77"}, 5},
+            SliceRequest{16, "coronal", std::nullopt, std::nullopt, 64, 64, std::nullopt, std::nullopt, std::nullopt,
+                         SliceSlab{12.5, "minip"}},
+            ProbeRequest{17, {-12.5, 30, 1e5}},
+            RoiStatsRequest{"roi", "sagittal", {1, 2, 3}, {4.5, 0.25}, "rectangle"},
+            PickRequest{18, 120.5, 0, 640, 480}};
 }
 
 TEST(ClientMessages, EveryRequestRoundTrips) {
@@ -333,6 +339,62 @@ TEST(FindStudies, FiltersAndLimitAreRead) {
     EXPECT_EQ(f.limit, 3);
     EXPECT_EQ(std::get<FindStudiesRequest>(accepted(R"({"type": "find_studies", "source": "a"})")).limit, 100)
         << "the default limit";
+}
+
+// The measurement requests and the slab: each bad field is named, with bad_field, whatever
+// kind of wrong it is (missing, wrong type, out of range, huge).
+TEST(Measurements, EachMalformedFieldIsNamed) {
+    const auto refused = [](std::string_view text, std::string_view path, std::string_view type) {
+        const ProtocolError e = errorOf(text);
+        EXPECT_EQ(e.code, ErrorCode::BadField) << text;
+        EXPECT_TRUE(e.message.starts_with(path)) << "the message should start with " << path << ": " << e.message;
+        EXPECT_EQ(e.requestType, type);
+    };
+    refused(R"({"type": "probe"})", "point", "probe");
+    refused(R"({"type": "probe", "point": [1, 2]})", "point", "probe");
+    refused(R"({"type": "probe", "point": [1, 2, "3"]})", "point[2]", "probe");
+    refused(R"({"type": "probe", "point": {"x": 1}})", "point", "probe");
+    refused(R"({"type": "probe", "point": [1, 2, 3], "value": 1})", "value", "probe");
+
+    const std::string roi = R"({"type": "roi_stats", "axis": "axial", "center": [0, 0, 0], )";
+    refused(roi + R"("radii": [1, 2], "shape": "circle"})", "shape", "roi_stats");
+    refused(roi + R"("radii": [1, 2], "shape": 1})", "shape", "roi_stats");
+    refused(roi + R"("radii": [1]})", "radii", "roi_stats");
+    refused(roi + R"("radii": [1, 0]})", "radii[1]", "roi_stats");
+    refused(roi + R"("radii": [-1, 2]})", "radii[0]", "roi_stats");
+    refused(roi + R"("radii": "big"})", "radii", "roi_stats");
+    refused(R"({"type": "roi_stats", "axis": "oblique", "center": [0, 0, 0], "radii": [1, 1]})", "axis", "roi_stats");
+    refused(R"({"type": "roi_stats", "axis": "axial", "radii": [1, 1]})", "center", "roi_stats");
+
+    const std::string pick = R"({"type": "pick", "width": 640, "height": 480, )";
+    refused(pick + R"("x": -0.5, "y": 1})", "x", "pick");
+    refused(pick + R"("x": 640.5, "y": 1})", "x", "pick");
+    refused(pick + R"("x": 1, "y": 1e300})", "y", "pick");
+    refused(pick + R"("x": "1", "y": 1})", "x", "pick");
+    refused(R"({"type": "pick", "x": 1, "y": 1, "width": 0, "height": 480})", "width", "pick");
+    refused(R"({"type": "pick", "x": 1, "y": 1, "width": 64.5, "height": 480})", "width", "pick");
+    refused(R"({"type": "pick", "x": 1, "y": 1, "width": 64, "height": 100000})", "height", "pick");
+
+    const std::string slice = R"({"type": "slice", "axis": "axial", "width": 8, "height": 8, )";
+    refused(slice + R"("slab": {"thickness": -1}})", "slab.thickness", "slice");
+    refused(slice + R"("slab": {"thickness": "thick"}})", "slab.thickness", "slice");
+    refused(slice + R"("slab": {"thickness": 2, "mode": "max"}})", "slab.mode", "slice");
+    refused(slice + R"("slab": {"mode": "mip"}})", "slab.thickness", "slice");
+    refused(slice + R"("slab": 5})", "slab", "slice");
+    refused(slice + R"("slab": {"thickness": 2, "planes": 5}})", "slab.planes", "slice");
+    // A number beyond a double fails while parsing, before the type and id are read: still
+    // bad_field naming the field.
+    for (const auto &[text, path] : std::vector<std::pair<std::string, std::string>>{
+             {R"({"type": "probe", "point": [1, 2, 1e999]})", "point[2]"},
+             {roi + R"("radii": [1, 1e400]})", "radii[1]"},
+             {slice + R"("slab": {"thickness": 1e999}})", "slab.thickness"}}) {
+        const ProtocolError e = errorOf(text);
+        EXPECT_EQ(e.code, ErrorCode::BadField) << text;
+        EXPECT_TRUE(e.message.starts_with(path)) << e.message;
+    }
+    // The defaults: an ellipse, a MIP slab.
+    EXPECT_EQ(std::get<RoiStatsRequest>(accepted(roi + R"("radii": [1, 2]})")).shape, "ellipse");
+    EXPECT_EQ(std::get<SliceRequest>(accepted(slice + R"("slab": {"thickness": 0}})")).slab->mode, "mip");
 }
 
 TEST(FindStudies, EachMalformedFieldIsNamed) {

@@ -95,7 +95,13 @@ std::vector<ServerMessage> everyMessage() {
             before,
             after,
             ProtocolError{ErrorCode::NotFound, "no volume \"bonsia\" in the data folders", 4, "open_volume"},
-            ProtocolError{ErrorCode::MalformedJson, "malformed JSON: ...", nullptr, ""}};
+            ProtocolError{ErrorCode::MalformedJson, "malformed JSON: ...", nullptr, ""},
+            ProbeMessage{20, {1, 2, 3}, true, -998.25, "HU"},
+            ProbeMessage{"p", {1e6, 2, 3}, false, std::nullopt, std::nullopt},
+            RoiStatsMessage{21, 1200, 75.0, 40.5, 3.25, 12, 88, "HU"},
+            RoiStatsMessage{22, 0, 0, std::nullopt, std::nullopt, std::nullopt, std::nullopt, std::nullopt},
+            PickMessage{23, true, std::array<double, 3>{10, -20.5, 30}, 0.98},
+            PickMessage{24, false, std::nullopt, 0.125}};
 }
 
 TEST(ServerMessages, EveryMessageRoundTrips) {

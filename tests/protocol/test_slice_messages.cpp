@@ -101,6 +101,20 @@ TEST(SliceMessage, RoundTripsAndIsNotAFrame) {
     EXPECT_THROW(decodeFrame(bytes), DecodeError);
 }
 
+TEST(SliceMessage, EchoesTheSlabWithItsPlanes) {
+    SliceHeader h = exampleHeader();
+    h.slab = SliceSlab{10, "mean"};
+    h.slabPlanes = 41;
+    const std::vector<uint8_t> pixels(6, 7);
+    const std::vector<uint8_t> bytes = encodeSlice(h, pixels);
+    EXPECT_EQ(decodeSlice(bytes).header, h);
+    const std::string text(bytes.begin() + 8, bytes.end() - 6);
+    EXPECT_EQ(json::parse(text).at("slab"), (json{{"thickness", 10}, {"mode", "mean"}, {"planes", 41}}));
+    // A plain slice's header has no slab.
+    const std::vector<uint8_t> plain = encodeSlice(exampleHeader(), pixels);
+    EXPECT_FALSE(json::parse(std::string(plain.begin() + 8, plain.end() - 6)).contains("slab"));
+}
+
 TEST(SliceMessage, DamagedMessagesAreRefusedNamingTheProblem) {
     const std::vector<uint8_t> pixels(6, 1);
     std::vector<uint8_t> bytes = encodeSlice(exampleHeader(), pixels);

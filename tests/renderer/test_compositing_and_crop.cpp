@@ -359,6 +359,79 @@ TEST_P(CompositingAndCrop, MipInsideACropBoxSeesOnlyTheBox) {
     EXPECT_LT(compareImages(inside, exact).maxAbs, 0.13);
 }
 
+// A windowed projection is grey clamp((v − (L − W/2)) / W, 0, 1), opaque where the ray
+// crosses the box, whatever the scene's transfer function: the renderers get it from
+// resolvedTransferFunction, the one place that makes the projection's ramp. On a constant box
+// of 100 with W = 200, L = 50 every hit pixel is 0.75 grey with alpha 1, exactly 0 off the box.
+// The grey passes through the transfer-function table (linear between entries, exact for a
+// ramp up to float rounding): 1e-5.
+TEST_P(CompositingAndCrop, WindowedProjectionIsOpaqueGreyOnAConstantBox) {
+    const SyntheticVolume box = makeConstantBox({12, 9, 15}, {1.0, 1.5, 0.8}, 100);
+    Scene scene;
+    scene.transferFunction = rampTf();   // ignored by projections
+    for (Compositing mode : {Compositing::Maximum, Compositing::Minimum}) {
+        scene.quality = plainQuality(0.5);
+        scene.quality.compositing = mode;
+        scene.quality.projectionWindow = ProjectionWindow{200, 50};
+        const TransferFunction tf = resolvedTransferFunction(scene, box.volume.range);
+        const Camera cam = test::obliqueCamera(box.volume, 30);
+        ReferenceRenderer ref(box.volume, tf, Reconstruction::Linear);
+        ref.setQuality(scene.quality);
+        const Image exact = ref.render(cam, 24, 20, {}, {});
+        const Image img = renderer(box.volume)->render(tf, cam, 24, 20, scene.quality, {});
+        const RayGenerator rays(cam, 24, 20);
+        int hits = 0;
+        for (int y = 0; y < 20; ++y)
+            for (int x = 0; x < 24; ++x) {
+                double t0, t1;
+                const Vec3d lo = box.volume.origin - box.volume.spacing * 0.5;
+                const Vec3d hi = box.volume.origin + mul(Vec3d(box.volume.dims) - Vec3d{0.5, 0.5, 0.5}, box.volume.spacing);
+                const bool crosses = slabs(rays.pixelRay(x, y), lo, hi, t0, t1);
+                for (const Image *im : {&exact, &img}) {
+                    const float *p = im->pixel(x, y);
+                    if (!crosses) {
+                        EXPECT_EQ(p[3], 0.0f) << x << "," << y;
+                        continue;
+                    }
+                    // A ray grazing an edge by less than a sample's reach may be missed by the
+                    // sampled back end; the reference never misses.
+                    if (im == &img && t1 - t0 < 0.5) continue;
+                    EXPECT_EQ(p[3], 1.0f) << x << "," << y;
+                    for (int ch = 0; ch < 3; ++ch) EXPECT_NEAR(p[ch], 0.75, 1e-5) << x << "," << y;
+                }
+                hits += crosses;
+            }
+        EXPECT_GT(hits, 60);
+    }
+}
+
+// Without a window the ramp spans the volume's value range; on a smooth blob each back end
+// matches the reference's grey to the bound of MipOfABlobMatchesTheReference rescaled: that
+// test allows 2 of 1000 in value (2e-3 of its ramp), which is 5e-3 of a W = 400 window.
+TEST_P(CompositingAndCrop, WindowedMipOfABlobMatchesTheReference) {
+    const SyntheticVolume b = makeGaussianBlob({24, 24, 24}, {1, 1, 1}, 4, 900);
+    Scene scene;
+    scene.quality = plainQuality(0.25);
+    scene.quality.compositing = Compositing::Maximum;
+    const TransferFunction whole = resolvedTransferFunction(scene, b.volume.range);
+    ASSERT_EQ(whole.points.size(), 2u);
+    EXPECT_EQ(whole.points[0].value, b.volume.range.min);
+    EXPECT_EQ(whole.points[1].value, b.volume.range.max);
+    scene.quality.projectionWindow = ProjectionWindow{400, 600};
+    const TransferFunction tf = resolvedTransferFunction(scene, b.volume.range);
+    const Camera cam = test::obliqueCamera(b.volume, 30);
+    ReferenceRenderer ref(b.volume, tf, Reconstruction::Linear);
+    ref.setQuality(scene.quality);
+    const Image exact = ref.render(cam, 32, 32, {}, {});
+    const Image img = renderer(b.volume)->render(tf, cam, 32, 32, scene.quality, {});
+    EXPECT_LT(compareImages(img, exact).maxAbs, 5e-3);
+    // Grey, and saturated at the blob's centre (900 > 600 + 200).
+    const float *centre = exact.pixel(16, 16);
+    EXPECT_EQ(centre[3], 1.0f);
+    EXPECT_EQ(centre[0], 1.0f);
+    EXPECT_EQ(centre[0], centre[1]);
+}
+
 TEST(SceneCompositingAndCrop, ReadsWritesAndRefuses) {
     const std::string base = R"({"volume": "builtin:gaussian_blob", "transfer_function": {"preset": "ct_bone"},
         "camera": {"eye": [0, 0, 100], "target": [0, 0, 0], "up": [0, 1, 0]}, "image": {"width": 8, "height": 8},
@@ -388,6 +461,52 @@ TEST(SceneCompositingAndCrop, ReadsWritesAndRefuses) {
     EXPECT_NE(error(R"({"crop": {"min": [0.5, 0, 0], "max": [0.5, 1, 1]}})").find("quality.crop.max[0]"),
               std::string::npos);
     EXPECT_NE(error(R"({"crop": {"lo": [0, 0, 0]}})").find("quality.crop.lo"), std::string::npos);
+}
+
+TEST(SceneCompositingAndCrop, ProjectionWindowReadsWritesAndRefuses) {
+    const std::string base = R"({"volume": "builtin:gaussian_blob", "transfer_function": {"preset": "ct_bone"},
+        "camera": {"eye": [0, 0, 100], "target": [0, 0, 0], "up": [0, 1, 0]}, "image": {"width": 8, "height": 8},
+        "quality": )";
+    const Scene s = parseScene(base + R"({"compositing": "mip", "projection_window": {"window": 400, "level": 40}}})");
+    ASSERT_TRUE(s.quality.projectionWindow);
+    EXPECT_EQ(*s.quality.projectionWindow, (ProjectionWindow{400, 40}));
+    EXPECT_EQ(parseScene(sceneToJson(s)), s);
+    // The projection's ramp replaces the preset: black at L − W/2, white at L + W/2, opaque.
+    const TransferFunction tf = resolvedTransferFunction(s, {-1000, 3000});
+    ASSERT_EQ(tf.points.size(), 2u);
+    EXPECT_EQ(tf.points[0], (ControlPoint{-160, 0, 0, 0, 1}));
+    EXPECT_EQ(tf.points[1], (ControlPoint{240, 1, 1, 1, 1}));
+    // Emission–absorption keeps its own transfer function, window or not.
+    Scene ea = s;
+    ea.quality.compositing = Compositing::EmissionAbsorption;
+    EXPECT_EQ(resolvedTransferFunction(ea, {-1000, 3000}), presetTransferFunction("ct_bone", {-1000, 3000}));
+    // Not written when unset.
+    EXPECT_EQ(sceneToJson(parseScene(base + R"({"compositing": "mip"}})")).find("projection_window"), std::string::npos);
+    // A constant volume gets a window of 1 around its value.
+    const TransferFunction flat = projectionTransferFunction(std::nullopt, {7, 7});
+    EXPECT_EQ(flat.points[0].value, 6.5);
+    EXPECT_EQ(flat.points[1].value, 7.5);
+
+    auto error = [&](const std::string &quality) {
+        try {
+            parseScene(base + quality + "}");
+        } catch (const SceneError &e) {
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    for (const char *bad : {R"({"projection_window": {"window": 0, "level": 1}})",
+                            R"({"projection_window": {"window": -5, "level": 1}})",
+                            R"({"projection_window": {"window": "wide", "level": 1}})",
+                            R"({"projection_window": {"window": 1e-300, "level": 1e300}})",
+                            R"({"projection_window": {"window": 1.7e308, "level": 1.7e308}})"})
+        EXPECT_NE(error(bad).find("quality.projection_window.window"), std::string::npos) << bad << ": " << error(bad);
+    EXPECT_NE(error(R"({"projection_window": {"window": 10}})").find("quality.projection_window.level"),
+              std::string::npos);
+    EXPECT_NE(error(R"({"projection_window": [10, 1]})").find("quality.projection_window"), std::string::npos);
+    EXPECT_NE(error(R"({"projection_window": {"window": 10, "level": 1, "gamma": 2}})")
+                  .find("quality.projection_window.gamma"),
+              std::string::npos);
 }
 
 } // namespace

@@ -132,6 +132,10 @@ class MessageTests(unittest.TestCase):
             (vc.close(), {"type": "close"}),
             (vc.slice_request("axial", 64, 32), {"type": "slice", "axis": "axial", "width": 64, "height": 32}),
             (vc.find_studies("pacs"), {"type": "find_studies", "source": "pacs", "filters": {}, "limit": 100}),
+            (vc.probe([1, 2, 3]), {"type": "probe", "point": [1.0, 2.0, 3.0]}),
+            (vc.roi_stats("axial", [1, 2, 3], [4, 5]),
+             {"type": "roi_stats", "axis": "axial", "center": [1.0, 2.0, 3.0], "radii": [4.0, 5.0], "shape": "ellipse"}),
+            (vc.pick(1.5, 2.5, 8, 8), {"type": "pick", "x": 1.5, "y": 2.5, "width": 8, "height": 8}),
         ]
         for built, expected in cases:
             self.assertEqual(built, expected)
