@@ -40,7 +40,7 @@ json headerToJson(const FrameHeader &h, size_t imageBytes) {
         if (h.error->method.empty()) throw std::invalid_argument("frame header: error.method is empty");
         error = {{"value", h.error->value}, {"method", h.error->method}};
     }
-    return {{"seq", h.seq},
+    json header{{"seq", h.seq},
             {"request", h.request},
             {"level", h.level},
             {"quality", h.quality},
@@ -53,6 +53,9 @@ json headerToJson(const FrameHeader &h, size_t imageBytes) {
             {"final", h.final},
             {"camera", h.camera},
             {"image_bytes", imageBytes}};
+    // Only on a level the server lowered to stay within its limits: older headers lack it.
+    if (!h.limited.empty()) header["limited"] = h.limited;
+    return header;
 }
 
 uint32_t readUint32LE(std::span<const uint8_t> bytes) {
@@ -109,6 +112,7 @@ FrameHeader readHeader(const json &root, uint64_t &imageBytes) {
     }
     h.final = detail::boolean(f.require("final"), "final");
     if (const json *c = f.find("camera"); c && !c->is_null()) h.camera = detail::object(*c, "camera");
+    if (const json *l = f.find("limited"); l && !l->is_null()) h.limited = detail::string(*l, "limited", 1024);
     imageBytes = detail::unsignedInteger(f.require("image_bytes"), "image_bytes");
     return h;
 }

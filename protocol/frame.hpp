@@ -58,6 +58,8 @@ struct FrameHeader {
     std::optional<ErrorEstimate> error;   // nullopt: not estimated
     bool final = false;        // the last frame for this view: nothing more comes until it changes
     nlohmann::json camera;     // scene-file "camera" this frame shows; null when not sent
+    std::string limited;       // what the automatic policy lowered to stay within the server's
+                               //   limits ("image scale 0.5 to stay within …"); empty: nothing
     bool operator==(const FrameHeader &) const = default;
 };
 

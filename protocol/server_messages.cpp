@@ -37,10 +37,11 @@ json volumeToJson(const VolumeInfo &v) {
         json presets = json::array();
         for (const PresetInfo &p : v.modality->presets)
             presets.push_back({{"name", p.name}, {"label", p.label}, {"window", p.window}, {"level", p.level},
-                               {"points", p.points}, {"shading", p.shading}});
+                               {"points", p.points}, {"shading", p.shading}, {"modality", p.modality}});
         j["modality"] = {{"name", v.modality->name}, {"source", v.modality->source},
                          {"reason", v.modality->reason}, {"default_preset", v.modality->defaultPreset},
-                         {"presets", std::move(presets)}};
+                         {"presets", std::move(presets)}, {"modalities", v.modality->modalities},
+                         {"hounsfield", v.modality->hounsfield}};
     }
     return j;
 }
@@ -202,11 +203,19 @@ VolumeInfo readVolume(const json &j, const std::string &path) {
             p.window = detail::number(pf.require("window"), pf.pathOf("window"));
             p.level = detail::number(pf.require("level"), pf.pathOf("level"));
             p.shading = detail::boolean(pf.require("shading"), pf.pathOf("shading"));
+            if (const json *pm = pf.find("modality")) p.modality = detail::string(*pm, pf.pathOf("modality"), kAnyLength);
             const json &points = detail::array(pf.require("points"), pf.pathOf("points"));
             for (size_t k = 0; k < points.size(); ++k)
                 p.points.push_back(numbers<5>(points[k], detail::element(pf.pathOf("points"), k)));
             modality.presets.push_back(std::move(p));
         }
+        if (const json *ms = mf.find("modalities")) {
+            const json &names = detail::array(*ms, mf.pathOf("modalities"));
+            for (size_t i = 0; i < names.size(); ++i)
+                modality.modalities.push_back(
+                    detail::string(names[i], detail::element(mf.pathOf("modalities"), i), kAnyLength));
+        }
+        if (const json *h = mf.find("hounsfield")) modality.hounsfield = detail::boolean(*h, mf.pathOf("hounsfield"));
         v.modality = std::move(modality);
     }
     return v;

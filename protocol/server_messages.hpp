@@ -63,6 +63,7 @@ struct PresetInfo {
     double window = 1, level = 0;
     std::vector<std::array<double, 5>> points;   // [value, r, g, b, a]
     bool shading = false;
+    std::string modality;   // the modality it belongs to ("CT", "MR", "micro-CT"); empty from older servers
     bool operator==(const PresetInfo &) const = default;
 };
 
@@ -72,7 +73,9 @@ struct ModalityInfo {
     std::string source;         // "file" or "inferred"
     std::string reason;
     std::string defaultPreset;  // the preset the volume opened with
-    std::vector<PresetInfo> presets;
+    std::vector<PresetInfo> presets;   // every modality's, the default first
+    std::vector<std::string> modalities;   // the modalities presets exist for, the chosen first; empty from older servers
+    bool hounsfield = false;    // CT whose values are Hounsfield units
     bool operator==(const ModalityInfo &) const = default;
 };
 

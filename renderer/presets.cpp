@@ -45,13 +45,31 @@ const PresetDef kPresets[] = {
     {"mr.t1_brain", "MR T1 brain", "MR", false, 1.0, 0.55, true,
      {{0, 0, 0, 0, 0}, {0.2, 0.55, 0.4, 0.35, 0}, {0.45, 0.85, 0.7, 0.6, 0.05}, {0.7, 0.95, 0.85, 0.8, 0.15},
       {1, 1, 1, 1, 0.35}}},
+    // T2: fluid (CSF) is the brightest tissue; the curve lifts it over grey and white matter.
+    {"mr.t2_brain", "MR T2 brain", "MR", false, 1.0, 0.5, true,
+     {{0, 0, 0, 0, 0}, {0.3, 0.5, 0.45, 0.5, 0}, {0.55, 0.75, 0.7, 0.8, 0.04}, {0.8, 0.85, 0.9, 1, 0.2},
+      {1, 0.95, 0.97, 1, 0.4}}},
     {"mr.angiography", "MR angiography", "MR", false, 0.5, 0.75, true,
      {{0, 0, 0, 0, 0}, {0.4, 0.8, 0.2, 0.1, 0}, {0.7, 1, 0.5, 0.4, 0.4}, {1, 1, 0.9, 0.8, 0.8}}},
     {"micro_ct.default", "Micro-CT", "micro-CT", false, 0.8, 0.6, true,
      {{0, 0, 0, 0, 0}, {0.25, 0.8, 0.6, 0.4, 0}, {0.5, 0.9, 0.8, 0.7, 0.25}, {1, 1, 1, 1, 0.8}}},
-    {"micro_ct.vessels", "Vessels (grey values)", "micro-CT", false, 0.5, 0.75, true,
+    {"micro_ct.vessels", "Micro-CT vessels", "micro-CT", false, 0.5, 0.75, true,
      {{0, 0, 0, 0, 0}, {0.4, 0.8, 0.2, 0.1, 0}, {0.7, 1, 0.5, 0.4, 0.4}, {1, 1, 0.9, 0.8, 0.8}}},
 };
+
+// The modalities presets exist for, in the table's order.
+const char *const kModalities[] = {"CT", "MR", "micro-CT"};
+
+// Grey-value CT: the robust range is taken to span these Hounsfield units (presets.hpp).
+constexpr double kGreyCtLowHu = -1000, kGreyCtHighHu = 1000;
+
+// Words that name a modality, in a file's description or its name.
+const std::initializer_list<const char *> kCtWords = {"ct", "cta", "cbct", "cect", "hrct", "mdct"};
+const std::initializer_list<const char *> kMrWords = {"mr",   "mri", "t1",  "t2",  "flair", "mra",
+                                                      "dwi",  "pd",  "tof", "mprage", "spgr", "bold"};
+const std::initializer_list<const char *> kMicroCtWords = {"microct", "uct", "micro"};
+const std::initializer_list<const char *> kAngioWords = {"cta",      "mra",    "angio", "angiography", "aneurism",
+                                                         "aneurysm", "avm",    "carotid", "vessels",   "tof"};
 
 // The value below which `fraction` of the counted voxels lie, interpolated in the bin.
 double percentile(const Histogram &h, double fraction, size_t firstBin) {
@@ -132,46 +150,109 @@ ValueRange robustRange(const Volume &volume) {
     return r;
 }
 
+namespace {
+
+bool looksHounsfield(const Volume &volume, double *airFraction = nullptr) {
+    const double air = fractionBetween(volume.histogram, -1100, -900);
+    if (airFraction) *airFraction = air;
+    return isSigned(volume.sourceType) && volume.range.min <= -900 && volume.range.max >= 200 && air >= 0.005;
+}
+
+std::string defaultPresetOf(const std::string &modality, bool angio) {
+    if (modality == "CT") return angio ? "ct.angiography" : "ct.bone";
+    if (modality == "MR") return angio ? "mr.angiography" : "mr.t1_brain";
+    return angio ? "micro_ct.vessels" : "micro_ct.default";
+}
+
+// A modality named by a word of `words`: the micro-CT words before the CT ones ("microct").
+std::string modalityOfWords(const std::set<std::string> &words, std::string *word) {
+    for (const auto &[modality, list] : {std::pair{"micro-CT", kMicroCtWords}, std::pair{"CT", kCtWords},
+                                         std::pair{"MR", kMrWords}}) {
+        const std::string w = nameSays(words, list);
+        if (!w.empty()) {
+            *word = w;
+            return modality;
+        }
+    }
+    return {};
+}
+
+} // namespace
+
 ModalityChoice chooseModality(const Volume &volume, std::string_view name) {
-    const std::set<std::string> words = wordsOf(name);
-    const std::string angioWord =
-        nameSays(words, {"cta", "mra", "angio", "angiography", "aneurism", "aneurysm", "avm", "carotid", "vessels"});
+    const std::set<std::string> nameWords = wordsOf(name);
+    const bool description = volume.modalityField == "NRRD content" || volume.modalityField == "NIfTI descrip";
+    const std::set<std::string> describedWords = description ? wordsOf(volume.modality) : std::set<std::string>{};
+    std::string angioWord = nameSays(describedWords, kAngioWords);
+    std::string angioWhere = "the file's description";
+    if (angioWord.empty()) {
+        angioWord = nameSays(nameWords, kAngioWords);
+        angioWhere = "the name";
+    }
+    double air = 0;
+    const bool hounsfield = looksHounsfield(volume, &air);
+    const std::string typeName(voxelTypeName(volume.sourceType));
     const auto pick = [&](std::string modality, std::string source, std::string reason) {
-        ModalityChoice c{std::move(modality), std::move(source), std::move(reason), {}};
-        if (c.modality == "CT") c.defaultPreset = angioWord.empty() ? "ct.bone" : "ct.angiography";
-        else if (c.modality == "MR") c.defaultPreset = angioWord.empty() ? "mr.t1_brain" : "mr.angiography";
-        else c.defaultPreset = angioWord.empty() ? "micro_ct.default" : "micro_ct.vessels";
-        if (!angioWord.empty()) c.reason += "; the name says '" + angioWord + "': angiography preset";
+        ModalityChoice c{std::move(modality), false, std::move(source), std::move(reason), {}};
+        c.defaultPreset = defaultPresetOf(c.modality, !angioWord.empty());
+        if (!angioWord.empty()) c.reason += "; " + angioWhere + " says '" + angioWord + "': angiography preset";
+        return c;
+    };
+    // CT: in Hounsfield units when the values look so (air near -1000), else grey values.
+    const auto ct = [&](std::string source, std::string reason) {
+        ModalityChoice c = pick("CT", std::move(source), std::move(reason));
+        c.hounsfield = hounsfield;
+        c.reason += hounsfield ? "; values in Hounsfield units"
+                               : "; the " + typeName + " values are not Hounsfield units (no air near -1000): " +
+                                     "CT presets placed on the robust range " + number(double(robustRange(volume).min)) +
+                                     " .. " + number(double(robustRange(volume).max));
         return c;
     };
 
-    if (!volume.modality.empty()) {
+    if (!volume.modality.empty() && !description) {
         const std::string m = volume.modality;
-        if (m == "CT") return pick("CT", "file", "the DICOM header says modality CT (Hounsfield units)");
-        if (m == "MR") return pick("MR", "file", "the DICOM header says modality MR");
+        const std::string where =
+            volume.modalityField == "NRRD key" ? "the NRRD header's key 'modality'" : "the DICOM header";
+        if (m == "CT") {
+            // A DICOM CT's pixel data is rescaled to Hounsfield units by the loader.
+            if (volume.modalityField.empty() || volume.modalityField == "DICOM") {
+                ModalityChoice c = pick("CT", "file", where + " says modality CT (Hounsfield units)");
+                c.hounsfield = true;
+                return c;
+            }
+            return ct("file", where + " says modality CT");
+        }
+        if (m == "MR") return pick("MR", "file", where + " says modality MR");
         return pick("micro-CT", "file",
-                    "the DICOM header says modality " + m + ", which has no presets of its own: grey-value presets");
+                    where + " says modality " + m + ", which has no presets of its own: grey-value presets");
+    }
+    if (description) {
+        std::string word;
+        const std::string m = modalityOfWords(describedWords, &word);
+        const std::string said = "the " + volume.modalityField + " '" + volume.modality + "' says '" + word + "'";
+        if (m == "CT") return ct("file", said + ": CT");
+        if (m == "MR") return pick("MR", "file", said + ": MR");
+        if (m == "micro-CT") return pick("micro-CT", "file", said + ": micro-CT (grey values)");
     }
 
-    const Histogram &h = volume.histogram;
-    const double air = fractionBetween(h, -1100, -900);
-    const std::string typeName(voxelTypeName(volume.sourceType));
-    if (isSigned(volume.sourceType) && volume.range.min <= -900 && volume.range.max >= 200 && air >= 0.005)
-        return pick("CT", "inferred",
-                    "no modality in the file; " + typeName + " values from " + number(double(volume.range.min)) +
-                        " with " + number(100 * air, 2) +
-                        "% of voxels near -1000 (air): CT in Hounsfield units");
-
-    const std::string mrWord = nameSays(words, {"mr", "mri", "t1", "t2", "flair", "mra", "dwi", "pd"});
-    if (!mrWord.empty())
+    if (hounsfield) {
+        ModalityChoice c = pick("CT", "inferred",
+                                "no modality in the file; " + typeName + " values from " +
+                                    number(double(volume.range.min)) + " with " + number(100 * air, 2) +
+                                    "% of voxels near -1000 (air): CT in Hounsfield units");
+        c.hounsfield = true;
+        return c;
+    }
+    std::string word;
+    const std::string byName = modalityOfWords(nameWords, &word);
+    if (byName == "MR")
         return pick("MR", "inferred",
                     std::string("no modality in the file and no Hounsfield air in the ") + typeName +
-                        " values; the name says '" + mrWord + "': MR");
-    const std::string ctWord = nameSays(words, {"ct", "microct", "cbct", "uct"});
-    if (!ctWord.empty())
+                        " values; the name says '" + word + "': MR");
+    if (byName == "CT") return ct("inferred", "no modality in the file; the name says '" + word + "': CT");
+    if (byName == "micro-CT")
         return pick("micro-CT", "inferred",
-                    std::string("no modality in the file; the name says '") + ctWord + "' but the " + typeName +
-                        " values are not Hounsfield units (no air near -1000): grey-value presets");
+                    "no modality in the file; the name says '" + word + "': micro-CT (grey values)");
     if (volume.sourceType == VoxelType::Float32 || volume.sourceType == VoxelType::Float64)
         return pick("MR", "inferred",
                     std::string("no modality in the file; ") + typeName +
@@ -185,22 +266,52 @@ ModalityChoice chooseModality(const Volume &volume, std::string_view name) {
 std::vector<ResolvedPreset> presetsFor(const Volume &volume, const ModalityChoice &choice) {
     const ValueRange robust = robustRange(volume);
     const double lo = robust.min, span = std::max(double(robust.max) - double(robust.min), 1e-6);
+    const bool greyCt = !(choice.modality == "CT" && choice.hounsfield);
+    const bool angio = choice.defaultPreset == defaultPresetOf(choice.modality, true);
     std::vector<ResolvedPreset> out;
     for (const PresetDef &d : kPresets) {
-        if (choice.modality != d.modality) continue;
         ResolvedPreset p;
         p.name = d.name;
         p.label = d.label;
         p.modality = d.modality;
-        p.window = d.hounsfield ? d.window : d.window * span;
-        p.level = d.hounsfield ? d.level : lo + d.level * span;
+        if (!d.hounsfield) {
+            p.window = d.window * span;
+            p.level = lo + d.level * span;
+        } else if (!greyCt) {
+            p.window = d.window;
+            p.level = d.level;
+        } else {
+            // Hounsfield units onto the grey values (presets.hpp): a linear map keeps the curve's shape.
+            const double perHu = span / (kGreyCtHighHu - kGreyCtLowHu);
+            p.window = d.window * perHu;
+            p.level = lo + (d.level - kGreyCtLowHu) * perHu;
+            p.label += " (grey values)";
+        }
         p.shading = d.shading;
         const double start = p.level - 0.5 * p.window;
         for (const CurvePoint &c : d.curve) p.points.push_back({start + c.t * p.window, c.r, c.g, c.b, c.a});
         out.push_back(std::move(p));
     }
+    // The chosen modality first, each modality's default first among its own (angiography
+    // defaults follow the choice's), the chosen default first of all.
+    const std::vector<std::string> order = modalitiesFor(choice);
+    const auto rank = [&](const ResolvedPreset &p) {
+        const size_t m = size_t(std::find(order.begin(), order.end(), p.modality) - order.begin());
+        const bool isDefault = p.name == defaultPresetOf(p.modality, angio);
+        return 2 * m + (isDefault ? 0 : 1);
+    };
+    std::stable_sort(out.begin(), out.end(),
+                     [&](const ResolvedPreset &a, const ResolvedPreset &b) { return rank(a) < rank(b); });
     std::stable_partition(out.begin(), out.end(),
                           [&](const ResolvedPreset &p) { return p.name == choice.defaultPreset; });
+    return out;
+}
+
+std::vector<std::string> modalitiesFor(const ModalityChoice &choice) {
+    std::vector<std::string> out;
+    for (const char *m : kModalities)
+        if (choice.modality == m) out.insert(out.begin(), m);
+        else out.push_back(m);
     return out;
 }
 

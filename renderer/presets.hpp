@@ -9,9 +9,16 @@
 // `level − window/2 + t·window` for t in [0, 1], so the window/level a client reads off the
 // points (first to last point) is the preset's own. CT presets are in Hounsfield units with
 // the usual radiology windows (bone W 2000 / L 400, soft tissue W 400 / L 40, lung
-// W 1500 / L −600). MR and grey-value (micro-CT, non-HU CT) data have no units: their
+// W 1500 / L −600, angiography W 600 / L 300). MR and micro-CT data have no units: their
 // windows are fractions of the volume's robust range (the 0.5th to the 99.5th percentile of
-// the voxels above the background), resolved on the loaded volume.
+// the voxels above the background), resolved on the loaded volume. CT stored as grey values
+// (a scan windowed to 8 bits, a raw CT without its rescale) gets the CT presets too, placed
+// as if its robust range spanned −1000 HU (air) to +1000 HU (dense bone): the windowing a
+// grey-value export of a body CT typically has, so lung, soft tissue and bone fall near
+// where they do in Hounsfield units.
+//
+// Every preset of every modality is resolved on every scan (a client lets the user pick
+// another modality than the one chosen here); the chosen modality's default comes first.
 
 #include "renderer/volume.hpp"
 
@@ -24,7 +31,8 @@ namespace volcast {
 
 // What the data is, and how that was decided: the line a client shows the user.
 struct ModalityChoice {
-    std::string modality;       // "CT" (Hounsfield units), "MR", or "micro-CT" (grey values)
+    std::string modality;       // "CT", "MR", or "micro-CT" (grey values)
+    bool hounsfield = false;    // CT whose values are Hounsfield units (else grey values)
     std::string source;         // "file" (the header states it) or "inferred"
     std::string reason;         // one sentence: why this modality and this preset
     std::string defaultPreset;  // name of the preset the volume opens with
@@ -39,12 +47,18 @@ struct ResolvedPreset {
     bool shading = false;                        // gradient Phong lighting (renderer/phong_constants.h)
 };
 
-// The modality a volume's header states (Volume::modality), else inferred from its voxel
-// type, value range and histogram, and from words in its name ("mr", "t1", "cta", ...).
+// The modality a volume's header states (Volume::modality: a DICOM or NRRD-key code, or the
+// words of an NRRD content or NIfTI description), else inferred from its voxel type, value
+// range and histogram, and from words in its name ("mr", "t1", "ct", "cta", ...).
 ModalityChoice chooseModality(const Volume &volume, std::string_view name);
 
-// The presets of the chosen modality, resolved on this volume, the default first.
+// Every preset of every modality, resolved on this volume: the chosen default first, then
+// the rest of the chosen modality's, then the other modalities' (each modality's own
+// default first among its presets).
 std::vector<ResolvedPreset> presetsFor(const Volume &volume, const ModalityChoice &choice);
+
+// The modalities presets exist for, the chosen one first.
+std::vector<std::string> modalitiesFor(const ModalityChoice &choice);
 
 // The robust value range the grey-value presets are placed on (see the top of this file).
 ValueRange robustRange(const Volume &volume);

@@ -52,7 +52,11 @@ struct Volume {
     // qform/sform code > 0): only then are the world axes L, P, S. Otherwise the starting
     // view is a guess the client must say it is.
     bool orientationKnown = false;
-    std::string modality;           // the file's own (DICOM 0008,0060: "CT", "MR", ...); empty if none
+    // What the file's header says the data is, and where: a modality code (DICOM Modality
+    // (0008,0060), an NRRD key `modality:=CT`) or a description whose words may name one (NRRD
+    // `content`, NIfTI `descrip`); renderer/presets.cpp reads it. Both empty if none.
+    std::string modality;
+    std::string modalityField;      // "DICOM", "NRRD key", "NRRD content", "NIfTI descrip"; empty: a code
 
     size_t voxelCount() const { return size_t(dims.x) * size_t(dims.y) * size_t(dims.z); }
     size_t index(int64_t i, int64_t j, int64_t k) const {

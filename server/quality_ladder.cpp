@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace volcast::server {
 
@@ -24,7 +25,7 @@ std::vector<Level> automaticLadder(const Quality &f, int jitterPasses) {
         for (const Level &c : candidates)
             if (c.quality == q) return;
         if (q == f) return;
-        candidates.push_back({q, 1, jpegQuality});
+        candidates.push_back({q, 1, jpegQuality, {}});
     };
     Quality plain = f;
     plain.jitter = false;
@@ -53,7 +54,7 @@ std::vector<Level> automaticLadder(const Quality &f, int jitterPasses) {
         if (ca != cb) return ca < cb;
         return a.quality.mipLevel > b.quality.mipLevel;
     });
-    candidates.push_back({f, f.jitter ? jitterPasses : 1, kFinalJpegQuality});
+    candidates.push_back({f, f.jitter ? jitterPasses : 1, kFinalJpegQuality, {}});
     return candidates;
 }
 
@@ -92,7 +93,7 @@ size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels)
 }
 
 std::vector<Level> explicitLadder(const Quality &quality, int jitterPasses) {
-    return {{quality, quality.jitter ? jitterPasses : 1, 85}};
+    return {{quality, quality.jitter ? jitterPasses : 1, 85, {}}};
 }
 
 double predictedSamples(const Volume &volume, const Quality &q, int width, int height) {
@@ -105,6 +106,80 @@ double predictedSamples(const Volume &volume, const Quality &q, int width, int h
     if (q.interpolation == Interpolation::Cubic) perSample *= 4;   // 64 taps instead of 8
     if (q.shading) perSample *= 3;                                 // gradient: 6 more fetches
     return rays * diagonalVoxels / q.step * perSample;
+}
+
+double requestBytes(const Level &level, int width, int height) {
+    const double scale = level.quality.imageScale;
+    return double(width) * double(height) * scale * scale * 16.0 * double(level.passes);
+}
+
+namespace {
+// A number for the user: up to three significant digits ("0.25", "4", "1.5").
+std::string shortNumber(double x) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.3g", x);
+    return buffer;
+}
+
+// The largest image scale, in hundredths, at or below `scale`: a readable number whose
+// prediction is at or under what `scale` was computed to allow.
+double hundredthsBelow(double scale) { return std::max(0.01, std::floor(scale * 100 + 1e-9) / 100); }
+} // namespace
+
+std::vector<Level> fitToLimits(std::vector<Level> ladder, const Volume *volume, int width, int height,
+                               const AdmissionLimits &limits) {
+    const auto samplesOf = [&](const Quality &q) {
+        return volume ? predictedSamples(*volume, q, width, height) : 0.0;
+    };
+    const auto bytesFit = [&](const Level &l) { return requestBytes(l, width, height) <= limits.maxRequestBytes; };
+    const auto samplesFit = [&](const Quality &q) { return samplesOf(q) <= limits.maxSamplesPerFrame; };
+    // The largest scale at or below q's that both limits allow at q's step (prediction ∝ scale²).
+    const auto scaleAllowed = [&](const Level &l) {
+        double s = l.quality.imageScale;
+        const double bytes = requestBytes(l, width, height);
+        if (bytes > limits.maxRequestBytes) s = std::min(s, l.quality.imageScale * std::sqrt(limits.maxRequestBytes / bytes));
+        const double samples = samplesOf(l.quality);
+        if (samples > limits.maxSamplesPerFrame)
+            s = std::min(s, l.quality.imageScale * std::sqrt(limits.maxSamplesPerFrame / samples));
+        return s;
+    };
+    for (Level &level : ladder) {
+        if (bytesFit(level) && samplesFit(level.quality)) continue;
+        const Quality own = level.quality;
+        const bool memory = !bytesFit(level);
+        Level l = level;
+        const double scale = scaleAllowed(l);
+        if (scale >= kMinFittedImageScale || scale >= own.imageScale) {
+            l.quality.imageScale = hundredthsBelow(scale);
+        } else {
+            // A quarter of the pixels at most is taken from the picture; then a coarser step.
+            l.quality.imageScale = std::min(own.imageScale, kMinFittedImageScale);
+            while (bytesFit(l) && !samplesFit(l.quality) && l.quality.step < own.step * kMaxFittedStepFactor) {
+                l.quality.step *= 2;
+                // The mip level a step of 2^m level-0 voxels allows (the ladder's rule), at most its coarsest.
+                while (l.quality.mipLevel < 2 && l.quality.step >= double(2 << l.quality.mipLevel)) ++l.quality.mipLevel;
+            }
+            if (!(bytesFit(l) && samplesFit(l.quality))) l.quality.imageScale = hundredthsBelow(scaleAllowed(l));
+        }
+        std::string what = "image scale " + shortNumber(l.quality.imageScale);
+        if (l.quality.step != own.step) what += ", step " + shortNumber(l.quality.step);
+        if (l.quality.mipLevel != own.mipLevel) what += ", mip level " + std::to_string(l.quality.mipLevel);
+        const bool both = memory && volume && samplesOf(own) > limits.maxSamplesPerFrame;
+        l.limited = what + " to stay within the server's " +
+                    (both ? "per-frame and image-memory limits" : memory ? "image-memory limit" : "per-frame limit");
+        level = std::move(l);
+    }
+    // A lowered level may now equal a cheaper one: one of them is enough.
+    std::vector<Level> out;
+    for (size_t i = 0; i < ladder.size(); ++i) {
+        const bool last = i + 1 == ladder.size();
+        bool repeated = false;
+        for (const Level &kept : out) repeated = repeated || (kept.quality == ladder[i].quality && kept.passes == ladder[i].passes);
+        if (!last && (repeated || (ladder[i].quality == ladder.back().quality && ladder[i].passes == ladder.back().passes)))
+            continue;
+        out.push_back(std::move(ladder[i]));
+    }
+    return out;
 }
 
 void LevelTimer::record(size_t level, double ms, double samples) {

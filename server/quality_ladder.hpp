@@ -14,6 +14,12 @@
 // level equal to another is left out), ordered by predicted cost: rays ÷ step, then coarser
 // mip level first. An explicit policy has one level, its own quality.
 //
+// The automatic ladder then stays within the server's admission limits (fitToLimits): a level
+// predicted over --max-samples-per-frame or --max-request-mib for the view's size is lowered,
+// image scale first (down to kMinFittedImageScale), then step (doubled, with the mip level that
+// step allows), then image scale again; the level says so (Level::limited) and its frames'
+// headers carry the words. An explicit policy is refused instead (too_large).
+//
 // The choice is made on the error-against-time front of the view: each level's error is its
 // measured RMSE against the final frame of the same camera (ErrorCalibrator renders every
 // level once in the background when a view of its kind first reaches its final frame, and
@@ -32,6 +38,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace volcast::server {
@@ -40,7 +47,20 @@ struct Level {
     Quality quality;
     int passes = 1;        // jittered passes accumulated (final level with jitter)
     int jpegQuality = 80;  // for non-final frames
+    std::string limited;   // what fitToLimits lowered, for the user; empty when nothing
 };
+
+// The admission limits a view is judged by (ServerConfig's, protocol/README.md "Admission").
+struct AdmissionLimits {
+    double maxSamplesPerFrame = 0;   // predicted samples of one frame (predictedSamples)
+    double maxRequestBytes = 0;      // image buffers of one view (requestBytes)
+};
+
+// Image scale a fitted level keeps before its step is made coarser: below a quarter of the
+// window's pixels a picture loses more than a doubled step costs it.
+inline constexpr double kMinFittedImageScale = 0.25;
+// Steps a fitted level may take, as a multiple of its own, before the scale drops further.
+inline constexpr double kMaxFittedStepFactor = 8;
 
 std::vector<Level> automaticLadder(const Quality &finalQuality, int jitterPasses);
 std::vector<Level> explicitLadder(const Quality &quality, int jitterPasses);
@@ -69,6 +89,16 @@ size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels)
 // A prediction, not a measurement (early termination and empty-space skipping make real
 // rays shorter); the measured cost per sample absorbs the difference.
 double predictedSamples(const Volume &volume, const Quality &q, int width, int height);
+
+// The image memory a level of a width × height view allocates: the float RGBA image of each
+// jittered pass (a conservative bound of what one view holds).
+double requestBytes(const Level &level, int width, int height);
+
+// The ladder with every level lowered until it fits `limits` at width × height (see the top
+// of this file); `volume` null: only the image memory is judged (no volume open yet). Levels
+// that become equal to a cheaper one are left out; the final stays last.
+std::vector<Level> fitToLimits(std::vector<Level> ladder, const Volume *volume, int width, int height,
+                               const AdmissionLimits &limits);
 
 // Measured cost per sample, per level, for one session.
 class LevelTimer {

@@ -520,6 +520,7 @@ void RenderScheduler::runUnit(Work &work) {
     h.encodeMs = Ms(Clock::now() - t1).count();
     h.final = work.final;
     h.camera = job.cameraJson;
+    h.limited = level.limited;
 
     Deliver deliver;
     std::shared_ptr<const CalibrationView> calibration;

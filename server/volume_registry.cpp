@@ -83,9 +83,11 @@ protocol::VolumeInfo VolumeEntry::info() const {
     // Built-ins are phantoms with transfer functions of their own (session_scene.cpp).
     if (!name.starts_with(kBuiltinPrefix)) {
         const ModalityChoice choice = chooseModality(v, name);
-        protocol::ModalityInfo m{choice.modality, choice.source, choice.reason, choice.defaultPreset, {}};
+        protocol::ModalityInfo m{choice.modality, choice.source, choice.reason, choice.defaultPreset, {}, {}, false};
         for (const ResolvedPreset &p : presetsFor(v, choice))
-            m.presets.push_back({p.name, p.label, p.window, p.level, p.points, p.shading});
+            m.presets.push_back({p.name, p.label, p.window, p.level, p.points, p.shading, p.modality});
+        m.modalities = modalitiesFor(choice);
+        m.hounsfield = choice.hounsfield;
         i.modality = std::move(m);
     }
     return i;

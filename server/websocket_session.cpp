@@ -43,6 +43,15 @@ std::chrono::steady_clock::duration milliseconds(double ms) {
 }
 
 std::string mib(double bytes) { return fmt::format("{:.0f} MiB", bytes / double(1 << 20)); }
+
+// The levels a view of `size` renders: an explicit policy's one level (admission refuses it
+// over a limit), or the automatic ladder lowered to fit the limits (quality_ladder.hpp).
+std::vector<Level> ladderOf(const SessionScene &scene, const ServerConfig &config, const Volume *volume, ImageSize size) {
+    const Quality &q = scene.scene().quality;
+    if (scene.policy().mode == protocol::QualityMode::Explicit) return explicitLadder(q, config.jitterPasses);
+    return fitToLimits(automaticLadder(q, config.jitterPasses), volume, size.width, size.height,
+                       {double(config.maxSamplesPerFrame), double(config.maxRequestBytes)});
+}
 } // namespace
 
 template <class F>
@@ -391,12 +400,8 @@ void WebsocketSession::onOpened(nlohmann::json id, VolumeRegistry::Result result
 
 void WebsocketSession::admit(const SessionScene &candidate, ImageSize size, bool still) const {
     const ServerConfig &config = state_->config();
-    const Scene &scene = candidate.scene();
     const int width = size.width, height = size.height;
-    const int passes = config.jitterPasses;
-    const std::vector<Level> ladder = candidate.policy().mode == protocol::QualityMode::Explicit
-                                          ? explicitLadder(scene.quality, passes)
-                                          : automaticLadder(scene.quality, passes);
+    const std::vector<Level> ladder = ladderOf(candidate, config, volume_ ? volume_->volume.get() : nullptr, size);
     const int64_t pixels = int64_t(width) * height;
     if (still && pixels > config.maxStillPixels)
         throw AdmissionError(fmt::format("a still of {}x{} is {} pixels, over the server's limit of {} "
@@ -407,8 +412,7 @@ void WebsocketSession::admit(const SessionScene &candidate, ImageSize size, bool
     for (size_t i = first; i < ladder.size(); ++i) {
         const Level &level = ladder[i];
         const double scale = level.quality.imageScale;
-        // The float RGBA image of each jittered pass (a conservative bound of what one view holds).
-        const double bytes = double(width) * height * scale * scale * 16.0 * level.passes;
+        const double bytes = requestBytes(level, width, height);
         if (bytes > double(config.maxRequestBytes))
             throw AdmissionError(fmt::format("a frame of {}x{} at image scale {} with {} pass(es) needs {} of image "
                                              "buffers (width x height x 16 bytes x passes), over the server's limit "
@@ -446,9 +450,7 @@ void WebsocketSession::submitView(const nlohmann::json &requestId, std::optional
     admit(scene_, size, job->stillOnly);
     job->clipPlanes = scene.clipPlanes;
     const auto &policy = scene_.policy();
-    const int passes = state_->config().jitterPasses;
-    job->ladder = policy.mode == protocol::QualityMode::Explicit ? explicitLadder(scene.quality, passes)
-                                                                 : automaticLadder(scene.quality, passes);
+    job->ladder = ladderOf(scene_, state_->config(), volume_->volume.get(), size);
     job->targetFrameMs = scene_.policySent() ? policy.targetFrameMs : state_->config().defaultTargetFrameMs;
     job->request = requestId;
     state_->scheduler().submit(slot_, std::move(job));

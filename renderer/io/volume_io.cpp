@@ -1447,6 +1447,9 @@ std::string headerText(const itk::MetaDataDictionary &dict, const std::string &k
     return {};
 }
 
+// Longest modality statement kept (a description is cut there): what the checker hands back.
+constexpr size_t kMaxStatedModalityBytes = 64;
+
 // Whether the header names the patient space and which modality it states (see Volume).
 // DICOM: image orientation (0020,0037) and modality (0008,0060). NRRD: a `space` field
 // (ITK keeps it as NRRD_space). NIfTI: a qform or sform code other than 0 (unknown). A
@@ -1455,12 +1458,30 @@ std::string headerText(const itk::MetaDataDictionary &dict, const std::string &k
 void readPatientSpace(const itk::ImageIOBase &io, Volume &v) {
     const itk::MetaDataDictionary &dict = io.GetMetaDataDictionary();
     const std::string ioName = io.GetNameOfClass();
+    // The modality statement, fit for a sentence and the checker's hand-back: printable, short.
+    const auto state = [&](const std::string &text, const char *field) {
+        std::string said;
+        for (char c : text)
+            if (c >= 0x20 && c < 0x7f && said.size() < kMaxStatedModalityBytes) said += c;
+        while (!said.empty() && said.back() == ' ') said.pop_back();
+        if (said.empty() || !v.modality.empty()) return;
+        v.modality = said;
+        v.modalityField = field;
+    };
     if (ioName == "GDCMImageIO") {
         v.orientationKnown = !headerText(dict, "0020|0037").empty();
-        v.modality = headerText(dict, "0008|0060");
+        state(headerText(dict, "0008|0060"), "DICOM");
     } else if (ioName == "NrrdImageIO") {
         v.orientationKnown = !headerText(dict, "NRRD_space").empty();
+        // A key-value pair `modality:=CT` (any case of the key) states it; else the `content`
+        // field (ITK keeps it as NRRD_content) may name it in words.
+        for (const std::string &key : dict.GetKeys())
+            if (lower(key) == "modality") state(headerText(dict, key), "NRRD key");
+        state(headerText(dict, "NRRD_content"), "NRRD content");
     } else if (ioName == "NiftiImageIO") {
+        // NIfTI's 80-byte description; ITK 5.2 keeps it as ITK_FileNotes (later versions also as descrip).
+        state(headerText(dict, "descrip"), "NIfTI descrip");
+        state(headerText(dict, "ITK_FileNotes"), "NIfTI descrip");
         const auto coded = [&](const char *code, const char *name) {
             const std::string n = headerText(dict, name);
             if (!n.empty()) return n.find("UNKNOWN") == std::string::npos;
@@ -1580,7 +1601,7 @@ std::string quotableTask(std::string_view text) {
 // so every field is checked and the statistics are computed again.
 struct CheckedHeader {
     char magic[16] = "volcast-checked";
-    uint32_t version = 1;
+    uint32_t version = 2;
     int32_t sourceType = 0;
     int64_t dims[3] = {0, 0, 0};
     double spacing[3] = {1, 1, 1};
@@ -1591,6 +1612,7 @@ struct CheckedHeader {
     uint64_t nonFiniteReplaced = 0;
     uint32_t orientationKnown = 0;
     uint32_t modalityBytes = 0;
+    uint32_t modalityFieldBytes = 0;
 };
 constexpr uint32_t kMaxCheckedModalityBytes = 64;
 
@@ -1609,6 +1631,8 @@ void writeCheckedVolume(const Volume &v, const fs::path &to) {
     h.orientationKnown = v.orientationKnown ? 1 : 0;
     const std::string modality = v.modality.substr(0, kMaxCheckedModalityBytes);
     h.modalityBytes = uint32_t(modality.size());
+    const std::string modalityField = v.modalityField.substr(0, kMaxCheckedModalityBytes);
+    h.modalityFieldBytes = uint32_t(modalityField.size());
     // O_NOFOLLOW and no O_CREAT: the caller made the file, and only that file is written.
     const int fd = ::open(to.c_str(), O_WRONLY | O_TRUNC | O_NOFOLLOW | O_CLOEXEC);
     if (fd < 0) throw std::runtime_error("cannot open the result file: " + std::string(std::strerror(errno)));
@@ -1627,6 +1651,7 @@ void writeCheckedVolume(const Volume &v, const fs::path &to) {
     };
     put(&h, sizeof h);
     put(modality.data(), modality.size());
+    put(modalityField.data(), modalityField.size());
     if (v.narrow.bytes == 4) put(v.voxels.data(), v.voxels.size() * sizeof(float));
     else put(v.narrowVoxels.data(), v.voxelCount() * size_t(v.narrow.bytes));
     ::close(fd);
@@ -1639,11 +1664,13 @@ Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadO
     std::ifstream in(from, std::ios::binary);
     CheckedHeader h;
     if (!in.read(reinterpret_cast<char *>(&h), sizeof h)) return damaged("short header");
-    if (std::memcmp(h.magic, CheckedHeader{}.magic, sizeof h.magic) != 0 || h.version != 1)
+    if (std::memcmp(h.magic, CheckedHeader{}.magic, sizeof h.magic) != 0 || h.version != CheckedHeader{}.version)
         return damaged("not a result of this version");
     if (h.sourceType < 0 || h.sourceType > int32_t(VoxelType::Float64)) return damaged("voxel type");
     if (h.narrowBytes != 1 && h.narrowBytes != 2 && h.narrowBytes != 4) return damaged("sample width");
-    if (h.modalityBytes > kMaxCheckedModalityBytes || !std::isfinite(h.narrowOffset)) return damaged("modality");
+    if (h.modalityBytes > kMaxCheckedModalityBytes || h.modalityFieldBytes > kMaxCheckedModalityBytes ||
+        !std::isfinite(h.narrowOffset))
+        return damaged("modality");
     Volume v;
     for (int a = 0; a < 3; ++a) {
         if (h.dims[a] < 1 || h.dims[a] > options.maxDimension) return damaged("dimensions");
@@ -1661,7 +1688,9 @@ Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadO
     v.modality.resize(h.modalityBytes);
     if (!in.read(v.modality.data(), std::streamsize(h.modalityBytes))) return damaged("short modality");
     const uint64_t sampleBytes = uint64_t(v.voxelCount()) * uint64_t(h.narrowBytes);
-    const uint64_t expected = sizeof h + h.modalityBytes + sampleBytes;
+    const uint64_t expected = sizeof h + h.modalityBytes + h.modalityFieldBytes + sampleBytes;
+    v.modalityField.resize(h.modalityFieldBytes);
+    if (!in.read(v.modalityField.data(), std::streamsize(h.modalityFieldBytes))) return damaged("short modality");
     if (fileSize(from).value_or(0) != expected) return damaged("its size is not what its header says");
     if (h.narrowBytes == 4) {
         v.voxels.resize(v.voxelCount());

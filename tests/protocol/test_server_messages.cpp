@@ -28,7 +28,8 @@ VolumeInfo loadedVolume() {
     v.orientationKnown = false;
     v.modality = ModalityInfo{"micro-CT", "inferred", "uint8 values with no Hounsfield air", "micro_ct.default",
                               {PresetInfo{"micro_ct.default", "Micro-CT", 160, 130,
-                                          {{{50, 0, 0, 0, 0}, {210, 1, 1, 1, 0.8}}}, true}}};
+                                          {{{50, 0, 0, 0, 0}, {210, 1, 1, 1, 0.8}}}, true, "micro-CT"}},
+                              {"micro-CT", "CT", "MR"}, false};
     return v;
 }
 

@@ -26,6 +26,7 @@
 #include <iostream>
 #include <map>
 #include <random>
+#include <set>
 #include <string>
 
 namespace volcast {
@@ -350,8 +351,157 @@ TEST(ModalityPresets, GreyValuePresetsSitOnTheRobustRangeAboveTheBackground) {
 TEST(ModalityPresets, TheNameMayAskForAngiography) {
     const Volume v = synthetic(VoxelType::UInt8, {0, 0, 0, 10, 100, 200, 255});
     const ModalityChoice c = chooseModality(v, "head_cta.nrrd");
-    EXPECT_EQ(c.defaultPreset, "micro_ct.vessels") << c.reason;
+    EXPECT_EQ(c.modality, "CT") << c.reason;
+    EXPECT_FALSE(c.hounsfield) << "8-bit values are grey values";
+    EXPECT_EQ(c.defaultPreset, "ct.angiography") << c.reason;
     EXPECT_NE(c.reason.find("'cta'"), std::string::npos) << c.reason;
+    const Volume unnamed = synthetic(VoxelType::UInt8, {0, 0, 0, 10, 100, 200, 255});
+    EXPECT_EQ(chooseModality(unnamed, "head_aneurysm.nrrd").defaultPreset, "micro_ct.vessels")
+        << "angiography without a modality word: the grey-value vessels preset";
+}
+
+// Points of a preset as a transfer function (what the client sends).
+TransferFunction curveOf(const ResolvedPreset &p) {
+    TransferFunction tf;
+    for (const auto &q : p.points) tf.points.push_back({q[0], q[1], q[2], q[3], q[4]});
+    return tf;
+}
+
+TEST(ModalityPresets, EveryPresetOfEveryModalityIsResolvedTheDefaultFirst) {
+    std::vector<float> values(1000, -1000.f);
+    for (size_t i = 0; i < 500; ++i) values[i] = float(i % 2 ? 40 : 1000);
+    const Volume ct = synthetic(VoxelType::Int16, values);
+    const ModalityChoice c = chooseModality(ct, "head");
+    ASSERT_TRUE(c.hounsfield) << c.reason;
+    const auto presets = presetsFor(ct, c);
+    const std::vector<std::string> all = {"ct.bone",     "ct.soft_tissue", "ct.lung",         "ct.angiography",
+                                          "mr.t1_brain", "mr.t2_brain",    "mr.angiography",  "micro_ct.default",
+                                          "micro_ct.vessels"};
+    std::set<std::string> names;
+    for (const auto &p : presets) names.insert(p.name);
+    EXPECT_EQ(names, std::set<std::string>(all.begin(), all.end())) << "every preset, whatever the modality";
+    EXPECT_EQ(presets.size(), all.size()) << "each once";
+    EXPECT_EQ(presets.front().name, c.defaultPreset);
+    EXPECT_EQ(modalitiesFor(c), (std::vector<std::string>{"CT", "MR", "micro-CT"}));
+    // Grouped by modality, the chosen one first, each modality's default first of its own.
+    std::vector<std::string> order;
+    for (const auto &p : presets) {
+        EXPECT_FALSE(p.modality.empty()) << p.name;
+        if (order.empty() || order.back() != p.modality) order.push_back(p.modality);
+    }
+    EXPECT_EQ(order, modalitiesFor(c)) << "one block per modality";
+    // The MR presets of a CT sit on its robust range (grey values), the CT ones in HU.
+    for (const auto &p : presets) {
+        EXPECT_NO_THROW(curveOf(p).validate()) << p.name;
+        if (p.modality == "CT") {
+            EXPECT_EQ(p.label.find("grey"), std::string::npos) << p.label;
+        }
+    }
+
+    // An MR volume lists MR first and still reaches the CT presets, in its grey values.
+    const Volume mr = synthetic(VoxelType::UInt8, {0, 0, 0, 30, 60, 90, 120, 150});
+    const ModalityChoice m = chooseModality(mr, "subject_t2.nii");
+    EXPECT_EQ(m.modality, "MR");
+    EXPECT_EQ(modalitiesFor(m), (std::vector<std::string>{"MR", "CT", "micro-CT"}));
+    const auto mrPresets = presetsFor(mr, m);
+    EXPECT_EQ(mrPresets.size(), all.size());
+    EXPECT_EQ(mrPresets.front().modality, "MR");
+    for (const auto &p : mrPresets) {
+        if (p.modality == "CT") {
+            EXPECT_NE(p.label.find("grey values"), std::string::npos) << p.label;
+        }
+    }
+}
+
+TEST(ModalityPresets, GreyValueCtGetsTheCtWindowsOnItsRobustRange) {
+    // 8-bit CT: background zeros, tissue 1 … 250. The robust range maps onto −1000 … +1000 HU
+    // (presets.hpp), so each CT window lands at a closed-form place.
+    std::vector<float> values(20000, 0.f);
+    for (size_t i = 0; i < 10000; ++i) values[i] = float(1 + i % 250);
+    const Volume v = synthetic(VoxelType::UInt8, values);
+    const ModalityChoice c = chooseModality(v, "chest_ct.nrrd");
+    EXPECT_EQ(c.modality, "CT") << c.reason;
+    EXPECT_FALSE(c.hounsfield);
+    EXPECT_EQ(c.defaultPreset, "ct.bone");
+    const ValueRange r = robustRange(v);
+    const double span = double(r.max) - double(r.min);
+    std::map<std::string, ResolvedPreset> byName;
+    for (const auto &p : presetsFor(v, c)) byName[p.name] = p;
+    const std::map<std::string, std::pair<double, double>> windows = {
+        {"ct.bone", {2000, 400}}, {"ct.soft_tissue", {400, 40}}, {"ct.lung", {1500, -600}}, {"ct.angiography", {600, 300}}};
+    for (const auto &[name, wl] : windows) {
+        const ResolvedPreset &p = byName.at(name);
+        // Doubles of one linear map: equal to rounding (1e-9 relative).
+        EXPECT_NEAR(p.window, wl.first / 2000 * span, 1e-9 * span) << name;
+        EXPECT_NEAR(p.level, r.min + (wl.second + 1000) / 2000 * span, 1e-9 * span) << name;
+        EXPECT_NE(p.label.find("grey values"), std::string::npos) << p.label;
+        EXPECT_EQ(curveOf(p).evaluate(0).a, 0) << name << ": the background (air) is never visible";
+    }
+}
+
+// An NRRD header over 8³ int16 zeros but for a bright cube, with `extra` header lines.
+fs::path writeNrrd(const fs::path &dir, const std::string &name, const std::string &extra) {
+    std::vector<int16_t> values(8 * 8 * 8, 0);
+    for (size_t i = 0; i < values.size(); i += 3) values[i] = 200;
+    std::ofstream(dir / (name + ".raw"), std::ios::binary)
+        .write(reinterpret_cast<const char *>(values.data()), std::streamsize(values.size() * 2));
+    std::ofstream(dir / (name + ".nhdr")) << "NRRD0004\ntype: int16\ndimension: 3\nsizes: 8 8 8\n"
+                                             "spacings: 1 1 1\nendian: little\nencoding: raw\n"
+                                          << extra << "data file: " << name << ".raw\n\n";
+    return dir / (name + ".nhdr");
+}
+
+TEST(ModalityPresets, TheFileStatesTheModalityBeforeAnyGuess) {
+    TempDir dir;
+    // The names say nothing or the opposite: the header wins.
+    const Volume keyed = loadVolume(writeNrrd(dir.path, "scan_ct", "modality:=MR\n"));
+    EXPECT_EQ(keyed.modality, "MR");
+    EXPECT_EQ(keyed.modalityField, "NRRD key");
+    ModalityChoice c = chooseModality(keyed, "scan_ct.nhdr");
+    EXPECT_EQ(c.modality, "MR") << c.reason;
+    EXPECT_EQ(c.source, "file");
+    EXPECT_NE(c.reason.find("NRRD"), std::string::npos) << c.reason;
+
+    const Volume content = loadVolume(writeNrrd(dir.path, "scan_mr", "content: CT angiography of the head\n"));
+    EXPECT_EQ(content.modalityField, "NRRD content");
+    c = chooseModality(content, "scan_mr.nhdr");
+    EXPECT_EQ(c.modality, "CT") << c.reason;
+    EXPECT_EQ(c.source, "file");
+    EXPECT_FALSE(c.hounsfield) << "no air near -1000: grey values";
+    EXPECT_EQ(c.defaultPreset, "ct.angiography") << c.reason;
+    EXPECT_NE(c.reason.find("content"), std::string::npos) << c.reason;
+
+    // A description naming no modality leaves the choice to the name and statistics.
+    const Volume vague = loadVolume(writeNrrd(dir.path, "plain", "content: volume 3\n"));
+    EXPECT_EQ(chooseModality(vague, "plain.nhdr").source, "inferred");
+
+    // NIfTI: the 80-byte `descrip` at byte 148 of the header (NIfTI-1).
+    const Volume v = patientVolume(Mat3d::identity());
+    saveVolume(v, dir.path / "a.nii", {VoxelType::Int16, false});
+    {
+        std::fstream f(dir.path / "a.nii", std::ios::in | std::ios::out | std::ios::binary);
+        char descrip[80] = {};
+        std::snprintf(descrip, sizeof descrip, "T1 MPRAGE sagittal");
+        f.seekp(148);
+        f.write(descrip, sizeof descrip);
+    }
+    const Volume nifti = loadVolume(dir.path / "a.nii");
+    EXPECT_EQ(nifti.modalityField, "NIfTI descrip");
+    EXPECT_EQ(nifti.modality, "T1 MPRAGE sagittal");
+    c = chooseModality(nifti, "a.nii");
+    EXPECT_EQ(c.modality, "MR") << c.reason;
+    EXPECT_EQ(c.source, "file");
+}
+
+TEST(ModalityPresets, TheModalityTravelsThroughTheParserProcess) {
+    // A file parsed in the separate checker process hands its modality statement back.
+    TempDir dir;
+    const fs::path file = writeNrrd(dir.path, "checked", "content: MRI of the knee\n");
+    LoadOptions options;
+    options.parseInChild = true;
+    const Volume checked = loadVolume(file, options);
+    EXPECT_EQ(checked.modality, "MRI of the knee");
+    EXPECT_EQ(checked.modalityField, "NRRD content");
 }
 
 // The 13 scans of the shared data folder (MANIFEST.md): what each is and what it should
@@ -361,11 +511,11 @@ TEST(ModalityPresets, TheSharedScansOpenOnTheirModalitysPreset) {
     if (!dataDir || !fs::is_directory(dataDir)) GTEST_SKIP() << "VOLCAST_DATA_DIR is not set to the scans' folder";
     const std::map<std::string, std::pair<std::string, std::string>> expected = {
         {"cranium_ct.nhdr", {"CT", "ct.bone"}},               // int16 HU, air at -1024
-        {"headsq.nhdr", {"micro-CT", "micro_ct.default"}},    // int16 from 0: not HU
-        {"lidc2_chest_ct.nhdr", {"micro-CT", "micro_ct.default"}},   // 8-bit windowed CT
+        {"headsq.nhdr", {"micro-CT", "micro_ct.default"}},    // int16 from 0: not HU, the name says nothing
+        {"lidc2_chest_ct.nhdr", {"CT", "ct.bone"}},           // 8-bit windowed CT: CT presets in grey values
         {"aneurism.nhdr", {"micro-CT", "micro_ct.vessels"}},  // rotational angiography, 8-bit
-        {"avm_cta.nhdr", {"micro-CT", "micro_ct.vessels"}},   // 8-bit CT angiography
-        {"stent_ct.nhdr", {"micro-CT", "micro_ct.default"}},
+        {"avm_cta.nhdr", {"CT", "ct.angiography"}},           // 8-bit CT angiography
+        {"stent_ct.nhdr", {"CT", "ct.bone"}},                 // int16 0 … 2000, not HU
         {"bonsai.nhdr", {"micro-CT", "micro_ct.default"}},
         {"engine.nhdr", {"micro-CT", "micro_ct.default"}},
         {"tooth.nhdr", {"micro-CT", "micro_ct.default"}},
@@ -383,12 +533,36 @@ TEST(ModalityPresets, TheSharedScansOpenOnTheirModalitysPreset) {
         EXPECT_EQ(c.defaultPreset, want.second) << file << ": " << c.reason;
         const auto presets = presetsFor(v, c);
         ASSERT_FALSE(presets.empty()) << file;
-        for (const auto &p : presets) {
-            TransferFunction tf;
-            for (const auto &q : p.points) tf.points.push_back({q[0], q[1], q[2], q[3], q[4]});
-            EXPECT_NO_THROW(tf.validate()) << file << " " << p.name;
-        }
+        for (const auto &p : presets) EXPECT_NO_THROW(curveOf(p).validate()) << file << " " << p.name;
     }
+}
+
+TEST(ModalityPresets, TheLungPresetShowsTheLungsOfTheEightBitChestCt) {
+    // lidc2_chest_ct (MANIFEST.md): air is 0, the lungs the histogram's peak between 1 and 60,
+    // soft tissue its peak between 100 and 160. The lung preset makes the lungs visible and
+    // leaves air and soft tissue clear.
+    const char *dataDir = std::getenv("VOLCAST_DATA_DIR");
+    if (!dataDir || !fs::is_directory(dataDir)) GTEST_SKIP() << "VOLCAST_DATA_DIR is not set to the scans' folder";
+    const Volume v = loadVolume(fs::path(dataDir) / "lidc2_chest_ct.nhdr");
+    const ModalityChoice c = chooseModality(v, "lidc2_chest_ct.nhdr");
+    ASSERT_EQ(c.modality, "CT") << c.reason;
+    const auto peak = [&](int lo, int hi) {   // bins are one grey value wide (range 0 … 255)
+        int best = lo;
+        for (int i = lo; i <= hi; ++i)
+            if (v.histogram.counts[size_t(i)] > v.histogram.counts[size_t(best)]) best = i;
+        return double(best);
+    };
+    const double lung = peak(1, 60), soft = peak(100, 160);
+    ResolvedPreset lungPreset;
+    for (const auto &p : presetsFor(v, c))
+        if (p.name == "ct.lung") lungPreset = p;
+    ASSERT_FALSE(lungPreset.points.empty());
+    const TransferFunction tf = curveOf(lungPreset);
+    std::cout << "lung peak " << lung << ", soft-tissue peak " << soft << ", lung window " << lungPreset.window
+              << " / " << lungPreset.level << "\n";
+    EXPECT_GT(tf.evaluate(lung).a, 0.02) << "the lungs are visible";
+    EXPECT_EQ(tf.evaluate(0).a, 0) << "air is clear";
+    EXPECT_EQ(tf.evaluate(soft).a, 0) << "soft tissue is clear";
 }
 
 } // namespace

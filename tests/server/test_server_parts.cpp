@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 namespace {
@@ -167,6 +168,78 @@ TEST(QualityLadder, PredictedSamplesFollowWhatTheRendererTakesAtEveryMipLevel) {
         // really cross; their ratios between levels must agree. 5 %: the rays' entry points
         // on a coarser level's box differ by up to half a coarse voxel over ~70 samples.
         EXPECT_NEAR(predicted(mip) / predicted(0), taken(mip) / taken(0), 0.05) << "mip level " << mip;
+    }
+}
+
+// The automatic policy within the server's limits: every level of a 3840×2160 view of a
+// 256² × 133 volume (the 8-bit chest CT's size) fits --max-samples-per-frame and
+// --max-request-mib, lowered by image scale first, then step; a level that fits is untouched.
+TEST(QualityLadder, TheAutomaticLadderIsFittedWithinTheLimitsImageScaleFirst) {
+    Volume v;
+    v.dims = {256, 256, 133};
+    Quality f;
+    f.step = 0.5;
+    f.shading = true;
+    f.jitter = true;
+    const int w = 3840, h = 2160;
+    const AdmissionLimits limits{double(int64_t(1) << 32), double(uint64_t(1) << 30)};
+    const auto ladder = automaticLadder(f, 4);
+    const auto fitted = fitToLimits(ladder, &v, w, h, limits);
+    ASSERT_FALSE(fitted.empty());
+    const auto fits = [&](const Level &l) {
+        return predictedSamples(v, l.quality, w, h) <= limits.maxSamplesPerFrame &&
+               requestBytes(l, w, h) <= limits.maxRequestBytes;
+    };
+    for (const Level &l : fitted) EXPECT_TRUE(fits(l)) << qualityToJson(l.quality).dump() << " " << l.limited;
+    // The final level: 8.3 M rays × 385 voxels / 0.5 × 3 (shading) = 1.9e10 samples, 4.4× the
+    // 2^32 limit: scale √(1/4.4) = 0.47 at the same step, in hundredths below.
+    const Level &last = fitted.back();
+    const double over = predictedSamples(v, f, w, h) / limits.maxSamplesPerFrame;
+    EXPECT_NEAR(last.quality.imageScale, std::floor(100 / std::sqrt(over)) / 100, 1e-12);
+    EXPECT_EQ(last.quality.step, f.step) << "the image scale alone sufficed: the step is kept";
+    EXPECT_EQ(last.passes, 4);
+    EXPECT_NE(last.limited.find("image scale 0.47"), std::string::npos) << last.limited;
+    EXPECT_NE(last.limited.find("per-frame limit"), std::string::npos) << last.limited;
+    // Levels that fitted as they were are unchanged and say nothing.
+    for (const Level &l : ladder)
+        if (fits(l)) {
+            bool kept = false;
+            for (const Level &g : fitted) kept = kept || (g.quality == l.quality && g.limited.empty());
+            EXPECT_TRUE(kept) << qualityToJson(l.quality).dump();
+        }
+    // No two levels are the same.
+    for (size_t i = 0; i < fitted.size(); ++i)
+        for (size_t j = i + 1; j < fitted.size(); ++j)
+            EXPECT_FALSE(fitted[i].quality == fitted[j].quality && fitted[i].passes == fitted[j].passes) << i << " " << j;
+
+    // A limit 20× tighter: a quarter scale is not enough (it would need 0.10), so the step
+    // doubles (with the mip level it allows) until the samples fit, at scale 0.25: ×5.7 more
+    // than at 0.10, so step 0.5 × 8.
+    const AdmissionLimits tight{limits.maxSamplesPerFrame / 20, limits.maxRequestBytes};
+    const Level coarse = fitToLimits(ladder, &v, w, h, tight).back();
+    EXPECT_EQ(coarse.quality.imageScale, kMinFittedImageScale);
+    EXPECT_EQ(coarse.quality.step, 8 * f.step);
+    EXPECT_EQ(coarse.quality.mipLevel, 2);
+    EXPECT_LE(predictedSamples(v, coarse.quality, w, h), tight.maxSamplesPerFrame);
+    EXPECT_GT(predictedSamples(v, [&] { Quality q = coarse.quality; q.step /= 2; return q; }(), w, h),
+              tight.maxSamplesPerFrame) << "the step is the finest that fits (doubling from the final's)";
+    EXPECT_GE(coarse.quality.step, double(1 << coarse.quality.mipLevel)) << "a mip level only with a step that allows it";
+    EXPECT_NE(coarse.limited.find("step"), std::string::npos) << coarse.limited;
+
+    // Image memory alone (no volume open yet): 3840×2160 × 16 B × 4 passes = 506 MiB over a
+    // 128 MiB limit: scale √(128/506) = 0.50 → 0.5 at most.
+    const AdmissionLimits memory{limits.maxSamplesPerFrame, double(128 << 20)};
+    const Level small = fitToLimits(ladder, nullptr, w, h, memory).back();
+    EXPECT_LE(requestBytes(small, w, h), memory.maxRequestBytes);
+    EXPECT_GT(small.quality.imageScale, 0.49);
+    EXPECT_NE(small.limited.find("image-memory limit"), std::string::npos) << small.limited;
+
+    // A view within the limits is not touched at all.
+    const auto inside = fitToLimits(ladder, &v, 512, 512, limits);
+    ASSERT_EQ(inside.size(), ladder.size());
+    for (size_t i = 0; i < inside.size(); ++i) {
+        EXPECT_TRUE(inside[i].quality == ladder[i].quality);
+        EXPECT_TRUE(inside[i].limited.empty());
     }
 }
 

@@ -13,7 +13,9 @@
 #include <boost/beast/websocket.hpp>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -226,6 +228,10 @@ TEST(WsHardening, UnboundedRequestsAreRefusedNamingTheLimitWhileOthersRender) {
     auto b = openDemo(server->port(), 64);
     ASSERT_TRUE(finalFrameOf(*b, 3, kTimeout));
     ASSERT_TRUE(finalFrameOf(*a, 3, kTimeout));
+    // Explicit quality is refused over a limit (the automatic policy is lowered to fit it
+    // instead: TheAutomaticPolicyRendersAnyWindowWithinTheLimits).
+    a->sendText(json{{"type", "quality_policy"}, {"id", 9}, {"mode", "explicit"}, {"quality", {{"step", 1}}}}.dump());
+    ASSERT_TRUE(finalFrameOf(*a, 9, kTimeout));
     const json before = json::parse(request(*a, {{"type", "get_state"}, {"id", 10}}).text);
 
     // The kind of request, an absurd step: 0.0002 on the demo (diagonal 222 voxels)
@@ -236,10 +242,6 @@ TEST(WsHardening, UnboundedRequestsAreRefusedNamingTheLimitWhileOthersRender) {
     const auto e1 = errorFor(*a, tiny);
     EXPECT_EQ(protocol::errorCodeName(e1.code), "too_large") << e1.message;
     EXPECT_NE(e1.message.find("--max-samples-per-frame"), std::string::npos) << e1.message;
-    // The automatic policy's final quality is judged too.
-    const auto e2 = errorFor(*a, {{"type", "quality_policy"}, {"id", 12}, {"mode", "automatic"},
-                                  {"quality", {{"step", 0.0002}}}});
-    EXPECT_NE(e2.message.find("--max-samples-per-frame"), std::string::npos) << e2.message;
     const auto e3 = errorFor(*a, {{"type", "still"}, {"id", 13}, {"image", {{"width", 8192}, {"height", 8192}}}});
     EXPECT_EQ(protocol::errorCodeName(e3.code), "too_large") << e3.message;
     EXPECT_NE(e3.message.find("--max-still-pixels"), std::string::npos) << e3.message;
@@ -272,6 +274,53 @@ TEST(WsHardening, UnboundedRequestsAreRefusedNamingTheLimitWhileOthersRender) {
     EXPECT_EQ(h.at("limits").at("max_samples_per_frame"), server->state().config().maxSamplesPerFrame);
     EXPECT_EQ(h.at("limits").at("max_still_pixels"), server->state().config().maxStillPixels);
     EXPECT_EQ(h.at("limits").at("max_request_bytes"), 32 << 20);
+}
+
+// The automatic policy never meets a refusal: each level is lowered (image scale, then step)
+// until it fits --max-samples-per-frame and --max-request-mib, and every frame of such a
+// level says so in its header. A 3840×2160 viewport gets its final frame.
+TEST(WsHardening, TheAutomaticPolicyRendersAnyWindowWithinTheLimits) {
+    volcast::server::ServerConfig config;
+    config.maxSamplesPerFrame = int64_t(1) << 28;   // 2.7e8: the demo (diagonal 222 voxels) at
+    config.maxRequestBytes = 64 << 20;              // 3840×2160, step 0.5, predicts 3.7e9
+    auto server = startServer(config);
+    auto a = openDemo(server->port(), 64);
+    ASSERT_TRUE(finalFrameOf(*a, 3, kTimeout));
+    a->sendText(json{{"type", "viewport"}, {"id", 4}, {"image", {{"width", 3840}, {"height", 2160}}}}.dump());
+    a->sendText(json{{"type", "quality_policy"}, {"id", 5}, {"mode", "automatic"}, {"quality", {{"step", 0.5}}}}.dump());
+    const auto deadline = Clock::now() + 60s;
+    std::optional<protocol::FrameHeader> final;
+    int limitedFrames = 0;
+    while (Clock::now() < deadline && !final) {
+        auto m = a->next(50ms);
+        if (!m) continue;
+        if (const auto *e = asError(*m)) {
+            ADD_FAILURE() << "refused: " << e->message;
+            break;
+        }
+        if (!m->isFrame || m->frame.header.request != json(5)) continue;
+        const auto &h = m->frame.header;
+        // Every frame stays within both limits, as the server predicts them (quality_ladder.hpp).
+        const double scale = h.quality.at("image_scale").get<double>(), step = h.quality.at("step").get<double>();
+        const double rays = 3840.0 * 2160.0 * scale * scale;
+        const double samples = rays * std::sqrt(3.0 * 128 * 128) / step * (h.quality.at("shading").get<bool>() ? 3 : 1);
+        EXPECT_LE(samples, double(config.maxSamplesPerFrame)) << h.quality.dump();
+        const double passes = h.final && h.quality.value("jitter", false) ? config.jitterPasses : 1;
+        EXPECT_LE(rays * 16.0 * passes, double(config.maxRequestBytes)) << h.quality.dump();
+        if (!h.limited.empty()) {
+            ++limitedFrames;
+            EXPECT_NE(h.limited.find("to stay within the server's"), std::string::npos) << h.limited;
+        }
+        if (h.final) final = h;
+    }
+    ASSERT_TRUE(final.has_value()) << "no final frame of the 3840x2160 view";
+    EXPECT_LT(final->quality.at("image_scale").get<double>(), 1);
+    EXPECT_NE(final->limited.find("image scale"), std::string::npos) << final->limited;
+    EXPECT_GT(limitedFrames, 0);
+    // The same view with explicit quality is refused, naming the limit.
+    const auto e = errorFor(*a, {{"type", "quality_policy"}, {"id", 6}, {"mode", "explicit"}, {"quality", {{"step", 0.5}}}});
+    EXPECT_EQ(protocol::errorCodeName(e.code), "too_large") << e.message;
+    EXPECT_NE(e.message.find("--max-"), std::string::npos) << e.message;
 }
 
 // ---- slow readers ------------------------------------------------------------------------
