@@ -99,7 +99,7 @@ std::optional<ProtocolError> DicomWebProvider::check(const std::string &name) co
     return std::nullopt;
 }
 
-fs::path DicomWebProvider::fetch(const std::string &name, const FetchContext &context) {
+FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContext &context) {
     const auto series = std::get<DicomWebSeriesName>(parseDicomWebName(name));   // check() passed
     const std::string key = series.source + "/" + series.studyUid + "/" + series.seriesUid;
     {
@@ -107,7 +107,7 @@ fs::path DicomWebProvider::fetch(const std::string &name, const FetchContext &co
         if (auto it = cache_.find(key); it != cache_.end()) {
             it->second.lastUse = ++useClock_;
             spdlog::debug("{}: retrieved before, loaded from the cache", name);
-            return it->second.folder;
+            return {it->second.folder};
         }
     }
     const dicomweb::SourceConfig &config = *source(series.source);
@@ -168,7 +168,7 @@ fs::path DicomWebProvider::fetch(const std::string &name, const FetchContext &co
         }
         spdlog::info("{}: retrieved {} instances, {} MiB in {:.2f} s", name, got.instancesDone, bytes >> 20,
                      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
-        return folder;
+        return {folder};
     } catch (const dicomweb::DicomWebError &e) {
         if (e.kind == dicomweb::ErrorKind::Cancelled && context.stopRequested())
             throw VolumeFetchError(ErrorCode::Busy, name + ": the server is shutting down");

@@ -51,7 +51,7 @@ class DicomWebProvider final : public VolumeProvider {
 
     std::string_view prefix() const override { return kDicomWebPrefix; }
     std::optional<protocol::ProtocolError> check(const std::string &name) const override;
-    std::filesystem::path fetch(const std::string &name, const FetchContext &context) override;
+    FetchedVolume fetch(const std::string &name, const FetchContext &context) override;
 
     std::vector<protocol::SourceInfo> sources() const;
     // Queue a search; done is called on the search thread with the studies or an error

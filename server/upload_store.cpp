@@ -236,14 +236,14 @@ std::optional<protocol::ProtocolError> UploadStore::check(const std::string &nam
     return e;
 }
 
-fs::path UploadStore::fetch(const std::string &name, const FetchContext &) {
+FetchedVolume UploadStore::fetch(const std::string &name, const FetchContext &) {
     const auto id = idOf(name);
     std::lock_guard lock(mutex_);
     const auto it = id ? uploads_.find(*id) : uploads_.end();
     if (it == uploads_.end() || Clock::now() - it->second.created >= ttl_)
         throw VolumeFetchError(protocol::ErrorCode::NotFound, notFoundMessage(name));
     it->second.lastUse = Clock::now();
-    return it->second.file;
+    return {it->second.parsed, FetchedVolume::Form::Parsed};
 }
 
 bool UploadStore::makeRoom(uint64_t bytes, std::vector<std::pair<std::string, Record>> &evicted) {
@@ -363,12 +363,18 @@ UploadStore::Result UploadStore::verify(Job &job) {
         return stopping_;
     };
     Accepted accepted;
+    // What the checker parsed is kept, not the file: opening the upload reads it back without
+    // a second parse (an upload may never be opened, and the registry's budget decides what
+    // stays in memory, so nothing is held here).
+    const fs::path parsed = p.folder_ / kParsedName;
+    uint64_t keptBytes = 0;
     try {
-        // The volume is dropped: the registry loads the file again when it is opened
-        // (an upload may never be opened, and the registry's budget decides what stays).
-        const Volume v = loadVolume(p.file_, options);
-        accepted.dims = {v.dims.x, v.dims.y, v.dims.z};
-        accepted.voxelType = std::string(voxelTypeName(v.sourceType));
+        const ParsedVolumeSummary summary = parseToKeep(p.file_, parsed, options);
+        accepted.dims = summary.dims;
+        accepted.voxelType = std::string(voxelTypeName(summary.sourceType));
+        std::error_code ec;
+        fs::remove(p.file_, ec);
+        keptBytes = fs::file_size(parsed);
     } catch (const std::exception &e) {
         // The loader names the file by its path: the client sees its own file name instead.
         std::string message = e.what();
@@ -387,14 +393,14 @@ UploadStore::Result UploadStore::verify(Job &job) {
         // What was reserved at begin() is this upload's own room.
         reserved_ -= p.reserved_;
         p.reserved_ = 0;
-        if (!makeRoom(job.bytes, evicted)) {
-            refusal = UploadRefusal{507, fmt::format("no room for {} bytes in the upload storage of {} MiB (server "
-                                                     "flag --max-upload-storage-mib)",
-                                                     job.bytes, maxStorageBytes_ >> 20)};
+        if (!makeRoom(keptBytes, evicted)) {
+            refusal = UploadRefusal{507, fmt::format("no room for its {} bytes as parsed in the upload storage of "
+                                                     "{} MiB (server flag --max-upload-storage-mib)",
+                                                     keptBytes, maxStorageBytes_ >> 20)};
         } else {
             const auto now = Clock::now();
-            uploads_[p.id_] = Record{p.folder_, p.file_, p.filename_, job.bytes, now, now};
-            stored_ += job.bytes;
+            uploads_[p.id_] = Record{p.folder_, parsed, p.filename_, keptBytes, now, now};
+            stored_ += keptBytes;
             p.kept_ = true;
         }
     }

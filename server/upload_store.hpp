@@ -8,8 +8,10 @@
 //
 // An upload goes: begin() (the request's head passed its checks: a slot of its address and
 // storage room reserved) → the body streamed into pending->file() → finish(), which on the
-// store's worker thread parses the file (LoadOptions::parseInChild: first in the checker
-// process, so a parser crash ends the child, not the server) and only then keeps it.
+// store's worker thread parses the file in the checker process (a parser crash ends the
+// child, not the server) and keeps what the child handed back in place of the file
+// (renderer/io/volume_io.hpp's parseToKeep): opening the upload reads that back, checked
+// again, without parsing the file a second time. The storage limits count the parsed file.
 // Limits: bytes per upload, uploads at once per address, total storage (the least recently
 // opened uploads are evicted to make room), a lifetime from arrival. An upload that expires
 // or is evicted is reported to the forget hook (the registry then drops its loaded copy).
@@ -66,7 +68,7 @@ class UploadStore : public VolumeProvider {
 
     std::string_view prefix() const override { return kPrefix; }
     std::optional<protocol::ProtocolError> check(const std::string &name) const override;
-    std::filesystem::path fetch(const std::string &name, const FetchContext &context) override;
+    FetchedVolume fetch(const std::string &name, const FetchContext &context) override;
 
     // One upload under way: its address slot and reserved room, released when the last
     // reference goes; its folder is deleted then unless finish() kept it.
@@ -114,10 +116,12 @@ class UploadStore : public VolumeProvider {
     size_t count() const;
 
   private:
+    // The checker's parse of an upload, the one file its folder keeps.
+    static constexpr const char *kParsedName = "parsed.volcast";
     struct Record {
-        std::filesystem::path folder, file;
+        std::filesystem::path folder, parsed;
         std::string filename;
-        uint64_t bytes = 0;
+        uint64_t bytes = 0;   // of the parsed file
         std::chrono::steady_clock::time_point created, lastUse;
     };
     struct Job {

@@ -45,6 +45,16 @@ struct VolumeFetchError : std::runtime_error {
     protocol::ErrorCode code;
 };
 
+// What a fetch made available: the volume's bytes as they came (a DICOM series in a folder,
+// a file), for the registry to parse in the child process; or what the child already
+// parsed from them and handed back (renderer/io/volume_io.hpp's parseToKeep), which the
+// registry only reads and checks (loadParsedVolume): an upload is parsed once, when it arrives.
+struct FetchedVolume {
+    enum class Form { Source, Parsed };
+    std::filesystem::path path;
+    Form form = Form::Source;
+};
+
 class VolumeProvider {
   public:
     virtual ~VolumeProvider() = default;
@@ -53,9 +63,9 @@ class VolumeProvider {
     // A cheap check on the caller's thread, before a load is queued: nullopt if the name may
     // be opened, else the error to answer (not_found for an unknown upload or source).
     virtual std::optional<protocol::ProtocolError> check(const std::string &name) const = 0;
-    // On the loader thread: the local file or folder holding the volume's bytes, which stays
-    // there at least until the load has read it. Throws VolumeFetchError.
-    virtual std::filesystem::path fetch(const std::string &name, const FetchContext &context) = 0;
+    // On the loader thread: the local file or folder holding the volume, which stays there at
+    // least until the load has read it. Throws VolumeFetchError.
+    virtual FetchedVolume fetch(const std::string &name, const FetchContext &context) = 0;
 };
 
 } // namespace volcast::server

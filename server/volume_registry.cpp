@@ -370,11 +370,16 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
             context.stopRequested = [this] { return stopRequested_.load(); };
             context.timeLimitSeconds = loadTimeoutSeconds_;
             context.maxFloat32Bytes = options.maxBytes;
-            p.path = p.provider->fetch(p.name, context);
+            FetchedVolume fetched = p.provider->fetch(p.name, context);
+            p.path = std::move(fetched.path);
+            p.form = fetched.form;
             options.parseInChild = true;
             progress(p.name, ProgressStage::Loading, "", 0.0);
         }
-        LoadedVolume loaded = p.path.empty() ? loadSceneVolume(p.name, options) : loadSceneVolume(p.path.string(), options);
+        LoadedVolume loaded = p.path.empty() ? loadSceneVolume(p.name, options)
+                              : p.form == FetchedVolume::Form::Parsed
+                                  ? LoadedVolume{loadParsedVolume(p.path, p.name, options), {}}
+                                  : loadSceneVolume(p.path.string(), options);
         holdNarrow(loaded.volume); // files already are; a built-in volume of integers too
         progress(p.name, ProgressStage::Loading, "", 1.0);
         auto entry = std::make_shared<VolumeEntry>();

@@ -101,6 +101,7 @@ class VolumeRegistry {
     struct Pending {
         std::string name;
         std::filesystem::path path;   // empty for built-ins; for a provider's volume, set once fetched
+        FetchedVolume::Form form = FetchedVolume::Form::Source;
         std::shared_ptr<VolumeProvider> provider;   // null for built-ins and data-folder files
         std::vector<Waiter> waiters;
     };

@@ -1657,7 +1657,9 @@ void writeCheckedVolume(const Volume &v, const fs::path &to) {
     ::close(fd);
 }
 
-Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options) {
+// `samples` false: the header only (its fields and the file's size checked), for a caller that
+// keeps the result to load later.
+Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options, bool samples = true) {
     const auto damaged = [&](const std::string &what) -> Volume {
         fail(path, "the parser in its separate process handed back a damaged result (" + what + "); it is not loaded");
     };
@@ -1687,11 +1689,15 @@ Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadO
     v.orientationKnown = h.orientationKnown != 0;
     v.modality.resize(h.modalityBytes);
     if (!in.read(v.modality.data(), std::streamsize(h.modalityBytes))) return damaged("short modality");
-    const uint64_t sampleBytes = uint64_t(v.voxelCount()) * uint64_t(h.narrowBytes);
-    const uint64_t expected = sizeof h + h.modalityBytes + h.modalityFieldBytes + sampleBytes;
     v.modalityField.resize(h.modalityFieldBytes);
     if (!in.read(v.modalityField.data(), std::streamsize(h.modalityFieldBytes))) return damaged("short modality");
+    const uint64_t sampleBytes = uint64_t(v.voxelCount()) * uint64_t(h.narrowBytes);
+    const uint64_t expected = sizeof h + h.modalityBytes + h.modalityFieldBytes + sampleBytes;
     if (fileSize(from).value_or(0) != expected) return damaged("its size is not what its header says");
+    if (!samples) {
+        v.narrow = {h.narrowBytes, h.narrowOffset};
+        return v;
+    }
     if (h.narrowBytes == 4) {
         v.voxels.resize(v.voxelCount());
         in.read(reinterpret_cast<char *>(v.voxels.data()), std::streamsize(sampleBytes));
@@ -1723,9 +1729,11 @@ struct CheckedResultFile {
     CheckedResultFile &operator=(const CheckedResultFile &) = delete;
 };
 
-// The volume the child loaded, or nothing when it refused the file (the caller then repeats
-// the load here for the refusal's own words); any other end of the child fails the load.
-std::optional<Volume> checkInChild(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom) {
+// Parses the file in the checker process, which writes what it loaded to `result` (a file the
+// caller made): true when it did, false when it refused the file (the caller then repeats the
+// load here for the refusal's own words); any other end of the child fails the load.
+bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
+                const fs::path &result) {
     const auto checker = dicomCheckerPath();
     if (!checker)
         fail(path, fmt::format("{}, which is first parsed in a separate process, but the DICOM checker '{}' "
@@ -1752,10 +1760,9 @@ std::optional<Volume> checkInChild(const fs::path &path, const LoadOptions &opti
     posix_spawnattr_setsigmask(&attr, &none);
     posix_spawnattr_setsigdefault(&attr, &all);
     posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
-    const CheckedResultFile result;
     std::vector<std::string> args = {checker->string(), path.string(), std::to_string(options.maxBytes),
                                      std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds),
-                                     std::to_string(options.maxArchiveBytes), result.path.string()};
+                                     std::to_string(options.maxArchiveBytes), result.string()};
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -1819,11 +1826,8 @@ std::optional<Volume> checkInChild(const fs::path &path, const LoadOptions &opti
             fail(path, fmt::format("lost the DICOM checker: {}", std::strerror(errno)));
         }
     }
-    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckRefused) return std::nullopt;
-    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckLoaded) {
-        progress(0.8, "reading the parsed volume");
-        return readCheckedVolume(path, result.path, options);
-    }
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckRefused) return false;
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckLoaded) return true;
     while (!said.empty() && std::isspace(static_cast<unsigned char>(said.back()))) said.pop_back();
     spdlog::warn("{}: the checker ({}) {}; it said: {}", path.string(), checker->string(),
                  WIFSIGNALED(status) ? "ended with " + signalName(WTERMSIG(status))
@@ -1863,7 +1867,13 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
         std::optional<Volume> checked;
         if (dicomInChild) {
             const bool dicom = folder || zip || (fileSize(path).value_or(0) > 0 && reachesGdcm(path));
-            if (dicom || options.parseInChild) checked = checkInChild(path, options, progress, dicom);
+            if (dicom || options.parseInChild) {
+                const CheckedResultFile result;
+                if (runChecker(path, options, progress, dicom, result.path)) {
+                    progress(0.8, "reading the parsed volume");
+                    checked = readCheckedVolume(path, result.path, options);
+                }
+            }
         }
         Volume v = checked ? std::move(*checked)
                    : folder ? loadDicomFolder(path, options, progress)
@@ -1942,6 +1952,67 @@ void setLimit(int resource, uint64_t value) {
 
 Volume loadVolume(const fs::path &path, const LoadOptions &options) {
     return loadVolumeHere(path, options, true);
+}
+
+ParsedVolumeSummary parseToKeep(const fs::path &path, const fs::path &keep, const LoadOptions &options) {
+    // O_EXCL: the checker writes only into a file made here, never through a name that was there.
+    const int fd = ::open(keep.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0600);
+    if (fd < 0) fail(path, fmt::format("cannot make the file for its parsed volume: {}", std::strerror(errno)));
+    ::close(fd);
+    struct RemoveUnlessKept {
+        const fs::path &keep;
+        bool kept = false;
+        ~RemoveUnlessKept() {
+            std::error_code ec;
+            if (!kept) fs::remove(keep, ec);
+        }
+    } guard{keep};
+    try {
+        LoadProgress progress(options, path);
+        progress(0, "reading header");
+        std::error_code ec;
+        const auto status = fs::status(path, ec);
+        if (!fs::exists(status)) fail(path, "file not found");
+        if (!fs::is_regular_file(status) && !fs::is_directory(status))
+            fail(path, "is not a regular file or a folder (a FIFO, socket or device); it is not loaded");
+        const bool dicom = fs::is_directory(status) || isZipName(path) ||
+                           (fileSize(path).value_or(0) > 0 && reachesGdcm(path));
+        if (!runChecker(path, options, progress, dicom, keep)) {
+            // The child refused it and survived: the same parse here gives the refusal's own words.
+            loadVolumeHere(path, options, false);
+            fail(path, "was refused by the parser in its separate process; it is not loaded");
+        }
+        const Volume v = readCheckedVolume(path, keep, options, false);
+        progress(1, "parsed");
+        guard.kept = true;
+        return {{v.dims.x, v.dims.y, v.dims.z}, v.sourceType};
+    } catch (const VolumeLoadError &) {
+        throw;
+    } catch (const std::bad_alloc &) {
+        throw LoadOutOfMemory(path.string() + ": not enough memory to load the volume");
+    } catch (const std::exception &e) {
+        fail(path, std::string("cannot be read: ") + e.what());
+    }
+}
+
+Volume loadParsedVolume(const fs::path &keep, const fs::path &shownAs, const LoadOptions &options) {
+    try {
+        LoadProgress progress(options, shownAs);
+        progress(0.8, "reading the parsed volume");
+        Volume v = readCheckedVolume(shownAs, keep, options);
+        v.name = displayName(shownAs);
+        progress(0.9, "statistics");
+        computeStatistics(v);
+        holdNarrow(v);
+        progress(1, "statistics");
+        return v;
+    } catch (const VolumeLoadError &) {
+        throw;
+    } catch (const std::bad_alloc &) {
+        throw LoadOutOfMemory(shownAs.string() + ": not enough memory to load the volume");
+    } catch (const std::exception &e) {
+        fail(shownAs, std::string("cannot be read: ") + e.what());
+    }
 }
 
 int runDicomCheck(int argc, char **argv) {

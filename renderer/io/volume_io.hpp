@@ -42,6 +42,7 @@
 
 #include "renderer/volume.hpp"
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -93,6 +94,21 @@ struct VolumeLoadTimeout : VolumeLoadError {
 };
 
 Volume loadVolume(const std::filesystem::path &path, const LoadOptions &options = {});
+
+// A file from outside parsed once however often it is opened (an upload): parseToKeep parses
+// it in the checker process only, as LoadOptions::parseInChild does, and keeps what the child
+// handed back in the new file `keep` (made here, 0600; removed again when the parse fails),
+// reading back only its header; loadParsedVolume loads that file later, checking every field
+// again (the child that wrote it parsed hostile bytes) and computing the statistics. Both
+// throw as loadVolume does; `shownAs` is the path the messages and the volume's name use.
+struct ParsedVolumeSummary {
+    std::array<int64_t, 3> dims{};
+    VoxelType sourceType = VoxelType::Float32;
+};
+ParsedVolumeSummary parseToKeep(const std::filesystem::path &path, const std::filesystem::path &keep,
+                                const LoadOptions &options = {});
+Volume loadParsedVolume(const std::filesystem::path &keep, const std::filesystem::path &shownAs,
+                        const LoadOptions &options = {});
 
 // Writing volumes through ITK, for exports and for building test fixtures in every format
 // the loader reads. Voxels are converted to `type` (integers: rounded and clamped to the

@@ -19,6 +19,7 @@
 
 #include <boost/asio/write.hpp>
 
+#include <cstring>
 #include <fstream>
 #include <regex>
 #include <sys/stat.h>
@@ -311,8 +312,19 @@ TEST_F(Upload, LargeBodyIsStoredWholeAndAccepted) {
     std::vector<fs::path> stored;
     for (const auto &e : fs::recursive_directory_iterator(s.state().uploads().folder()))
         if (e.is_regular_file()) stored.push_back(e.path());
-    ASSERT_EQ(stored.size(), 1u) << "one upload, one file in the upload folder";
-    EXPECT_TRUE(readFile(stored.front()) == nrrd) << "the stored file differs from the body sent";
+    ASSERT_EQ(stored.size(), 1u) << "one upload, one file in the upload folder: its parse";
+    // What the upload keeps is the checker's parse of the body: its samples are the body's.
+    const volcast::Volume v = volcast::loadParsedVolume(stored.front(), "large.nrrd");
+    ASSERT_EQ(v.dims, kLargeDims);
+    ASSERT_EQ(v.narrow.bytes, 2) << "int16 samples are held as 16-bit";
+    size_t differing = 0;
+    for (size_t i = 0; i < voxels; ++i) {
+        const auto want = uint16_t(((i * 40503u) >> 4) & 0x0fffu);
+        uint16_t got;
+        std::memcpy(&got, v.narrowVoxels.data() + 2 * i, 2);
+        if (float(got) + v.narrow.offset != float(want)) ++differing;
+    }
+    EXPECT_EQ(differing, 0u) << "samples of the kept parse differ from the body sent";
 }
 
 TEST_F(Upload, ExpiredUploadIsNotFoundAndDeleted) {
@@ -433,6 +445,45 @@ TEST(UploadParts, ParseInChildTakesTheChildsVolumeAndRefusesADamagedOne) {
     ::unsetenv("VOLCAST_DICOM_CHECK");
     fs::remove_all(dir);
     EXPECT_NE(message.find("damaged result"), std::string::npos) << "a damaged hand-back was not refused: " << message;
+}
+
+// An upload is parsed once: parseToKeep leaves the child's hand-back in a file of its own and
+// loadParsedVolume reads it later as loadVolume with parseInChild would have loaded the file;
+// a refused file leaves nothing behind, and a kept file damaged since is refused, not trusted.
+TEST(UploadParts, ParsedOnceAndKeptLoadsAsTheFileDoes) {
+    const fs::path dir = fs::temp_directory_path() / ("volcast_kept_parse_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    volcast::saveVolume(testVolume(), dir / "v.nrrd", {volcast::VoxelType::Int16, false});
+    const volcast::Volume direct = volcast::loadVolume(dir / "v.nrrd");
+    const volcast::ParsedVolumeSummary summary = volcast::parseToKeep(dir / "v.nrrd", dir / "kept");
+    EXPECT_EQ(summary.dims, (std::array<int64_t, 3>{direct.dims.x, direct.dims.y, direct.dims.z}));
+    EXPECT_EQ(summary.sourceType, direct.sourceType);
+    const volcast::Volume kept = volcast::loadParsedVolume(dir / "kept", "upload:x");
+    EXPECT_EQ(kept.dims, direct.dims);
+    EXPECT_EQ(kept.spacing, direct.spacing);
+    EXPECT_EQ(kept.direction, direct.direction);
+    EXPECT_EQ(kept.narrowVoxels, direct.narrowVoxels) << "the same samples, bit for bit";
+    EXPECT_EQ(kept.histogram.counts, direct.histogram.counts) << "statistics computed again on loading";
+    EXPECT_EQ(kept.range.min, direct.range.min);
+    EXPECT_EQ(kept.range.max, direct.range.max);
+
+    EXPECT_THROW(volcast::parseToKeep(dir / "v.nrrd", dir / "kept"), volcast::VolumeLoadError)
+        << "an existing file is never written over";
+    std::ofstream(dir / "bad.nrrd") << "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4\n\n";
+    EXPECT_THROW(volcast::parseToKeep(dir / "bad.nrrd", dir / "kept-bad"), volcast::VolumeLoadError);
+    EXPECT_FALSE(fs::exists(dir / "kept-bad")) << "a refused file leaves no kept parse";
+
+    fs::resize_file(dir / "kept", fs::file_size(dir / "kept") - 1);
+    std::string message;
+    try {
+        volcast::loadParsedVolume(dir / "kept", "upload:x");
+    } catch (const volcast::VolumeLoadError &e) {
+        message = e.what();
+    }
+    fs::remove_all(dir);
+    EXPECT_NE(message.find("damaged result"), std::string::npos) << "a cut kept parse was not refused: " << message;
+    EXPECT_NE(message.find("upload:x"), std::string::npos) << "the message names the volume as shown: " << message;
 }
 
 class ZipParts : public ::testing::Test {
