@@ -140,7 +140,7 @@ export class SliceViews {
       this.showEdges();
     });
     this.restoreWidth();
-    new ResizeObserver(() => { this.requestAll(); this.drawMarker(); }).observe(container);
+    new ResizeObserver(() => { this.layout(); this.requestAll(); this.drawMarker(); }).observe(container);
   }
 
   // A tool: {pointerDown(pane, at, ev) → {move(at), end(at)} | null, draw(pane, ctx, fit)};
@@ -149,6 +149,14 @@ export class SliceViews {
   addTool(tool) { this.tools.push(tool); }
 
   // --- the column's width -----------------------------------------------------------------
+
+  // Three panes stacked are each a third of the column's height; once the column is wider
+  // than two thirds of its height, two columns (axial on the left, coronal over sagittal on
+  // the right) give every pane a larger square: min(W/2, H/2) > min(W, H/3).
+  layout() {
+    const r = this.paneBox.getBoundingClientRect();
+    this.paneBox.classList.toggle("two-columns", r.height > 0 && r.width > (2 * r.height) / 3);
+  }
 
   bindGrip(grip) {
     let startX = 0, startWidth = 0;
