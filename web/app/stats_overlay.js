@@ -19,6 +19,8 @@ export class StatsOverlay {
     const image = this.$("stat-image");
     this.limitedTerm = Object.assign(root.createElement("dt"), { textContent: "lowered", hidden: true });
     this.limited = Object.assign(root.createElement("dd"), { id: "stat-limited", hidden: true });
+    this.limited.style.whiteSpace = "normal";   // a sentence: wrapped, not cut like the numbers
+    this.limited.style.textAlign = "left";
     image.after(this.limitedTerm, this.limited);
     setInterval(() => this.refresh(), STATS_REFRESH_MS);
   }
