@@ -9,7 +9,7 @@ import assert from "node:assert/strict";
 import { existsSync } from "node:fs";
 import path from "node:path";
 
-import { DATA_DIR, canvasSummary, checkPrerequisites, launchBrowser, openPage, screenshot, startServer, waitForFinal } from "./harness.mjs";
+import { DATA_DIR, canvasSummary, checkPrerequisites, launchBrowser, openPage, screenshot, startServer, updateDocScreenshot, waitForFinal } from "./harness.mjs";
 
 const missing = checkPrerequisites();
 if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
@@ -63,6 +63,7 @@ test("the 8-bit chest CT is CT, every modality is offered, and the lung preset s
   assert.ok(lung.litFraction > 0.1, `lit fraction ${lung.litFraction} with the lung preset`);
   assert.notDeepEqual(lung.thumb, bone.thumb);
   await screenshot(page, "presets-lidc2-lung.png");
+  updateDocScreenshot("presets-lidc2-lung.png", "presets-lidc2-lung.png");
 });
 
 test("another modality's presets are reachable and the note follows the choice", { skip }, async () => {
