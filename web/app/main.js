@@ -12,9 +12,9 @@ import { presetPoints, problems, resolvePoints, tidyPoints } from "../core/trans
 import { windowLevelStep } from "../core/window_level.js";
 import { OrientationControls } from "./orientation_marker.js";
 import { PresetPicker } from "./preset_picker.js";
+import { tooLargeWords } from "../core/limits.js";
 import { CropPanel } from "./crop_panel.js";
 import { CropHandles } from "./crop_handles.js";
-import { tooLargeWords } from "../core/limits.js";
 import { MeasureTools } from "./measure_tools.js";
 import { QualityPanel, renderScaleFor } from "./quality_panel.js";
 import { SliceViews } from "./slice_views.js";
@@ -175,9 +175,9 @@ function onTfEdited(points, interactive) {
   app.tf = { points: tidyPoints(points) };
   if (app.tfOpacityUnit !== undefined) app.tf.opacity_unit = app.tfOpacityUnit;
   $("tf-preset").value = "";
+  presetPicker.showMatching(app.tf.points);   // the note under the picker follows the curve shown
   if (!session.volume) return;
   if (interactive) { session.beginInteraction(); sendTf(app.tf); }
-  presetPicker.showMatching(app.tf.points);   // the note under the picker follows the curve shown
   else { sendTf.now(app.tf); if (!view.interacting) session.endInteraction(); }
 }
 
@@ -419,9 +419,9 @@ function updateMessage() {
     return message.show({ title: `Preparing ${(p.task ?? p.stage).replace(/_/g, " ")}`, detail: `${Math.round(p.fraction * 100)} %`, progress: p.fraction });
   }
   if (!app.frameSinceOpen) {
+    if (app.renderError?.code === "too_large") return message.show({ kind: "error", ...tooLargeWords(app.renderError) });
     if (app.renderError) return message.show({ kind: "error", title: "The server could not render this view", detail: `${app.renderError.code}: ${app.renderError.message}` });
     return message.show({ title: `Rendering ${session.volume.name}…`, progress: true });
-    if (app.renderError?.code === "too_large") return message.show({ kind: "error", ...tooLargeWords(app.renderError) });
   }
   message.show(null);
 }
