@@ -120,13 +120,17 @@ struct OpenTiming {
 //   metadata:       sending → the first "retrieving instances" (the series' size asked by QIDO-RS)
 //   retrieve:       → the last retrieving message (the WADO-RS transfer, written to the cache)
 //   parse_in_child: the first "… in a separate process" → the next step of the load
-//   load:           → the first "uploading" (this process's parse, statistics, narrow samples)
+//   load:           → the first "uploading" (this process's parse, statistics, narrow samples);
+//                   for an upload, whose parse was kept when it arrived, from the first loading
+//                   step (reading the kept parse back, checked, statistics)
 //   renderer:       → the state (the renderer's bricks and tables)
 //   first_frame:    → the first frame
 std::map<std::string, double> splitOpen(const std::vector<Event> &events, double stateMs, double frameMs) {
     double retrieveStart = kNaN, retrieveEnd = kNaN, checkStart = kNaN, checkEnd = kNaN, uploading = kNaN;
+    double loadStart = kNaN;
     for (size_t i = 0; i < events.size(); ++i) {
         const Event &e = events[i];
+        if (e.stage == "loading" && std::isnan(loadStart)) loadStart = e.firstMs;
         if (e.stage == "retrieving" && e.task == "retrieving instances") {
             retrieveStart = e.firstMs;
             retrieveEnd = e.lastMs;
@@ -143,7 +147,7 @@ std::map<std::string, double> splitOpen(const std::vector<Event> &events, double
         parts["retrieve"] = retrieveEnd - retrieveStart;
     }
     parts["parse_in_child"] = checkEnd - checkStart;
-    parts["load"] = uploading - checkEnd;
+    parts["load"] = uploading - (std::isnan(checkStart) ? loadStart : checkEnd);
     parts["renderer"] = stateMs - uploading;
     parts["first_frame"] = frameMs - stateMs;
     return parts;
