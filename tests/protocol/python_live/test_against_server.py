@@ -140,6 +140,43 @@ class LiveServerTests(unittest.TestCase):
         for i in range(3):
             self.assertAlmostEqual(shown[i], centre[i], delta=axial.header["pixel_spacing"])
 
+    def test_measurements_probe_roi_pick_and_a_slab(self):
+        # A picked 3D point lies on material (the probe there finds the value the transfer
+        # function makes opaque), an ROI's statistics bracket its mean, a slab's header says
+        # how many planes it took, and a ray beside the volume picks nothing.
+        async def body():
+            async with await self.connect() as client:
+                state = await open_demo(client)
+                await client.send(vc.transfer_function({"points": GREY_RAMP}))
+                await client.send(vc.camera(axis_camera(state, +1)))
+                hit = await client.pick(SIZE / 2, SIZE / 2, SIZE, SIZE, timeout=60)
+                miss = await client.pick(0.5, 0.5, SIZE, SIZE, timeout=60)
+                at_hit = await client.probe(hit["point"], timeout=60) if hit["hit"] else None
+                v = state["volume"]
+                centre = [v["origin"][i] + (v["dims"][i] - 1) * v["spacing"][i] / 2 for i in range(3)]
+                roi = await client.roi_stats("axial", centre, [10, 6], timeout=60)
+                outside = await client.probe([c + 1e4 for c in centre], timeout=60)
+                slab = await client.request_slice("axial", 32, 32, slab=vc.slab(4, "mean"), timeout=60)
+                return state, hit, miss, at_hit, roi, outside, slab
+
+        state, hit, miss, at_hit, roi, outside, slab = run(body())
+        self.assertTrue(hit["hit"], hit)
+        self.assertGreaterEqual(hit["opacity"], 0.5)
+        self.assertTrue(at_hit["inside"])
+        self.assertIsNone(at_hit["unit"], "the demo phantom is not in Hounsfield units")
+        self.assertGreater(at_hit["value"], 0, "the picked point is on empty space (value 0 is transparent)")
+        self.assertFalse(miss["hit"])
+        self.assertIsNone(miss["point"])
+        self.assertGreater(roi["samples"], 0)
+        self.assertLessEqual(roi["min"], roi["mean"])
+        self.assertLessEqual(roi["mean"], roi["max"])
+        self.assertGreaterEqual(roi["std"], 0)
+        self.assertFalse(outside["inside"])
+        self.assertIsNone(outside["value"])
+        spacing = min(state["volume"]["spacing"])
+        self.assertEqual(slab.slab["planes"], int(np.ceil(4 / (spacing / 2))) + 1)
+        self.assertEqual(slab.slab["mode"], "mean")
+
 
 if __name__ == "__main__":
     unittest.main()
