@@ -3,13 +3,15 @@
 // URL parameters: ?volume=NAME opens that volume first; ?server=ws://host:port/ws talks to
 // another server than the one that served the page; ?token=T for a server started with
 // --token. A view link's fragment (#volume=…&eye=…, core/view_link.js) opens its volume
-// with its camera and transfer function.
+// with its whole view: camera, transfer function, orientation, crop box, clip planes,
+// compositing and projection window, and the slice panes' window/level, crosshair and slab.
 
 import { orbit, pan, volumeBounds, zoom } from "../core/camera.js";
 import { defaultServerUrl } from "../core/connection.js";
 import { Session } from "../core/session.js";
 import { presetPoints, problems, resolvePoints, tidyPoints } from "../core/transfer_function.js";
 import { windowLevelStep } from "../core/window_level.js";
+import { imageEdgeLabels, isAnatomical, mmPerPixelAtTarget, scaleBarLength } from "../core/orientation.js";
 import { OrientationControls } from "./orientation_marker.js";
 import { PresetPicker } from "./preset_picker.js";
 import { tooLargeWords } from "../core/limits.js";
@@ -316,7 +318,7 @@ session.on("opened", ({ state, restored }) => {
   showOpenVolume();
   // After the quality panel shows the state: a preset's shading then overrides it.
   presetPicker.setVolume(volume, app.tf, { restored });
-  orientation.setVolume(volume);
+  orientation.setVolume(volume, { keepHand: restored });
   orientation.showState(state.scene?.quality);
   orientation.showCamera(app.camera);
   $("volume-name").value = "";
@@ -457,15 +459,69 @@ function download(blob, filename) {
 
 const fileStem = () => (session.volume?.name ?? "view").replace(/[^A-Za-z0-9._-]+/g, "_");
 
-// The image on screen: the final frame's own PNG when it is the one shown (lossless, at the
-// rendered size, premultiplied RGBA stored as straight RGBA), else the canvas.
-function savePng() {
+// The image on screen, opaque over black as the view shows it: the final frame's own PNG
+// when it is the one shown (lossless, at the rendered size), else the canvas. With "Letters
+// and scale" it also carries the orientation letters at the edges (the file's axes where
+// the patient axes are unknown, as on the page) and a scale bar at the volume's centre.
+async function savePng() {
   const f = session.lastFrame;
-  if (f?.header.final && f.header.seq === window.volcast.shown?.seq) {
-    download(new Blob([f.image], { type: "image/png" }), `${fileStem()}-${f.header.seq}.png`);
-  } else {
-    $("view-canvas").toBlob((blob) => download(blob, `${fileStem()}-view.png`), "image/png");
+  const final = f?.header.final && f.header.seq === window.volcast.shown?.seq;
+  const source = final ? await createImageBitmap(new Blob([f.image], { type: "image/png" })) : $("view-canvas");
+  const out = document.createElement("canvas");
+  out.width = source.width;
+  out.height = source.height;
+  const g = out.getContext("2d");
+  g.fillStyle = "#000";
+  g.fillRect(0, 0, out.width, out.height);
+  g.drawImage(source, 0, 0);
+  const camera = (final ? f.header.camera : window.volcast.shown?.camera) ?? app.camera;
+  window.volcast.lastSaved = $("save-annotate").checked && camera ? annotateImage(g, out.width, out.height, camera) : null;
+  const name = final ? `${fileStem()}-${f.header.seq}.png` : `${fileStem()}-view.png`;
+  out.toBlob((blob) => download(blob, name), "image/png");
+}
+
+// Orientation letters at the middle of each edge, a note on where they come from, and a
+// scale bar; returns what was drawn (for the tests and the console).
+function annotateImage(g, width, height, camera) {
+  const source = orientation.source;
+  const labels = imageEdgeLabels(camera, isAnatomical(source));
+  const note = source === "axes" ? "orientation unknown: the file's axes" : source === "hand" ? "patient axes set by hand" : "";
+  const px = Math.max(12, Math.round(Math.min(width, height) / 36));
+  const pad = Math.round(px * 0.6);
+  g.font = `bold ${px}px system-ui, sans-serif`;
+  g.lineJoin = "round";
+  const text = (s, x, y, align, baseline) => {
+    g.textAlign = align;
+    g.textBaseline = baseline;
+    g.lineWidth = Math.max(2, px / 5);
+    g.strokeStyle = "rgba(0, 0, 0, 0.85)";
+    g.strokeText(s, x, y);
+    g.fillStyle = "#fff";
+    g.fillText(s, x, y);
+  };
+  text(labels.left, pad, height / 2, "left", "middle");
+  text(labels.right, width - pad, height / 2, "right", "middle");
+  text(labels.top, width / 2, pad, "center", "top");
+  text(labels.bottom, width / 2, height - pad, "center", "bottom");
+  g.font = `${Math.round(px * 0.7)}px system-ui, sans-serif`;
+  if (note) text(note, pad, height - pad, "left", "bottom");
+  // The bar is exact at the depth of the camera's target (the volume's centre) only, unless
+  // the projection is orthographic: said beside it.
+  const perPx = mmPerPixelAtTarget(camera, height);
+  const bar = scaleBarLength(perPx, width * 0.25);
+  let scale = null;
+  if (bar) {
+    const x1 = width - pad, x0 = x1 - bar.pixels, y = height - pad - Math.round(px * 1.2);
+    g.fillStyle = "#fff";
+    g.strokeStyle = "rgba(0, 0, 0, 0.85)";
+    g.lineWidth = 1;
+    g.fillRect(x0, y, bar.pixels, Math.max(2, px / 6));
+    g.strokeRect(x0, y, bar.pixels, Math.max(2, px / 6));
+    const words = `${bar.mm} mm${camera.projection === "orthographic" ? "" : " at the centre"}`;
+    text(words, x1, height - pad, "right", "bottom");
+    scale = { mm: bar.mm, pixels: bar.pixels, mmPerPixel: perPx, words };
   }
+  return { labels, note, scale, width, height };
 }
 
 async function saveScene() {
@@ -479,20 +535,73 @@ async function saveScene() {
 
 // --- view link, stats, full screen, phone layout ------------------------------------------
 
-// The view link's camera and transfer function, once its volume (or, naming none, the
-// first volume) has opened; the link's own problems were shown at start.
+// The view link's camera and transfer function, once its volume (or, naming none, the first
+// volume) has opened; the link's own problems were shown at start. The rest of the link
+// waits until the panels and the slice panes have taken the new volume
+// (applyRestOfLink, after every "opened" listener that puts a panel at its defaults).
 function applyPendingLink(volume) {
   const link = app.pendingLink;
   if (!link || (link.volume && link.volume !== volume?.name)) return;
   app.pendingLink = null;
+  app.pendingRest = link;
   if (link.transfer_function) session.setTransferFunction(link.transfer_function);
   if (link.camera) { app.camera = link.camera; session.setCamera(app.camera); }
+}
+
+function applyRestOfLink() {
+  const link = app.pendingRest;
+  app.pendingRest = null;
+  if (!link || !session.volume) return;
+  // Orientation first: the clip slider spans the box as drawn after it.
+  if (link.orientation) orientation.applyOrientationView(link.orientation);
+  if (link.clip_planes) {
+    quality.setVolume(session.volume, link.clip_planes, orientation.correction);
+    session.setClipPlanes(link.clip_planes);   // the link's planes as they are, not the slider's rounding
+  }
+  if (link.orientation || link.crop || link.compositing || link.projection_window) {
+    crop.showState({
+      compositing: link.compositing ?? "emission_absorption",
+      crop: link.crop ?? { min: [0, 0, 0], max: [1, 1, 1] },
+      ...(link.projection_window ? { projection_window: link.projection_window } : {}),
+    });
+    // One policy with all of it (the orientation's own scheduled send would only repeat it).
+    quality.touched = true;
+    quality.cancelScheduled();
+    session.setQualityPolicy(completePolicy(quality.policy()));
+  }
+  if (link.slab) slices.setSlab({ thickness: link.slab.thickness, mode: link.slab.mode });
+  if (link.slice_window) {
+    slices.wl = { window: link.slice_window.window, level: link.slice_window.level };
+    slices.showWindowLevel();
+  }
+  if (link.crosshair) slices.setPoint([...link.crosshair]);
+  slices.requestAll();
+}
+
+// The whole view as core/view_link.js carries it: what this page sent, the server's
+// defaults left out.
+function currentView() {
+  const q = completePolicy({ quality: quality.quality() }).quality;
+  const planes = session.scene.clip_planes;
+  return {
+    volume: session.volume.name,
+    camera: app.camera,
+    transfer_function: app.tf,
+    orientation: orientation.orientationView(),
+    crop: q.crop,
+    clip_planes: planes?.length ? planes : undefined,
+    compositing: q.compositing,
+    projection_window: q.projection_window,
+    slice_window: slices.wl ? { ...slices.wl } : undefined,
+    crosshair: slices.point ? [...slices.point] : undefined,
+    slab: slices.slab && slices.slab.thickness > 0 ? { ...slices.slab } : undefined,
+  };
 }
 
 function copyViewLink() {
   if (!session.volume) return errors.show({ code: "view_link", message: "open a volume first" });
   const url = new URL(location.href);
-  url.hash = formatViewLink({ volume: session.volume.name, camera: app.camera, transfer_function: app.tf });
+  url.hash = formatViewLink(currentView());
   history.replaceState(null, "", url);
   const button = $("copy-link");
   const said = (text) => { button.textContent = text; setTimeout(() => { button.textContent = "Link"; }, 1500); };
@@ -562,6 +671,8 @@ const slices = new SliceViews(document, session, $("slices"), $("view"));
 // Crop handles first: a press on a handle is theirs before a measurement's.
 const cropHandles = new CropHandles(document, session, crop, slices, $("view"));
 const measure = new MeasureTools(document, session, slices, $("view"));
+// After the panes' own "opened" (which puts the crosshair and window at the new volume's defaults).
+session.on("opened", () => applyRestOfLink());
 
 // A volume the user brings: a series from a PACS (the studies panel), a file from their disk.
 function openBrought(name, label) {

@@ -7,19 +7,25 @@
 // them and a saved scene holds them. Offered first where the file names no patient axes; for
 // a file that does, they sit behind "Override the file's orientation".
 //
+// Labels never claim anatomy the file does not name (core/orientation.js's anatomySource):
+// for such a file the buttons, the marker and the note speak of the file's axes (+x, −y, …)
+// until the user sets the patient axes by hand — a flip or turn of the volume, or "Treat as
+// LPS" / "Treat as RAS" — and then say they were set by hand. Every change is announced on
+// the document as a "volcast:orientation" event (detail: source, anatomical, setByHand,
+// correction, panes: the slice panes' edge letters), for the slice panes and the saved image.
+//
 // The module builds its own elements (a canvas over the view, a card in the side panel) and
 // follows the session's camera from the `scene` events and the frames, so the page only
 // constructs it and hands it the volume and a way to set the camera.
 
 import {
-  composeCorrection, CORRECTION_STEPS, describeCorrection, IDENTITY_CORRECTION, isIdentityCorrection,
-  projectAxes, rollCamera, screenLabels, standardViewCamera, STANDARD_VIEWS,
+  anatomySource, composeCorrection, CORRECTION_STEPS, correctionStepLabel, describeCorrection, directionLabel,
+  IDENTITY_CORRECTION, isAnatomical, isIdentityCorrection, paneEdgeLetters, projectAxes, rollCamera, screenLabels,
+  standardViewCamera, standardViewLabel, STANDARD_VIEWS, TREAT_AS, treatAsOf,
 } from "../core/orientation.js";
 
 const MARKER_CSS_PX = 96;          // the marker's side, CSS pixels
 const AXIS_COLORS = { L: "#e5534b", R: "#e5534b", A: "#3fbf6f", P: "#3fbf6f", S: "#3fb6c8", I: "#3fb6c8" };
-// Where the file names no patient space the axes are the file's own.
-const FILE_AXIS_LABELS = { L: "+x", R: "−x", P: "+y", A: "−y", S: "+z", I: "−z" };
 
 const STYLE = `
 .orientation-marker { position: absolute; right: 10px; bottom: 34px; width: ${MARKER_CSS_PX}px; height: ${MARKER_CSS_PX}px;
@@ -37,6 +43,9 @@ const STYLE = `
 .orientation-fix-buttons { display: grid; grid-template-columns: repeat(3, 1fr); gap: 4px; margin: 6px 0 4px; }
 .orientation-fix-buttons button, .orientation-fix > button { padding: 3px 4px; }
 .orientation-fix-status.overrides { color: var(--warn, #e0a73a); }
+.orientation-treat { display: grid; grid-template-columns: repeat(2, 1fr); gap: 4px; margin: 6px 0 4px; }
+.orientation-treat[hidden] { display: none; }
+.orientation-treat button { padding: 3px 4px; }
 `;
 
 export class OrientationControls {
@@ -54,6 +63,8 @@ export class OrientationControls {
     this.onCorrection = onCorrection;
     this.onCorrectionShown = onCorrectionShown;
     this.correction = IDENTITY_CORRECTION;
+    this.setByHand = false;       // the user chose "Treat as …" (any other correction is by hand anyway)
+    this.volume = null;
     this.known = true;
     this.hasVolume = false;
     this.camera = null;
@@ -84,11 +95,12 @@ export class OrientationControls {
     card.id = "orientation-card";
     const summary = Object.assign(doc.createElement("summary"), { textContent: "Orientation" });
     const views = Object.assign(doc.createElement("div"), { className: "standard-views" });
-    for (const [name, v] of Object.entries(STANDARD_VIEWS)) {
-      const b = Object.assign(doc.createElement("button"), { type: "button", textContent: v.label, id: `view-${name}` });
-      b.title = `${v.label} view`;
+    this.viewButtons = {};
+    for (const name of Object.keys(STANDARD_VIEWS)) {
+      const b = Object.assign(doc.createElement("button"), { type: "button", id: `view-${name}` });
       b.addEventListener("click", () => this.standardView(name));
       views.append(b);
+      this.viewButtons[name] = b;
     }
     this.turns = Object.assign(doc.createElement("div"), { className: "orientation-turns", id: "orientation-turns" });
     for (const [label, degrees, title] of [["⟲ 90°", -90, "Turn the image 90° anticlockwise"],
@@ -104,25 +116,38 @@ export class OrientationControls {
     this.fix = Object.assign(doc.createElement("details"), { id: "orientation-fix", className: "orientation-fix" });
     this.fixSummary = doc.createElement("summary");
     const buttons = Object.assign(doc.createElement("div"), { className: "orientation-fix-buttons" });
+    this.stepButtons = {};
     for (const [name, step] of Object.entries(CORRECTION_STEPS)) {
-      const b = Object.assign(doc.createElement("button"), { type: "button", textContent: step.label, id: `orientation-${name}`, title: step.title });
+      const b = Object.assign(doc.createElement("button"), { type: "button", id: `orientation-${name}` });
       b.addEventListener("click", () => this.correct(step.matrix));
       buttons.append(b);
+      this.stepButtons[name] = b;
+    }
+    // Where the file names no patient axes: say what its axes are, in one click.
+    this.treat = Object.assign(doc.createElement("div"), { className: "orientation-treat", id: "orientation-treat" });
+    for (const [key, t] of Object.entries(TREAT_AS)) {
+      const b = Object.assign(doc.createElement("button"), { type: "button", id: `orientation-treat-${key}`, textContent: t.label, title: t.title });
+      b.addEventListener("click", () => this.treatAs(key));
+      this.treat.append(b);
     }
     const reset = Object.assign(doc.createElement("button"), {
       type: "button", id: "orientation-fix-reset", textContent: "As the file says", title: "Remove the flips and turns",
     });
-    reset.addEventListener("click", () => this.setCorrection(IDENTITY_CORRECTION, { send: true }));
+    reset.addEventListener("click", () => { this.setByHand = false; this.setCorrection(IDENTITY_CORRECTION, { send: true }); });
     this.fixStatus = Object.assign(doc.createElement("div"), { id: "orientation-fix-status", className: "orientation-fix-status small" });
-    this.fix.append(this.fixSummary, buttons, reset, this.fixStatus);
+    this.fix.append(this.fixSummary, this.treat, buttons, reset, this.fixStatus);
     card.append(summary, views, this.status, this.turns, this.fix);
     const panel = doc.querySelector("aside.panel");
     panel.prepend(card);
     this.setVolume(null);
   }
 
-  setVolume(volume) {
+  // keepHand: the same volume came back (a reconnection): the axes set by hand stay set.
+  setVolume(volume, { keepHand = false } = {}) {
+    if (!(keepHand && volume?.name === this.volume?.name)) this.setByHand = false;
+    this.volume = volume;
     this.known = volume ? volume.orientation_known !== false : true;
+    this.treat.hidden = !volume || this.known;
     this.note.hidden = !volume || this.known;
     this.turns.hidden = !volume || this.known;
     this.fix.hidden = !volume;
@@ -144,6 +169,28 @@ export class OrientationControls {
     this.setCorrection(composeCorrection(step, this.correction), { send: true });
   }
 
+  // "Treat as LPS" / "Treat as RAS": the file's axes are the patient's, as chosen.
+  treatAs(key) {
+    if (!this.session.volume || this.known) return;
+    this.setByHand = true;
+    this.setCorrection(TREAT_AS[key].matrix, { send: true });
+  }
+
+  // The labels' source now: "file", "hand" or "axes" (core/orientation.js's anatomySource).
+  get source() { return anatomySource(this.volume, this.correction, this.setByHand); }
+  get anatomical() { return isAnatomical(this.source); }
+
+  // What a view link or saved view carries: the correction and whether the axes were set by hand.
+  orientationView() {
+    return { correction: this.correction.map((row) => [...row]), setByHand: this.setByHand };
+  }
+
+  // A link's orientation, once its volume is open: shown, sent with the quality policy.
+  applyOrientationView({ correction, setByHand }) {
+    this.setByHand = !this.known && !!setByHand;
+    this.setCorrection(correction ?? IDENTITY_CORRECTION, { send: true });
+  }
+
   setCorrection(matrix, { send }) {
     this.correction = matrix.map((row) => [...row]);
     this.showCorrection();
@@ -153,20 +200,42 @@ export class OrientationControls {
 
   showCorrection() {
     const words = describeCorrection(this.correction);
+    const source = this.source, anatomical = isAnatomical(source);
+    const treated = treatAsOf(this.correction, this.setByHand);
+    // What was set by hand, in words: "the file's axes taken as RAS" or "flipped L/R".
+    const hand = treated ? `the file's axes taken as ${treated.toUpperCase()}` : words;
     this.fixStatus.dataset.correction = JSON.stringify(this.correction);
+    this.fixStatus.dataset.source = source;
     this.fixStatus.classList.toggle("overrides", this.known && !!words);
-    this.fixStatus.textContent = !words ? "As the file places it."
-      : this.known ? `Overrides the file's orientation: ${words}.`
-        : `Corrected: ${words}. Kept by the session and saved with the scene.`;
-    this.note.textContent = !words
+    this.fixStatus.textContent = source === "axes" ? "As the file places it; the patient axes are unknown."
+      : this.known ? (words ? `Overrides the file's orientation: ${words}.` : "As the file places it.")
+        : `Patient axes set by hand: ${hand}. Kept by the session, in links and saved scenes.`;
+    this.note.textContent = source === "axes"
       ? "Orientation unknown: the file names no patient axes; labels show the file's axes"
-      : `Orientation unknown; corrected by hand (${words})`;
+      : `Patient axes set by hand (${hand}); the file names none`;
     // An override of a file's own axes is said where the views are explained, not only
     // in the closed "Override" panel.
-    this.status.textContent = !this.hasVolume ? "" : !this.known
-      ? "Orientation unknown: views follow the file's axes (x, y, z as if L, P, S). Turn the view to correct it."
-      : words ? `The file names its patient axes, corrected by hand (${words}): views follow the corrected axes.`
-        : "The file names its patient axes: views are anatomical.";
+    this.status.textContent = !this.hasVolume ? "" : source === "axes"
+      ? "Orientation unknown: views and labels follow the file's own axes (x, y, z). Set the patient axes below: a flip, a turn, or Treat as LPS / RAS."
+      : source === "hand" ? `The file names no patient axes; they were set by hand (${hand}): views and labels follow them.`
+        : words ? `The file names its patient axes, corrected by hand (${words}): views follow the corrected axes.`
+          : "The file names its patient axes: views are anatomical.";
+    for (const [name, b] of Object.entries(this.viewButtons)) {
+      const { label, title } = standardViewLabel(name, anatomical);
+      Object.assign(b, { textContent: label, title });
+    }
+    // The flips and turns name what they act on: file axes until the patient axes are known.
+    for (const [name, b] of Object.entries(this.stepButtons)) {
+      const { label, title } = correctionStepLabel(name, anatomical);
+      Object.assign(b, { textContent: label, title });
+    }
+    this.draw();
+    this.doc.dispatchEvent(new CustomEvent("volcast:orientation", {
+      detail: {
+        source, anatomical, setByHand: this.setByHand, correction: this.correction.map((row) => [...row]),
+        panes: paneEdgeLetters(this.volume, this.correction, this.setByHand),
+      },
+    }));
   }
 
   // quality.orientation_correction added to a quality object (left out when none, as the
@@ -205,7 +274,8 @@ export class OrientationControls {
     if (!this.camera) { c.hidden = true; return; }
     c.hidden = false;
     const axes = projectAxes(this.camera);
-    const labels = screenLabels(this.camera);
+    const anatomical = this.anatomical;
+    const labels = Object.fromEntries(Object.entries(screenLabels(this.camera)).map(([k, v]) => [k, directionLabel(v, anatomical)]));
     c.dataset.right = labels.right;
     c.dataset.up = labels.up;
     c.dataset.toward = labels.toward;
@@ -222,7 +292,7 @@ export class OrientationControls {
       g.moveTo(centre, centre);
       g.lineTo(x, y);
       g.stroke();
-      const text = this.known ? a.label : FILE_AXIS_LABELS[a.label];
+      const text = directionLabel(a.label, anatomical);
       g.font = `${near ? "bold " : ""}${Math.round(12 * dpr)}px system-ui, sans-serif`;
       g.textAlign = "center";
       g.textBaseline = "middle";

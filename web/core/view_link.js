@@ -17,14 +17,16 @@ export const MAX_LINK_CHARS = 8192;     // the whole fragment
 export const MAX_NAME_CHARS = 1024;     // the server's max_volume_name_bytes
 export const MAX_POINTS = 64;           // transfer-function points in a link
 const MAX_ABS = 1e12;                   // |coordinate|: world units of any scan fit far inside
-const DIGITS = 7;                       // significant digits written: 1e-7 of the scene's size
 
 export const MAX_CLIP_PLANES = 6;      // the scene file's limit
 export const MAX_SLAB_MM = 1e4;        // a slab thicker than 10 m is a typo
 export const COMPOSITING = Object.freeze(["emission_absorption", "mip", "minip"]);
 export const SLAB_MODES = Object.freeze(["mip", "minip", "mean"]);
 
-const num = (x) => Number(x.toPrecision(DIGITS));
+// Numbers are written as JavaScript's shortest text that reads back as the same double: a
+// reopened link draws the same rays (a camera rounded to 7 digits moves a ray by 1e-7 of
+// the scene, enough to turn a pixel on a clip plane's or crop face's edge).
+const num = (x) => x;
 const list = (v) => v.map(num).join(",");
 
 // The fragment (without "#") for a view {volume, camera, transfer_function, orientation,

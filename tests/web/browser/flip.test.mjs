@@ -1,5 +1,9 @@
-// Flips and quarter turns of a volume whose file names no patient axes (issue 16, item 1), in
-// headless Chromium against a real volcast-server: "Flip L/R" mirrors the image (which no
+// A volume whose file names no patient axes (builtin:demo), in headless Chromium against a
+// real volcast-server. Nothing on the page claims anatomy: no R/L/A/P/S/I letter on the
+// buttons, the marker, the slice panes' edges or the saved image, which use the file's axes
+// (+x, −y, …); "Treat as LPS" / "Treat as RAS" set the patient axes by hand and the labels
+// then say so; the saved PNG is opaque, and with "letters and scale" carries them.
+// Flips and quarter turns of the volume: "Flip x" (Flip L/R once the axes are set) mirrors the image (which no
 // camera move can), the correction reaches the server as the scene's
 // quality.orientation_correction, camera and transfer function changes keep it, the state and
 // the saved scene hold it, and volcast-render draws the saved scene as the browser showed it.
@@ -15,6 +19,43 @@ import {
 } from "./harness.mjs";
 import { pageUnderTest } from "./page_setup.mjs";
 import { compareBytes, decodePng, overBlack } from "../lib/png.mjs";
+
+const ANATOMICAL_LETTERS = new Set(["R", "L", "A", "P", "S", "I"]);
+const ANATOMICAL_WORDS = /\b(anterior|posterior|superior|inferior|left|right)\b/i;
+const SIDES = /\b(anterior|posterior|superior|inferior)\b/i;
+
+// Every label on the page that could name a direction: the orientation card's and the
+// marker's text and tooltips, the slice panes' edge letters, the note over the view, and
+// the page's visible text as a whole (split into words: a lone R, L, A, P, S or I). The
+// tooltips of "Treat as LPS" and "Treat as RAS" are left out: they say what each choice
+// would mean, which is what the user is asked to decide.
+const directionLabels = () => page.evaluate(() => {
+  const card = document.getElementById("orientation-card");
+  const marker = document.getElementById("orientation-marker");
+  const texts = [...card.querySelectorAll("button, summary, div")]
+    .flatMap((el) => [el.textContent, el.closest("#orientation-treat") ? "" : el.title ?? ""]);
+  return {
+    card: texts,
+    marker: [marker.dataset.right, marker.dataset.up, marker.dataset.toward, marker.getAttribute("aria-label") ?? ""],
+    edges: [...document.querySelectorAll(".slice-pane .edge")].map((e) => e.textContent.trim()),
+    note: document.getElementById("orientation-note").textContent,
+    // The slice panes' bar labels its window and level fields "W" and "L": not a side.
+    page: document.body.innerText.replace(document.querySelector(".slices-bar")?.innerText ?? "", ""),
+  };
+});
+
+function assertNoAnatomy(labels, what) {
+  const words = (t) => t.split(/[^A-Za-z]+/).filter(Boolean);
+  for (const t of [...labels.card, ...labels.marker, labels.note]) {
+    // The marker's spoken label may say "to the right" of the screen; nothing may say anterior.
+    const words_ = labels.marker.includes(t) ? SIDES : ANATOMICAL_WORDS;
+    assert.ok(!words_.test(t), `${what}: "${t}" names a patient direction`);
+    for (const w of words(t)) assert.ok(!ANATOMICAL_LETTERS.has(w), `${what}: "${t}" has the letter ${w}`);
+  }
+  for (const e of labels.edges) assert.match(e, /^[+−][xyz]$/, `${what}: pane edge "${e}"`);
+  for (const w of words(labels.page)) assert.ok(!ANATOMICAL_LETTERS.has(w), `${what}: the page shows a lone "${w}"`);
+  assert.ok(!/\b(anterior|posterior|superior|inferior)\b/i.test(labels.page), `${what}: the page names a patient side`);
+}
 
 const FLIP_LR = [[-1, 0, 0], [0, 1, 0], [0, 0, 1]];
 
@@ -45,6 +86,80 @@ test("a volume without patient axes offers the flips and turns, open, beside the
   for (const id of ["flip-lr", "flip-ap", "flip-si", "turn-si", "turn-ap", "turn-lr"])
     assert.ok(await page.isVisible(`#orientation-${id}`), `#orientation-${id} is visible`);
   assert.match(await page.textContent("#orientation-fix-status"), /As the file places it/);
+});
+
+test("no anatomical label anywhere on the page, nor on the saved image: the file's axes instead", async () => {
+  await page.waitForFunction(() => document.querySelectorAll(".slice-pane .edge").length === 12);
+  const labels = await directionLabels();
+  assertNoAnatomy(labels, "unoriented");
+  assert.equal(labels.edges.length, 12, "four edge letters on each of three panes");
+  assert.equal(await page.textContent("#view-anterior"), "From −y");
+  assert.equal(await page.textContent("#orientation-flip-lr"), "Flip x");
+  let seq = await shownSeq(page);
+  await page.click("#view-anterior");
+  await finalWith(seq, null, "anterior");
+  assert.deepEqual((await page.$eval("#orientation-marker", (el) => [el.dataset.right, el.dataset.up, el.dataset.toward])), ["+x", "+z", "−y"]);
+
+  // The saved PNG: opaque, the final frame over black; with letters and scale, the file's axes.
+  const framePng = await page.evaluate(() => Array.from(new Uint8Array(window.volcast.session.lastFrame.image)));
+  const plainPath = await download(page, "#save-png", "labels-saved-plain.png");
+  const saved = decodePng(readFileSync(plainPath));
+  const frame = decodePng(Buffer.from(framePng));
+  assert.deepEqual([saved.width, saved.height], [frame.width, frame.height], "the rendered size");
+  assert.equal(saved.channels, 4);
+  for (let i = 3; i < saved.data.length; i += 4) if (saved.data[i] !== 255) assert.fail(`pixel ${(i - 3) / 4} has alpha ${saved.data[i]}: not opaque`);
+  // The frame's straight RGBA over black, as the view shows it: the browser's premultiplied
+  // decode rounds once (1/255); anything else (a transparent or grey background) is far off.
+  const d = compareBytes(overBlack(saved), overBlack(frame));
+  assert.ok(d.maxDiff <= 1, `saved vs the frame over black: max ${d.maxDiff}/255`);
+
+  await page.check("#save-annotate");
+  await download(page, "#save-png", "labels-saved-annotated.png").finally(() => page.uncheck("#save-annotate"));
+  const drawn = await page.evaluate(() => window.volcast.lastSaved);
+  assert.deepEqual(drawn.labels, { right: "+x", left: "−x", top: "+z", bottom: "−z" });
+  assert.match(drawn.note, /orientation unknown/);
+  // The bar: 1, 2 or 5 × 10^k mm, at most a quarter of the width, at mm-per-pixel of the frame's camera.
+  const cam = (await page.evaluate(() => window.volcast.shown.camera));
+  const distance = Math.hypot(...cam.eye.map((e, i) => e - cam.target[i]));
+  const perPx = (2 * distance * Math.tan((cam.fov_y_deg * Math.PI) / 360)) / frame.height;
+  assert.ok(Math.abs(drawn.scale.mmPerPixel - perPx) < 1e-9 * perPx, JSON.stringify(drawn.scale));
+  assert.match(String(drawn.scale.mm), /^[125]0*$|^0\.0*[125]$/);
+  assert.ok(drawn.scale.pixels <= frame.width / 4 && drawn.scale.pixels > frame.width / 40, JSON.stringify(drawn.scale));
+  assert.match(drawn.scale.words, /mm at the centre$/);
+});
+
+test("Treat as LPS / RAS set the patient axes by hand: anatomical labels that say so", async () => {
+  let seq = await shownSeq(page);
+  await page.click("#orientation-treat-lps");
+  await page.waitForFunction(() => document.getElementById("orientation-marker").dataset.right === "L");
+  assert.match(await page.textContent("#orientation-note"), /set by hand \(the file's axes taken as LPS\)/);
+  assert.match(await page.textContent("#orientation-fix-status"), /set by hand/);
+  assert.equal(await page.textContent("#view-anterior"), "Anterior");
+  assert.equal(await page.textContent("#orientation-flip-lr"), "Flip L/R");
+  const edges = (await directionLabels()).edges;
+  assert.deepEqual(edges.slice(0, 4).sort(), ["A", "L", "P", "R"], `axial pane edges ${edges}`);
+  // LPS changes nothing on the server: no correction.
+  assert.equal((await serverQuality())?.orientation_correction, undefined);
+  await finalWith(seq, null);
+  await page.check("#save-annotate");
+  await download(page, "#save-png", "labels-saved-lps.png").finally(() => page.uncheck("#save-annotate"));
+  const drawn = await page.evaluate(() => window.volcast.lastSaved);
+  // The anterior view of the test before: the patient's left on the right, superior up.
+  assert.deepEqual(drawn.labels, { right: "L", left: "R", top: "S", bottom: "I" });
+  assert.equal(drawn.note, "patient axes set by hand");
+
+  // RAS: x and y mirrored into LPS, as the loader does for a file in RAS.
+  seq = await shownSeq(page);
+  await page.click("#orientation-treat-ras");
+  await finalWith(seq, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]);
+  assert.deepEqual((await serverQuality()).orientation_correction, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]);
+  assert.match(await page.textContent("#orientation-note"), /taken as RAS/);
+
+  // "As the file says": unknown again, the file's axes again.
+  seq = await shownSeq(page);
+  await page.click("#orientation-fix-reset");
+  await finalWith(seq, null);
+  assertNoAnatomy(await directionLabels(), "after As the file says");
 });
 
 test("Flip L/R mirrors the image; the server keeps the correction", async () => {
@@ -83,7 +198,7 @@ test("Flip L/R mirrors the image; the server keeps the correction", async () => 
 
   assert.deepEqual((await serverQuality()).orientation_correction, FLIP_LR);
   assert.match(await page.textContent("#orientation-fix-status"), /flipped L\/R/);
-  assert.match(await page.textContent("#orientation-note"), /corrected by hand/);
+  assert.match(await page.textContent("#orientation-note"), /set by hand \(flipped L\/R\)/);
 });
 
 test("camera and transfer function changes keep the correction", async () => {

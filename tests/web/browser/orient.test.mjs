@@ -67,18 +67,22 @@ test("a volume without patient axes says its orientation is unknown and offers t
   assert.equal((await page.evaluate(() => window.volcast.session.volume.orientation_known)), false);
 });
 
-test("the marker starts on the anterior view: the patient's left on the right, superior up", { skip }, async () => {
+// The file names no patient axes: the marker speaks of the file's axes (LPS's L is +x …).
+const FILE_AXES = { L: "+x", R: "−x", P: "+y", A: "−y", S: "+z", I: "−z" };
+const inFileAxes = (letters) => letters.map((l) => FILE_AXES[l]);
+
+test("the marker starts on the anterior view, in the file's axes: +x on the right, +z up", { skip }, async () => {
   const m = await marker();
   assert.equal(m.hidden, false);
-  // The starting view is slightly oblique (from the front, a little left and above).
-  assert.deepEqual([m.right, m.up, m.toward], ["L", "S", "A"], JSON.stringify(m));
+  // The starting view is slightly oblique (from −y, a little towards +x and above).
+  assert.deepEqual([m.right, m.up, m.toward], inFileAxes(["L", "S", "A"]), JSON.stringify(m));
 });
 
 test("each standard view sets the camera, and the marker turns with it", { skip }, async () => {
-  const expected = {
+  const expected = Object.fromEntries(Object.entries({
     anterior: ["L", "S", "A"], posterior: ["R", "S", "P"], left: ["P", "S", "L"],
     right: ["A", "S", "R"], superior: ["R", "A", "S"], inferior: ["L", "A", "I"],
-  };
+  }).map(([k, v]) => [k, inFileAxes(v)]));
   const target = await page.evaluate(() => window.volcast.session.scene.camera.target);
   for (const [name, labels] of Object.entries(expected)) {
     await page.click(`#view-${name}`);
@@ -97,12 +101,12 @@ test("turning the view is kept by the session and saved in the scene's camera", 
   await page.click("#view-anterior");
   await page.click('#orientation-turns button[data-degrees="180"]');
   const m = await marker();
-  assert.equal(m.up, "I", "upside down");
+  assert.equal(m.up, "−z", "upside down");
   await settle();
   const scene = await page.evaluate(() => window.volcast.session.sceneFile());
   assert.ok(scene.camera.up[2] < -0.99, `the saved camera is turned: up ${scene.camera.up}`);
   await page.click('#orientation-turns button[data-degrees="180"]');
-  assert.equal((await marker()).up, "S");
+  assert.equal((await marker()).up, "+z");
 });
 
 test("an Alt-drag of 75 px moves the level by 150 HU on bone (a share of the window), not 750", { skip }, async () => {

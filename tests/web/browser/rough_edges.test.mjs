@@ -233,7 +233,7 @@ test("a view link restores the volume, camera and transfer function; a hostile o
       return h?.final && h.camera.eye.every((x, i) => Math.abs(x - eye[i]) <= 1e-6 * Math.abs(eye[i]) + 1e-9) ? h : null;
     }, want.camera.eye, { timeout: 60000, polling: 50 })).jsonValue();
     const got = await other.page.evaluate(async () => (await window.volcast.session.getState()).scene);
-    // The link writes 7 significant digits: each coordinate within 5e-7 of itself.
+    // The link writes each number as the shortest text of the same double: well within 5e-7 of itself.
     for (const k of ["eye", "target", "up"]) got.camera[k].forEach((x, i) => assert.ok(Math.abs(x - want.camera[k][i]) <= 5e-7 * Math.abs(want.camera[k][i]) + 1e-12, `${k}[${i}] ${x} vs ${want.camera[k][i]}`));
     assert.equal(got.transfer_function.points.length, want.tf.points.length);
     got.transfer_function.points.forEach((p, i) => p.forEach((x, k) => assert.ok(Math.abs(x - want.tf.points[i][k]) <= 5e-7 * Math.abs(want.tf.points[i][k]) + 1e-12)));
