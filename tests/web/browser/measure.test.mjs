@@ -102,7 +102,13 @@ test("the crosshair starts at the new volume's centre, also after switching quic
   CENTRE.forEach((v, i) => closeTo(point[i], v, 1e-9, `centre after switching[${i}]`));
   const headers = await page.evaluate((axes) => axes.map((a) => window.volcast.slices.panes[a].header.point), AXES);
   for (const h of headers) CENTRE.forEach((v, i) => closeTo(h[i], v, 1e-9, "each pane cut through the centre"));
-  await waitForFinal(page);
+  try {
+    await waitForFinal(page);
+  } catch (e) {
+    const seen = await page.evaluate(async () => ({ frames: window.volcast.frames.slice(-5).map((h) => ({ seq: h.seq, final: h.final, request: h.request })),
+      sent: window.sentLog.slice(-12), state: await window.volcast.session.getState().then((s) => ({ interacting: s.interacting, volume: s.volume?.name }), (x) => String(x)) }));
+    throw new Error(`no final frame after switching volumes: ${JSON.stringify(seen)} (${e.message})`);
+  }
 });
 
 test("the wheel steps the axial pane one slice (2 mm) at a time; the other panes keep their planes", async () => {
