@@ -97,7 +97,9 @@ TEST(Frame, RoundTripsVariants) {
     noRequest.error = std::nullopt;
     noRequest.camera = nullptr;
     noRequest.final = false;
-    for (const FrameHeader &h : {interactive, noRequest, exampleHeader()}) {
+    FrameHeader limited = exampleHeader();   // a level the automatic policy lowered
+    limited.limited = "image scale 0.47 to stay within the server's per-frame limit";
+    for (const FrameHeader &h : {interactive, noRequest, exampleHeader(), limited}) {
         for (const Bytes &image : {Bytes{}, Bytes{1, 2, 3}, Bytes(70000, 7)}) {
             const Bytes message = encodeFrame(h, image);
             const DecodedFrame frame = decodeFrame(message);
@@ -105,6 +107,20 @@ TEST(Frame, RoundTripsVariants) {
             EXPECT_EQ(Bytes(frame.image.begin(), frame.image.end()), image);
         }
     }
+}
+
+TEST(Frame, LimitedIsSentOnlyWhenALevelWasLowered) {
+    // Absent from the header when nothing was lowered: the documented bytes, and older
+    // clients' headers, stay as they were.
+    const auto headerOf = [](const FrameHeader &h) {
+        const Bytes m = encodeFrame(h, Bytes{});
+        const uint32_t n = uint32_t(m[4]) | uint32_t(m[5]) << 8 | uint32_t(m[6]) << 16 | uint32_t(m[7]) << 24;
+        return nlohmann::json::parse(std::string(m.begin() + 8, m.begin() + 8 + n));
+    };
+    EXPECT_FALSE(headerOf(exampleHeader()).contains("limited"));
+    FrameHeader h = exampleHeader();
+    h.limited = "image scale 0.25, step 4, mip level 2 to stay within the server's per-frame limit";
+    EXPECT_EQ(headerOf(h).at("limited"), h.limited);
 }
 
 TEST(Frame, EveryTruncationIsRefused) {
