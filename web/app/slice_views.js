@@ -205,7 +205,7 @@ export class SliceViews {
     pane.dataset.axis = axis;
     const canvas = this.doc.createElement("canvas");
     canvas.tabIndex = 0;
-    canvas.setAttribute("aria-label", `${LABELS[axis]} slice: click or drag to move the crosshair, wheel to step through slices`);
+    canvas.setAttribute("aria-label", `${LABELS[axis]} slice: click or drag to move the crosshair, wheel or up and down arrows to step through slices`);
     pane.appendChild(canvas);
     pane.insertAdjacentHTML("beforeend", `<span class="slice-label">${LABELS[axis]}</span>
       <span class="edge left"></span><span class="edge right"></span>
@@ -250,6 +250,13 @@ export class SliceViews {
       wheelRest -= steps * WHEEL_NOTCH_PX;
       this.scroll(axis, steps);
     }, { passive: false });
+    // By keyboard, with the pane focused: ↑/↓ or Page Up/Down step as one wheel notch does.
+    canvas.addEventListener("keydown", (ev) => {
+      const steps = { ArrowUp: -1, PageUp: -1, ArrowDown: 1, PageDown: 1 }[ev.key];
+      if (!steps) return;
+      ev.preventDefault();
+      this.scroll(axis, steps);
+    });
     return state;
   }
 

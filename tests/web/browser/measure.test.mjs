@@ -105,7 +105,7 @@ test("the crosshair starts at the new volume's centre, also after switching quic
   try {
     await waitForFinal(page);
   } catch (e) {
-    const seen = await page.evaluate(async () => ({ frames: window.volcast.frames.slice(-5).map((h) => ({ seq: h.seq, final: h.final, request: h.request })),
+    const seen = await page.evaluate(async () => ({ frames: window.volcast.frames.slice(-5).map((h) => ({ seq: h.seq, final: h.final, request: h.request, level: h.level, limited: h.limited, codec: h.codec, width: h.width, height: h.height, quality: h.quality })),
       sent: window.sentLog.slice(-12), state: await window.volcast.session.getState().then((s) => ({ interacting: s.interacting, volume: s.volume?.name }), (x) => String(x)) }));
     throw new Error(`no final frame after switching volumes: ${JSON.stringify(seen)} (${e.message})`);
   }
@@ -128,6 +128,10 @@ test("the wheel steps the axial pane one slice (2 mm) at a time; the other panes
   await page.waitForFunction(() => Math.abs(window.volcast.slices.point[2] - 46) < 1e-6, null, { timeout: 30000 });
   await page.mouse.wheel(0, -100 * 30);
   await page.waitForFunction(() => Math.abs(window.volcast.slices.point[2] - 0) < 1e-6, null, { timeout: 30000 });
+  // By keyboard on the focused pane: ↓ one slice up the normal, as a notch down.
+  await page.focus('.slice-pane[data-axis="axial"] canvas');
+  await page.keyboard.press("ArrowDown");
+  await page.waitForFunction(() => Math.abs(window.volcast.slices.point[2] - 2) < 1e-6, null, { timeout: 30000 });
   // Back to the centre for the tests below.
   await page.evaluate((c) => window.volcast.slices.setPoint(c), CENTRE);
   await waitSettled();
