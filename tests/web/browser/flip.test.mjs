@@ -115,6 +115,7 @@ test("no anatomical label anywhere on the page, nor on the saved image: the file
 
   await page.check("#save-annotate");
   await download(page, "#save-png", "labels-saved-annotated.png").finally(() => page.uncheck("#save-annotate"));
+  updateDocScreenshot("labels-saved-annotated.png", "saved-png-letters.png");
   const drawn = await page.evaluate(() => window.volcast.lastSaved);
   assert.deepEqual(drawn.labels, { right: "+x", left: "−x", top: "+z", bottom: "−z" });
   assert.match(drawn.note, /orientation unknown/);

@@ -3,11 +3,12 @@
 // axes are set by hand with a flip, the crop box, a clip plane, a windowed MIP, the slice
 // panes' window/level, crosshair and a thick slab are set; the link opens a new page that
 // draws the same final frame (to 1/255) and the same three slices, and says the axes were
-// set by hand.
+// set by hand. With VOLCAST_UPDATE_DOC_SCREENSHOTS=1 the reopened page's screenshot goes
+// over web/doc/view-link.png.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
-import { artifact, openPage, screenshot, waitForFinal } from "./harness.mjs";
+import { artifact, openPage, screenshot, updateDocScreenshot, waitForFinal } from "./harness.mjs";
 import { pageUnderTest } from "./page_setup.mjs";
 import { compareBytes, decodePng, overBlack } from "../lib/png.mjs";
 import { writeFileSync } from "node:fs";
@@ -148,6 +149,7 @@ test("a link reopens the whole view: the same final frame to 1/255 and the same 
     assert.equal(await p.inputValue("#clip-axis"), "0");
     assert.equal(Number(await p.inputValue('.slices-bar input[data-slab="thickness"]')), 6);
     await screenshot(p, "link-reopened.png");
+    updateDocScreenshot("link-reopened.png", "view-link.png");
     assert.deepEqual(other.problems, [], other.problems.join("\n"));
   } finally {
     await other.page.close();
