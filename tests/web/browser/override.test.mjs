@@ -113,6 +113,13 @@ test("a file that names its patient axes keeps the flips and turns behind Overri
   for (const id of ["flip-lr", "flip-ap", "flip-si", "turn-si", "turn-ap", "turn-lr", "fix-reset"])
     assert.ok(await page.isVisible(`#orientation-${id}`), `#orientation-${id} shows once Override is opened`);
   assert.match(await page.textContent("#orientation-fix-status"), /As the file places it/);
+  // The file names its axes: anatomical labels everywhere, and no "Treat as" to offer.
+  assert.ok(await page.isHidden("#orientation-treat"));
+  assert.equal(await page.textContent("#view-anterior"), "Anterior");
+  assert.equal(await page.textContent("#orientation-flip-lr"), "Flip L/R");
+  await page.click("#view-anterior");
+  assert.deepEqual(await page.$eval("#orientation-marker", (el) => [el.dataset.right, el.dataset.up, el.dataset.toward]), ["L", "S", "A"]);
+  assert.deepEqual(await page.$$eval('.slice-pane[data-axis="axial"] .edge', (es) => es.map((e) => e.textContent.trim()).sort()), ["A", "L", "P", "R"]);
 });
 
 test("Override's Flip L/R mirrors the image; the card says the file's axes were corrected by hand", async () => {
