@@ -146,7 +146,8 @@ test("the transfer-function editor adds, drags and removes points", async () => 
     return m ? window.volcast.session.scene.transfer_function : null;
   });
   const n0 = await page.evaluate(() => window.volcast.session.scene.transfer_function.points?.length ?? 0);
-  const box = await page.$eval("#tf-editor", (el) => { const r = el.getBoundingClientRect(); return { x: r.x, y: r.y, w: r.width, h: r.height }; });
+  // The side panel scrolls (the orientation and preset cards come first): bring the curve into view.
+  const box = await page.$eval("#tf-editor", (el) => { el.scrollIntoView({ block: "center" }); const r = el.getBoundingClientRect(); return { x: r.x, y: r.y, w: r.width, h: r.height }; });
   // Click low in the plot, a third of the way along: adds a point there.
   const px = box.x + box.w * 0.33, py = box.y + box.h * 0.6;
   await page.mouse.move(px, py);
