@@ -405,7 +405,10 @@ Scene parseScene(std::string_view jsonText, const std::filesystem::path &baseDir
     return asSceneError([&] {
         const json root = parseJson(jsonText);
         const Fields f(root, "",
-                       {"volume", "transfer_function", "camera", "image", "quality", "clip_planes"});
+                       {"volume", "transfer_function", "camera", "image", "quality", "clip_planes", "viewer"});
+        // A client's view beyond the picture (its slice panes, the orientation it was told):
+        // kept in the file for the client, ignored here; only its kind is checked.
+        if (const json *v = f.find("viewer")) check(v->is_object(), "viewer", "must be an object");
         Scene scene;
         scene.volume = parseVolume(f.require("volume"), baseDir);
         parseTransferFunction(f.require("transfer_function"), scene);

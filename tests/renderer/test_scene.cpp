@@ -457,6 +457,14 @@ TEST(SceneRefuses, UnknownKeyAtAnyLevel) {
         EXPECT_SCENE_ERROR(with(example(), pointer, value), path + ": unknown key");
 }
 
+// The client's own view travels in the file and changes nothing the renderer draws.
+TEST(SceneViewer, AnObjectIsKeptOutOfTheSceneAndAnythingElseIsRefused) {
+    const json viewer = {{"crosshair", {1.5, 2, 3}}, {"slab", {{"thickness", 5}, {"mode", "mip"}}}};
+    EXPECT_EQ(volcast::parseScene(with(example(), "/viewer", viewer).dump()), volcast::parseScene(example().dump()));
+    EXPECT_SCENE_ERROR(with(example(), "/viewer", json::array({1})), "viewer: must be an object");
+    EXPECT_SCENE_ERROR(with(example(), "/viewer", "lps"), "viewer: must be an object");
+}
+
 TEST(SceneRefuses, DuplicateKey) {
     std::string text = kExample;
     text.replace(text.find("\"fov_y_deg\": 30"), 15, "\"fov_y_deg\": 30, \"fov_y_deg\": 60");

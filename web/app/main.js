@@ -527,6 +527,10 @@ function annotateImage(g, width, height, camera) {
 async function saveScene() {
   try {
     const scene = await session.sceneFile();
+    // What the picture does not hold but the viewer showed (volcast-render ignores it): the
+    // same fields a view link carries beyond the scene.
+    const { orientation: orient, slice_window, crosshair, slab } = currentView();
+    scene.viewer = JSON.parse(JSON.stringify({ orientation: orient, slice_window, crosshair, slab }));
     download(new Blob([`${JSON.stringify(scene, null, 2)}\n`], { type: "application/json" }), `${fileStem()}-scene.json`);
   } catch (e) {
     errors.show({ code: e.code ?? "client", message: `cannot save the scene: ${e.serverMessage ?? e.message}` });

@@ -235,6 +235,11 @@ test("the saved scene holds the correction, and volcast-render draws it as the b
   const scene = JSON.parse(readFileSync(scenePath, "utf8"));
   assert.deepEqual(scene.quality.orientation_correction, FLIP_LR, JSON.stringify(scene.quality));
   assert.deepEqual(scene.quality, final.quality);
+  // The slice panes' view and the orientation travel beside the picture, as in a view link.
+  const panes = await page.evaluate(() => ({ point: window.volcast.slices.point, wl: window.volcast.slices.wl }));
+  assert.deepEqual(scene.viewer.crosshair, panes.point, JSON.stringify(scene.viewer));
+  assert.deepEqual(scene.viewer.slice_window, panes.wl, JSON.stringify(scene.viewer));
+  assert.ok(scene.viewer.orientation, JSON.stringify(scene.viewer));
 
   const outPath = artifact("flip-volcast-render.png");
   const r = await run(RENDER_EXE, [scenePath, "-o", outPath]);
