@@ -8,6 +8,7 @@
 //                        (default: build/tests/web/artifacts)
 //   VOLCAST_DATA_DIR     the real scans (optional: the tests use builtin:demo)
 //   CHROMIUM             the browser (default: /usr/bin/chromium)
+//   VOLCAST_LOG_LEVEL    the servers' --log-level (default: info), e.g. debug to follow a failure
 
 import { spawn } from "node:child_process";
 import { copyFileSync, existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, createWriteStream } from "node:fs";
@@ -72,7 +73,7 @@ let serverRuns = 0;
 export async function startServer(port = 0, { extraArgs = [] } = {}) {
   const dir = mkdtempSync(path.join(os.tmpdir(), "volcast-web-test-"));
   const portFile = path.join(dir, "port");
-  const args = ["--port", String(port), "--port-file", portFile, "--web-root", path.join(REPO, "web"), "--log-level", "info"];
+  const args = ["--port", String(port), "--port-file", portFile, "--web-root", path.join(REPO, "web"), "--log-level", process.env.VOLCAST_LOG_LEVEL || "info"];
   if (DATA_DIR && existsSync(DATA_DIR)) args.push("--data", DATA_DIR);
   args.push(...extraArgs);
   const log = createWriteStream(artifact(`server-${++serverRuns}.log`));
