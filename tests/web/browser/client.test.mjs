@@ -8,8 +8,9 @@ import { existsSync, readFileSync, writeFileSync } from "node:fs";
 import path from "node:path";
 
 import {
-  DATA_DIR, RENDER_EXE, VIEWPORT, artifact, canvasSummary, connectionState, download, launchBrowser,
-  openPage, run, screenshot, shownSeq, startServer, thumbDifference, waitForFinal,
+  DATA_DIR, RENDER_EXE, VIEWPORT, artifact, canvasSummary, connectionState, download,
+  launchBrowser, openPage, run, screenshot, shownSeq, startServer, thumbDifference,
+  updateDocScreenshot, waitForFinal,
 } from "./harness.mjs";
 import { pageUnderTest } from "./page_setup.mjs";
 import { compareBytes, decodePng, overBlack } from "../lib/png.mjs";
@@ -336,6 +337,7 @@ test("a real CT scan opens from the picker, with progress, and renders", { skip:
   const larger = await waitForFinal(page, { afterSeq: seq, timeout: 120000 });
   assert.ok(larger.width > final.width && larger.height > final.height, `${final.width}×${final.height} → ${larger.width}×${larger.height}`);
   await screenshot(page, "08-cranium-ct.png");
+  updateDocScreenshot("08-cranium-ct.png", "client-cranium-ct.png");
   await page.setViewportSize(VIEWPORT);
 });
 

@@ -5,7 +5,7 @@
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
-import { canvasSummary, screenshot, shownSeq, thumbDifference } from "./harness.mjs";
+import { canvasSummary, screenshot, shownSeq, thumbDifference, updateDocScreenshot } from "./harness.mjs";
 import { pageUnderTest } from "./page_setup.mjs";
 
 let page, problems;
@@ -46,6 +46,7 @@ test("the compositing selector switches to MIP and back; the frame says so", asy
   assert.ok(mip.litFraction > 0.05, `MIP lit fraction ${mip.litFraction}`);
   assert.ok(thumbDifference(mip.thumb, emission.thumb) > 3, "MIP looks like emission–absorption");
   await screenshot(page, "modes-mip.png");
+  updateDocScreenshot("modes-mip.png", "mip.png");
   assert.deepEqual(problems, []);
 });
 
@@ -82,6 +83,7 @@ test("emission–absorption with a crop box; whole volume restores the image", a
   await page.$eval("#crop-max-z", (el) => { el.value = "0.55"; el.dispatchEvent(new Event("change")); });
   await finalWith(seq, { crop: { min: [0, 0, 0], max: [1, 1, 0.55] } });
   await screenshot(page, "modes-crop.png");
+  updateDocScreenshot("modes-crop.png", "crop.png");
   const q = await serverQuality();
   assert.equal(q.compositing, undefined, "the default is not written");
   assert.deepEqual(q.crop, { min: [0, 0, 0], max: [1, 1, 0.55] });

@@ -9,7 +9,7 @@ import assert from "node:assert/strict";
 import { existsSync } from "node:fs";
 import path from "node:path";
 
-import { DATA_DIR, checkPrerequisites, launchBrowser, openPage, screenshot, startServer, waitForFinal } from "./harness.mjs";
+import { DATA_DIR, checkPrerequisites, launchBrowser, openPage, screenshot, startServer, updateDocScreenshot, waitForFinal } from "./harness.mjs";
 
 const missing = checkPrerequisites();
 if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
@@ -128,5 +128,6 @@ test("an Alt-drag of 75 px moves the level by 150 HU on bone (a share of the win
   assert.equal(await page.inputValue("#tf-level"), "40");
   await settle();
   await page.locator("aside.panel").screenshot({ path: (await import("./harness.mjs")).artifact("orient-preset-picker.png") });
+  updateDocScreenshot("orient-preset-picker.png", "orient-preset-picker.png");
   assert.deepEqual(problems, []);
 });

@@ -11,8 +11,8 @@ import os from "node:os";
 import path from "node:path";
 
 import {
-  ARTIFACTS, RENDER_EXE, artifact, checkPrerequisites, download, launchBrowser, openPage, run, screenshot,
-  startServer, waitForFinal,
+  ARTIFACTS, RENDER_EXE, artifact, checkPrerequisites, download, launchBrowser, openPage, run,
+  screenshot, startServer, updateDocScreenshot, waitForFinal,
 } from "./harness.mjs";
 import { compareBytes, decodePng, overBlack } from "../lib/png.mjs";
 
@@ -74,6 +74,7 @@ test("the picker lists the server's volumes: scans first, the phantoms in a grou
   // For the README: the list drawn open (a native drop-down is not in screenshots).
   await page.$eval("#volume-select", (el) => { el.size = 8; });
   await page.locator(".topbar").screenshot({ path: artifact("rough-01-picker.png") });
+  updateDocScreenshot("rough-01-picker.png", "client-picker.png");
   await page.$eval("#volume-select", (el) => { el.size = 0; });
 
   const final = await openFromPicker(SCAN);
@@ -193,6 +194,7 @@ test("the stats overlay hides and shows (button and S), and full screen shows th
   assert.ok(await page.isHidden("#stats"));
   assert.equal(await page.getAttribute("#toggle-stats", "aria-pressed"), "false");
   await screenshot(page, "rough-03-stats-hidden.png");
+  updateDocScreenshot("rough-03-stats-hidden.png", "client-stats-hidden.png");
   await page.focus("#view-canvas");
   await page.keyboard.press("s");
   assert.ok(await page.isVisible("#stats"));
@@ -271,6 +273,7 @@ test("on a phone-sized screen the stats sit below the image, not over it", async
     assert.ok(b.bottom - b.top > 40, "the stats are still shown");
     assert.ok(a.bottom - a.top >= 300 && a.right - a.left >= 380, `the view keeps most of the screen: ${JSON.stringify(a)}`);
     await phone.screenshot({ path: artifact("rough-05-phone.png") });
+    updateDocScreenshot("rough-05-phone.png", "client-phone.png");
   } finally {
     await phone.close();
   }
