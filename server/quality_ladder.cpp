@@ -79,13 +79,14 @@ size_t chooseInteractiveLevel(const std::vector<LevelOutlook> &levels, double ta
     return bestOf(levels, fitting).value_or(0);
 }
 
-size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels) {
+size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels, const std::vector<bool> &shown) {
     if (levels.empty()) return 0;
     const size_t last = levels.size() - 1;
     if (sent >= last) return last;
     std::vector<size_t> better;
     for (size_t i = 0; i < last; ++i) {
-        if (i == sent || 2 * levels[i].predictedMs > levels[last].predictedMs) continue;
+        if (i == sent || (i < shown.size() && shown[i]) || 2 * levels[i].predictedMs > levels[last].predictedMs)
+            continue;
         const bool measured = levels[i].error && levels[sent].error;
         if (measured ? *levels[i].error < *levels[sent].error : i > sent) better.push_back(i);
     }

@@ -82,7 +82,11 @@ size_t chooseInteractiveLevel(const std::vector<LevelOutlook> &levels, double ta
 // final's time, the one with the lowest error (the costliest while any is unmeasured); else
 // the final. A level costing more than half the final would show little sooner than the
 // final itself (bonsai at 512² on PoCL: the jittered level took 804 ms, the final 938).
-size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels);
+// `sent` is the level shown last; a level in `shown` (true: shown already in this view) is
+// never chosen again, so a view reaches its final within as many refinements as it has
+// levels, even where measured errors do not fall with cost (a cheaper level with a lower
+// error is taken, and from there the costlier one must not come back).
+size_t nextRefinementLevel(size_t sent, const std::vector<LevelOutlook> &levels, const std::vector<bool> &shown = {});
 
 // Geometric samples of a level: rays × the volume's diagonal in level-0 voxels divided by
 // the step (the step is in level-0 voxels on every mip level), × the taps' relative cost.

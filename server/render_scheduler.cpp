@@ -141,6 +141,7 @@ void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
         s.calibration = std::move(calibration);
         ++s.generation;
         s.sentLevel = -1;
+        s.levelsShown.clear();
         s.substituteSent = -1;
         s.finalSent = false;
         s.failed_ = false;
@@ -324,7 +325,8 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
                 wakeAt = std::min(wakeAt, refineAt);
                 return false;
             }
-            level = int(nextRefinementLevel(size_t(std::max({s.sentLevel, s.substituteSent, 0})), outlook()));
+            level = int(nextRefinementLevel(size_t(std::max({s.sentLevel, s.substituteSent, 0})), outlook(),
+                                            s.levelsShown));
             if (s.substituteSent >= level) {
                 // Shown already without its preparation: wait for it (its completion wakes us).
                 const std::string key = preparationKey(job.volumeId, job.transferFunction, job.ladder[size_t(level)].quality);
@@ -536,8 +538,13 @@ void RenderScheduler::runUnit(Work &work) {
         if (s.generation == work.generation) {
             if (work.substitute)
                 s.substituteSent = std::max(s.substituteSent, work.level);
-            else
-                s.sentLevel = std::max(s.sentLevel, work.level);
+            else {
+                // The level shown last, not the highest: refinement may step to a cheaper
+                // level with a lower measured error, and goes on from there.
+                s.sentLevel = work.level;
+                if (s.levelsShown.size() <= size_t(work.level)) s.levelsShown.resize(size_t(work.level) + 1);
+                s.levelsShown[size_t(work.level)] = true;
+            }
             s.finalSent = work.final;
             if (options_.errorCalibration && !work.substitute) {
                 if (work.final) {

@@ -119,7 +119,8 @@ class RenderScheduler {
         bool interacting = false;
         Clock::time_point lastInput;
         bool inFlight = false;
-        int sentLevel = -1;           // highest level delivered for this generation
+        int sentLevel = -1;           // level delivered last for this generation
+        std::vector<bool> levelsShown;  // of this generation's ladder: delivered (not as a substitute)
         int substituteSent = -1;      // highest level delivered with its preparation pending
         bool finalSent = false;
         bool failed_ = false;

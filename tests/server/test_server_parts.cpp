@@ -135,6 +135,37 @@ TEST(QualityLadder, AtRestOneStepBelowTheShownErrorWithinHalfTheFinalThenTheFina
     EXPECT_EQ(nextRefinementLevel(2, levels), 1u);   // a cheaper level with a lower error
     EXPECT_EQ(nextRefinementLevel(0, {{5, {}}, {6, {}}}), 1u);
     EXPECT_EQ(nextRefinementLevel(0, {{7, {}}}), 0u);
+    // A level shown already in this view is not chosen again: from 2, level 1 came; from 1,
+    // with 1 and 0 shown, nothing else is better and cheap enough: the final.
+    EXPECT_EQ(nextRefinementLevel(1, levels, {true, true, true}), 4u);
+}
+
+// Walked as the scheduler walks it (the level shown last, the levels shown so far), the
+// refinement reaches the final within as many steps as there are levels, whatever the
+// measured errors: a cheaper level with a lower error must not send the view back to the
+// costlier one it came from, over and over, never final (seen after a quick volume switch,
+// when the reopened volume's errors were measured and not monotonic in cost).
+TEST(QualityLadder, EveryRefinementReachesTheFinalWhateverTheErrors) {
+    uint32_t seed = 12345;
+    const auto next = [&] { return seed = seed * 1664525u + 1013904223u; };
+    for (int trial = 0; trial < 2000; ++trial) {
+        const size_t n = 2 + next() % 8;
+        std::vector<LevelOutlook> levels(n);
+        for (size_t i = 0; i < n; ++i) {
+            levels[i].predictedMs = double(1 + i * 10);
+            if (next() % 4 != 0) levels[i].error = double(next() % 1000) / 1000.0;   // some unmeasured
+        }
+        size_t sent = next() % (n - 1);
+        std::vector<bool> shown(n, false);
+        shown[sent] = true;
+        size_t steps = 0;
+        while (sent != n - 1) {
+            ASSERT_LE(++steps, n) << "trial " << trial << ": refinement did not reach the final within " << n
+                                  << " steps";
+            sent = nextRefinementLevel(sent, levels, shown);
+            shown[sent] = true;
+        }
+    }
 }
 
 // The step is in level-0 voxels whatever the mip level (frameStep), so a ray takes as many
