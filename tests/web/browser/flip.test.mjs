@@ -17,45 +17,9 @@ import {
   RENDER_EXE, artifact, canvasSummary, download, keepCanvas, mirrored, pixelsDiffering, run, screenshot, shownSeq,
   thumbDifference, updateDocScreenshot,
 } from "./harness.mjs";
+import { assertNoAnatomy, directionLabels } from "./labels.mjs";
 import { pageUnderTest } from "./page_setup.mjs";
 import { compareBytes, decodePng, overBlack } from "../lib/png.mjs";
-
-const ANATOMICAL_LETTERS = new Set(["R", "L", "A", "P", "S", "I"]);
-const ANATOMICAL_WORDS = /\b(anterior|posterior|superior|inferior|left|right)\b/i;
-const SIDES = /\b(anterior|posterior|superior|inferior)\b/i;
-
-// Every label on the page that could name a direction: the orientation card's and the
-// marker's text and tooltips, the slice panes' edge letters, the note over the view, and
-// the page's visible text as a whole (split into words: a lone R, L, A, P, S or I). The
-// tooltips of "Treat as LPS" and "Treat as RAS" are left out: they say what each choice
-// would mean, which is what the user is asked to decide.
-const directionLabels = () => page.evaluate(() => {
-  const card = document.getElementById("orientation-card");
-  const marker = document.getElementById("orientation-marker");
-  const texts = [...card.querySelectorAll("button, summary, div")]
-    .flatMap((el) => [el.textContent, el.closest("#orientation-treat") ? "" : el.title ?? ""]);
-  return {
-    card: texts,
-    marker: [marker.dataset.right, marker.dataset.up, marker.dataset.toward, marker.getAttribute("aria-label") ?? ""],
-    edges: [...document.querySelectorAll(".slice-pane .edge")].map((e) => e.textContent.trim()),
-    note: document.getElementById("orientation-note").textContent,
-    // The slice panes' bar labels its window and level fields "W" and "L": not a side.
-    page: document.body.innerText.replace(document.querySelector(".slices-bar")?.innerText ?? "", ""),
-  };
-});
-
-function assertNoAnatomy(labels, what) {
-  const words = (t) => t.split(/[^A-Za-z]+/).filter(Boolean);
-  for (const t of [...labels.card, ...labels.marker, labels.note]) {
-    // The marker's spoken label may say "to the right" of the screen; nothing may say anterior.
-    const words_ = labels.marker.includes(t) ? SIDES : ANATOMICAL_WORDS;
-    assert.ok(!words_.test(t), `${what}: "${t}" names a patient direction`);
-    for (const w of words(t)) assert.ok(!ANATOMICAL_LETTERS.has(w), `${what}: "${t}" has the letter ${w}`);
-  }
-  for (const e of labels.edges) assert.match(e, /^[+−][xyz]$/, `${what}: pane edge "${e}"`);
-  for (const w of words(labels.page)) assert.ok(!ANATOMICAL_LETTERS.has(w), `${what}: the page shows a lone "${w}"`);
-  assert.ok(!/\b(anterior|posterior|superior|inferior)\b/i.test(labels.page), `${what}: the page names a patient side`);
-}
 
 const FLIP_LR = [[-1, 0, 0], [0, 1, 0], [0, 0, 1]];
 
@@ -90,7 +54,7 @@ test("a volume without patient axes offers the flips and turns, open, beside the
 
 test("no anatomical label anywhere on the page, nor on the saved image: the file's axes instead", async () => {
   await page.waitForFunction(() => document.querySelectorAll(".slice-pane .edge").length === 12);
-  const labels = await directionLabels();
+  const labels = await directionLabels(page);
   assertNoAnatomy(labels, "unoriented");
   assert.equal(labels.edges.length, 12, "four edge letters on each of three panes");
   assert.equal(await page.textContent("#view-anterior"), "From −y");
@@ -137,7 +101,7 @@ test("Treat as LPS / RAS set the patient axes by hand: anatomical labels that sa
   assert.match(await page.textContent("#orientation-fix-status"), /set by hand/);
   assert.equal(await page.textContent("#view-anterior"), "Anterior");
   assert.equal(await page.textContent("#orientation-flip-lr"), "Flip L/R");
-  const edges = (await directionLabels()).edges;
+  const edges = (await directionLabels(page)).edges;
   assert.deepEqual(edges.slice(0, 4).sort(), ["A", "L", "P", "R"], `axial pane edges ${edges}`);
   // LPS changes nothing on the server: no correction.
   assert.equal((await serverQuality())?.orientation_correction, undefined);
@@ -160,7 +124,7 @@ test("Treat as LPS / RAS set the patient axes by hand: anatomical labels that sa
   seq = await shownSeq(page);
   await page.click("#orientation-fix-reset");
   await finalWith(seq, null);
-  assertNoAnatomy(await directionLabels(), "after As the file says");
+  assertNoAnatomy(await directionLabels(page), "after As the file says");
 });
 
 test("Flip L/R mirrors the image; the server keeps the correction", async () => {

@@ -1,8 +1,8 @@
-// Orientation and presets in the web client (issue 16, items 1 and 2), in headless Chromium
-// against a real volcast-server: a CT in Hounsfield units opens on the CT bone preset with
+// Orientation and presets in the web client, in headless Chromium against a real
+// volcast-server: a CT in Hounsfield units opens on the CT bone preset with
 // shading on and its radiology window, says why; the orientation marker turns with the
 // view; the six standard views and the turns set the camera; a volume without patient axes
-// says so; an Alt-drag moves the level by a share of the window. Screenshots for
+// says so and names no patient direction anywhere on the page; an Alt-drag moves the level by a share of the window. Screenshots for
 // web/README.md go to the artifacts folder (orient-*.png).
 import { after, before, test } from "node:test";
 import assert from "node:assert/strict";
@@ -10,6 +10,7 @@ import { existsSync } from "node:fs";
 import path from "node:path";
 
 import { DATA_DIR, checkPrerequisites, launchBrowser, openPage, screenshot, startServer, updateDocScreenshot, waitForFinal } from "./harness.mjs";
+import { assertNoAnatomy, directionLabels } from "./labels.mjs";
 
 const missing = checkPrerequisites();
 if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
@@ -60,6 +61,13 @@ test("a CT in Hounsfield units opens on the CT bone preset, shaded, at W 2000 / 
   await screenshot(page, "orient-ct-bone-preset.png");
 });
 
+
+test("a scan file that names no patient axes shows no anatomical label anywhere on the page", { skip }, async () => {
+  await page.waitForFunction((name) => window.volcast.session.volume?.name === name, CT_SCAN, { timeout: 120000 });
+  assert.equal(await page.evaluate(() => window.volcast.session.volume.orientation_known), false);
+  await page.waitForFunction(() => document.querySelectorAll(".slice-pane .edge").length === 12);
+  assertNoAnatomy(await directionLabels(page), CT_SCAN);
+});
 test("a volume without patient axes says its orientation is unknown and offers turns", { skip }, async () => {
   assert.ok(await page.isVisible("#orientation-note"), "the note over the view");
   assert.match(await page.textContent("#orientation-note"), /Orientation unknown/);
