@@ -500,8 +500,8 @@ class UnevenRenderer : public SlowRenderer {
     double denseMsPerRay_;
 };
 
-// Issue 15's two-tab scenario left units of 100-250 ms (the frame-time target is 40): a
-// level's timing was kept when its quality changed (linear to cubic), and a unit planned on
+// Two tabs, one turning tricubic while the other drags, once gave units of 100-250 ms (the
+// frame-time target is 40): a level's timing was kept when its quality changed (linear to cubic), and a unit planned on
 // the cheap rows above the volume took the whole rest of the frame. After a final frame at
 // trilinear, the view turns tricubic: every unit, the first cubic frame's included, stays
 // near its budget.

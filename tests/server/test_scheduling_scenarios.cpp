@@ -1,4 +1,4 @@
-// The scheduling scenario of issue 15 on the real server and renderer, over loopback: two
+// A two-tab scheduling scenario on the real server and renderer, over loopback: two
 // tabs, one asking for expensive quality on a large scan while the other drags. What is
 // asserted is what holds on a loaded machine (2 shared cores): relations between times the
 // test measures itself, with allowances that say where they come from; how fast PoCL renders
@@ -124,7 +124,7 @@ class SchedulingScenario : public ::testing::Test {
     }
 };
 
-// Issue 15's "Done when": tab A opens iguana_microct (210×256×179), ticks shading and tricubic;
+// Tab A opens iguana_microct (210×256×179), ticks shading and tricubic;
 // tab B opens headsq and drags meanwhile. B's frames keep coming, each within the frame-time
 // target plus one unit plus an allowance for the loaded machine; A is told what is being
 // prepared, keeps getting trilinear frames marked as such, and then gets its cubic, shaded
@@ -250,7 +250,7 @@ TEST_F(SchedulingScenario, TabBStaysInteractiveWhileTabAPreparesCubicShadedIguan
     EXPECT_GT(duringPreparation.size(), 3u) << "B did not drag while A's coefficients were computed; " << report.str();
 }
 
-// Issue 15, item 3: each frame's stated error is within a factor of 1.5 of its RMSE against the
+// Each frame's stated error is within a factor of 1.5 of its RMSE against the
 // final frame of the same camera, in the same metric (8-bit RGB over black), over a drag of
 // bonsai, for interactive and refinement levels. Each camera: one interactive frame, then
 // the refinement to the final frame; the estimates come from earlier cameras' measurements.

@@ -121,7 +121,7 @@ double metricSum(const std::string &text, const std::string &name) {
 
 // ---- UTF-8 -----------------------------------------------------------------------------
 
-// The crash: a 2-byte text message "é" before hello, without a token, aborted the
+// A crash once: a 2-byte text message "é" before hello, without a token, aborted the
 // server (the malformed_json message quoted a cut UTF-8 sequence and serialising it threw).
 TEST(WsHardening, NonAsciiGarbageGetsMalformedJsonAndInvalidUtf8Closes1007) {
     volcast::server::ServerConfig config;
@@ -234,9 +234,9 @@ TEST(WsHardening, UnboundedRequestsAreRefusedNamingTheLimitWhileOthersRender) {
     ASSERT_TRUE(finalFrameOf(*a, 9, kTimeout));
     const json before = json::parse(request(*a, {{"type", "get_state"}, {"id", 10}}).text);
 
-    // The kind of request, an absurd step: 0.0002 on the demo (diagonal 222 voxels)
+    // An absurd step, as a browser field can send: 0.0002 on the demo (diagonal 222 voxels)
     // at 128² is 128² rays x 1.1e6 samples per ray = 1.8e10 predicted samples, over the 2^32
-    // default. (The issue's own step 0.001 at a browser's ~900 x 700 predicts 1.4e11.)
+    // default. (A step of 0.001 at a browser's ~900 x 700 predicts 1.4e11.)
     const json tiny = {{"type", "quality_policy"}, {"id", 11}, {"mode", "explicit"},
                        {"quality", {{"step", 0.0002}}}};
     const auto e1 = errorFor(*a, tiny);

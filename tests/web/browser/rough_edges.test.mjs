@@ -1,4 +1,4 @@
-// The web client's rough edges (issue 16, item 6), in headless Chromium against a real
+// The web client's rough edges, in headless Chromium against a real
 // volcast-server that also serves a small scan this test writes into a data folder of its
 // own: the picker, errors that clear, fields that show what is applied, honest stats, the
 // stats toggle, full screen, the view link, the focus ring, keyboard transfer-function

@@ -116,7 +116,7 @@ test("a link reopens the whole view: the same final frame to 1/255 and the same 
     const state = await p.evaluate(async () => (await window.volcast.session.getState()).scene);
     assert.deepEqual(state.clip_planes, clip);
 
-    // The same final frame: both PNGs over black, to 1/255 per channel (the issue's bound;
+    // The same final frame: both PNGs over black, to 1/255 per channel (the bound asked of a view link;
     // the same scene through the same renderer gives the same bytes, so any difference at
     // all would be a part of the view the link lost).
     const a = decodePng(Buffer.from(image)), b = decodePng(Buffer.from(await finalImage(p)));

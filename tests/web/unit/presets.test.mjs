@@ -51,7 +51,7 @@ test("the note follows the preset shown and says who chose the modality", () => 
 });
 
 test("window and level numbers: whole HU, else three significant digits, whole units above 100", () => {
-  assert.equal(displayNumber(176.896), 177);    // the MR window the issue found cut in its field
+  assert.equal(displayNumber(176.896), 177);    // an MR window once shown cut in its field
   assert.equal(displayNumber(108.148), 108);
   assert.equal(displayNumber(52.6123), 52.6);
   assert.equal(displayNumber(0.045678), 0.0457);
