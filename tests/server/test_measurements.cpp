@@ -11,6 +11,7 @@
 #include "renderer/reference_renderer.hpp"
 #include "renderer/slice.hpp"
 #include "server/server.hpp"
+#include "tests/server/png_decode.hpp"
 #include "tests/server/server_fixture.hpp"
 
 #include <OpenImageIO/filesystem.h>
@@ -55,23 +56,7 @@ volcast::Volume rampVolume() {
     return v;
 }
 
-// A PNG frame (the final level's codec) as 8-bit RGBA, alpha as stored.
-std::vector<uint8_t> decodePng(const std::vector<uint8_t> &png, int &w, int &h, int &channels) {
-    OIIO::Filesystem::IOMemReader reader(png.data(), png.size());
-    OIIO::ImageSpec config;
-    config.attribute("oiio:UnassociatedAlpha", 1);
-    OIIO::Filesystem::IOProxy *proxy = &reader;
-    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-    auto in = OIIO::ImageInput::open("frame.png", &config, &reader);
-    if (!in) throw std::runtime_error("png decode: " + OIIO::geterror());
-    const auto &spec = in->spec();
-    w = spec.width;
-    h = spec.height;
-    channels = spec.nchannels;
-    std::vector<uint8_t> pixels(size_t(w) * size_t(h) * size_t(channels));
-    in->read_image(0, 0, 0, channels, OIIO::TypeDesc::UINT8, pixels.data());
-    return pixels;
-}
+using volcast::test::decodePng;
 
 class MeasurementServerTest : public ::testing::Test {
   protected:

@@ -10,6 +10,7 @@
 #include "server/frame_encoder.hpp"
 #include "server/server.hpp"
 #include "tests/server/child_process.hpp"
+#include "tests/server/png_decode.hpp"
 #include "tests/server/server_fixture.hpp"
 
 #include <OpenImageIO/filesystem.h>
@@ -78,24 +79,7 @@ std::vector<volcast::client::Frame> framesUntilFinal(Client &c, std::vector<Mess
 
 using volcast::test::cameraAt;
 
-// Decode a PNG frame to 8-bit RGBA.
-std::vector<uint8_t> decodePng(const std::vector<uint8_t> &png, int &w, int &h, int &channels) {
-    OIIO::Filesystem::IOMemReader reader(png.data(), png.size());
-    // The bytes as stored (straight alpha): by default OIIO would premultiply them.
-    OIIO::ImageSpec config;
-    config.attribute("oiio:UnassociatedAlpha", 1);
-    OIIO::Filesystem::IOProxy *proxy = &reader;
-    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-    auto in = OIIO::ImageInput::open("frame.png", &config, &reader);
-    if (!in) throw std::runtime_error("png decode: " + OIIO::geterror());
-    const auto &spec = in->spec();
-    w = spec.width;
-    h = spec.height;
-    channels = spec.nchannels;
-    std::vector<uint8_t> pixels(size_t(w) * size_t(h) * size_t(channels));
-    in->read_image(0, 0, 0, channels, OIIO::TypeDesc::UINT8, pixels.data());
-    return pixels;
-}
+using volcast::test::decodePng;
 
 double metricValue(const std::string &text, const std::string &name) {
     const auto pos = text.find("\n" + name + " ");
