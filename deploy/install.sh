@@ -22,7 +22,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev python3 python3-websockets
   # Fuzz targets (fuzz/README.md): clang with libFuzzer, ASan and UBSan
   clang-14 libfuzzer-14-dev libclang-rt-14-dev
-  # The Python client package (protocol/python): Frame.to_numpy decodes with numpy and Pillow;
+  # The Python client package (client/python): Frame.to_numpy decodes with numpy and Pillow;
   # its test installs the package offline into a venv with the system's setuptools and wheel.
   python3-numpy python3-pil python3-venv python3-setuptools python3-wheel
   # Web client tests: Debian's Chromium driven by playwright-core

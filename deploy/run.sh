@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Quick start, the main job: install what is missing, build, and start the rendering server
 # on the built-in demo volume. Open the printed URL in a browser, or drive it with a script
-# (protocol/python/examples/orbit.py, build/client/volcast-client). Ctrl-C stops it.
+# (client/python/examples/orbit.py, build/client/volcast-client). Ctrl-C stops it.
 #
 # Settings come from the environment (server/README.md lists them all), e.g.
 #   VOLCAST_PORT=9000 VOLCAST_DATA=/scans deploy/run.sh

@@ -4,7 +4,7 @@
 // written out (sceneToJson) parses back to an equal scene.
 
 #include "fuzz/fuzz_check.hpp"
-#include "renderer/scene.hpp"
+#include "renderer/model/scene.hpp"
 
 #include <cstddef>
 #include <cstdint>

@@ -157,7 +157,7 @@ ClientMessage readRoiStats(const json &root, const RequestId &id, const Limits &
     return m;
 }
 
-// The same bound as a scene's image side (renderer/scene.hpp's kMaxImageSide).
+// The same bound as a scene's image side (renderer/model/scene.hpp's kMaxImageSide).
 constexpr int kMaxPickImageSide = 16384;
 
 ClientMessage readPick(const json &root, const RequestId &id, const Limits &) {

@@ -4,7 +4,7 @@
 // image size, quality switches, clip planes) travel in exactly the JSON form of docs/design.md's
 // scene file, under the same keys, so a session's state can be saved as a scene file. Here
 // only their JSON kind is checked (camera must be an object, ...): their detailed checks
-// belong to renderer/scene.cpp's parseScene, which the server runs on the assembled scene.
+// belong to renderer/model/scene.cpp's parseScene, which the server runs on the assembled scene.
 
 #include "protocol/errors.hpp"
 #include "protocol/slice.hpp"

@@ -1,11 +1,11 @@
 #pragma once
 // Internal to protocol/: the protocol's side of reading JSON. Fields, kinds and paths are
-// read by the shared json_fields library (json_fields/README.md); here are the errors that
+// read by the shared json_fields library (util/README.md); here are the errors that
 // carry a protocol error code (ReadError), how a json_fields::FieldError becomes one, and
 // the request id. The public parse functions catch both once and answer with a
 // ProtocolError carrying the request's id.
 
-#include "json_fields/json_fields.hpp"
+#include "util/json_fields.hpp"
 #include "protocol/errors.hpp"
 
 #include <nlohmann/json.hpp>

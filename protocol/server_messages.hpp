@@ -55,7 +55,7 @@ struct HistogramInfo {
     bool operator==(const HistogramInfo &) const = default;
 };
 
-// A display preset resolved on one volume (renderer/presets.hpp): window/level and points
+// A display preset resolved on one volume (renderer/model/presets.hpp): window/level and points
 // in the volume's data units, and whether it shades.
 struct PresetInfo {
     std::string name;

@@ -1,8 +1,8 @@
 #pragma once
-// The protocol quotes client text through json_fields' UTF-8 helpers (json_fields/utf8.hpp),
+// The protocol quotes client text through json_fields' UTF-8 helpers (util/utf8.hpp),
 // under the protocol's own names.
 
-#include "json_fields/utf8.hpp"
+#include "util/utf8.hpp"
 
 namespace volcast::protocol {
 using json_fields::isValidUtf8;

@@ -6,7 +6,7 @@
 //   auto                a GPU through OpenCL if there is one, else the native CPU ray caster
 // PoCL is an OpenCL *CPU* device: auto never picks it, opencl:cpu or opencl:pthread do.
 
-#include "renderer/frame_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
 
 #include <memory>
 #include <string>

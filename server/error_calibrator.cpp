@@ -1,7 +1,7 @@
 #include "server/error_calibrator.hpp"
 
-#include "renderer/camera.hpp"
-#include "renderer/reference_renderer.hpp"
+#include "renderer/model/camera.hpp"
+#include "renderer/reference/reference_renderer.hpp"
 #include "server/frame_encoder.hpp"
 
 #include <OpenImageIO/filesystem.h>

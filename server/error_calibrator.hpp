@@ -24,7 +24,7 @@
 // Nothing here runs on the render thread except copying a frame to 8-bit RGB.
 
 #include "protocol/frame.hpp"
-#include "renderer/frame_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
 #include "server/preprocess_worker.hpp"
 #include "server/quality_ladder.hpp"
 

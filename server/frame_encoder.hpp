@@ -2,19 +2,19 @@
 // Frames encoded in memory with OpenImageIO (docs/platform.md: ImageOutput::create with an
 // IOVecOutput proxy, no disk). The renderer's images are premultiplied float RGBA.
 //  - JPEG has no alpha: the premultiplied colour is the image composited over black, as
-//    volcast-render's .png writer does (renderer/image.cpp).
+//    volcast-render's .png writer does (renderer/model/image.cpp).
 //  - PNG (the final frame) is lossless RGBA: protocol/README.md's "premultiplied RGBA as 8-bit
 //    straight RGBA", so a client can composite it over any background. toStraightRgba8 is the
 //    conversion, exposed so tests can reproduce it byte for byte.
 
-#include "renderer/image.hpp"
+#include "renderer/model/image.hpp"
 
 #include <cstdint>
 #include <vector>
 
 namespace volcast::server {
 
-// 8-bit RGB over black: round(clamp(c) · 255), as renderer/image.cpp writes .png files.
+// 8-bit RGB over black: round(clamp(c) · 255), as renderer/model/image.cpp writes .png files.
 std::vector<uint8_t> toRgb8OverBlack(const Image &image);
 // 8-bit straight RGBA: A = round(a · 255), C = round(min(c / a, 1) · 255) (0 where a = 0).
 std::vector<uint8_t> toStraightRgba8(const Image &image);

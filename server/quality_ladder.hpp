@@ -33,8 +33,8 @@
 // latest level measured both ways compares; else the nearest measured level's; else a
 // device-independent guess).
 
-#include "renderer/scene.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <cstdint>
 #include <optional>

@@ -27,8 +27,8 @@
 
 #include "protocol/frame.hpp"
 #include "protocol/server_messages.hpp"
-#include "renderer/frame_renderer.hpp"
-#include "renderer/scene.hpp"
+#include "renderer/common/frame_renderer.hpp"
+#include "renderer/model/scene.hpp"
 #include "server/error_calibrator.hpp"
 #include "server/metrics.hpp"
 #include "server/preprocess_worker.hpp"

@@ -1,7 +1,7 @@
 #include "server/session_scene.hpp"
 
 #include "renderer/io/volume_source.hpp"
-#include "renderer/presets.hpp"
+#include "renderer/model/presets.hpp"
 
 #include <cmath>
 
@@ -23,7 +23,7 @@ json defaultTransferFunction(const VolumeEntry &entry) {
                   {225, 0.85, 0.15, 0.1, 0.3},
                   {255, 1, 0.25, 0.2, 0.95}}},
                 {"opacity_unit", 1.0}};
-    // The default preset of the modality chosen for the volume (renderer/presets.hpp), as
+    // The default preset of the modality chosen for the volume (renderer/model/presets.hpp), as
     // points in data units: a saved scene then renders the same wherever it is opened.
     const Volume &v = *entry.volume;
     const std::vector<ResolvedPreset> presets = presetsFor(v, chooseModality(v, entry.name));

@@ -2,11 +2,11 @@
 // A session's scene as the client built it: docs/design.md's scene-file pieces (camera, transfer
 // function, image, quality, clip planes) kept as typed values, plus the quality policy. Each
 // change arrives in scene-file JSON form and is read once, by the scene-file parser's own
-// piece readers (renderer/scene.hpp), so the server refuses exactly what volcast-render
+// piece readers (renderer/model/scene.hpp), so the server refuses exactly what volcast-render
 // would; a refused change (SceneError, whose message names the key) leaves the scene as it was.
 
 #include "protocol/client_messages.hpp"
-#include "renderer/scene.hpp"
+#include "renderer/model/scene.hpp"
 #include "server/volume_registry.hpp"
 
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
 #include "server/shared_state.hpp"
 
-#include "renderer/scene.hpp"
-#include "renderer/transfer_function.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/transfer_function.hpp"
 #include "server/websocket_session.hpp"
 
 #include <spdlog/spdlog.h>

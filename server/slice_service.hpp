@@ -1,6 +1,6 @@
 #pragma once
 // Answers `slice` requests (protocol/README.md): resamples a plane of a session's volume
-// (renderer/slice.hpp), windows it to 8-bit grey and encodes the VCS1 slice message.
+// (renderer/model/slice.hpp), windows it to 8-bit grey and encodes the VCS1 slice message.
 //
 // Where it runs: on its own worker thread, one slice at a time, not through the render
 // scheduler nor the preprocessing worker. A slice is a few milliseconds of host work
@@ -19,8 +19,8 @@
 
 #include "protocol/errors.hpp"
 #include "protocol/slice.hpp"
-#include "renderer/slice.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/slice.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <condition_variable>
 #include <cstdint>

@@ -12,7 +12,7 @@
 // unit's cost per ray stands for the rest of the frame: a frame whose top rows are empty no
 // longer measures a cost near zero there and then plans one unit for everything below.
 
-#include "renderer/frame_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
 #include "server/quality_ladder.hpp"
 
 #include <cstdint>

@@ -1,7 +1,7 @@
 #include "server/volume_registry.hpp"
 
-#include "renderer/presets.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/model/presets.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/make_frame_renderer.hpp"

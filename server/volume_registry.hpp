@@ -16,9 +16,9 @@
 
 #include "protocol/errors.hpp"
 #include "protocol/server_messages.hpp"
-#include "renderer/frame_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
 #include "renderer/opencl/opencl_context.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 #include "server/metrics.hpp"
 #include "server/volume_provider.hpp"
 

@@ -2,9 +2,9 @@
 
 #include "protocol/protocol.hpp"
 #include "renderer/io/volume_source.hpp"
-#include "renderer/presets.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/slice.hpp"
+#include "renderer/model/presets.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/slice.hpp"
 
 #include <boost/asio/post.hpp>
 #include <spdlog/fmt/fmt.h>
@@ -504,7 +504,7 @@ void WebsocketSession::onSlice(const protocol::SliceRequest &m) {
 
 namespace {
 // "HU" when the volume's values are Hounsfield units: the modality chosen for it is CT in
-// Hounsfield units (not CT stored as grey values, renderer/presets.hpp); else raw data units (null).
+// Hounsfield units (not CT stored as grey values, renderer/model/presets.hpp); else raw data units (null).
 std::optional<std::string> valueUnit(const VolumeEntry &entry) {
     if (chooseModality(*entry.volume, entry.name).hounsfield) return std::string("HU");
     return std::nullopt;

@@ -1,6 +1,6 @@
-#include "json_fields/json_fields.hpp"
+#include "util/json_fields.hpp"
 
-#include "json_fields/utf8.hpp"
+#include "util/utf8.hpp"
 
 #include <cmath>
 #include <memory>

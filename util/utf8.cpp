@@ -1,4 +1,4 @@
-#include "json_fields/utf8.hpp"
+#include "util/utf8.hpp"
 
 namespace volcast::json_fields {
 namespace {

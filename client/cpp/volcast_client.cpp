@@ -15,7 +15,7 @@
 // then waits for the final frame. Latency is from sending the request a frame answers to
 // receiving the frame.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 
 #include <CLI/CLI.hpp>
 

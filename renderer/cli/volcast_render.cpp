@@ -2,11 +2,11 @@
 //
 //   volcast-render scene.json -o out.exr [--reference] [--compare other.exr] [--data FOLDER]...
 
-#include "renderer/error_metrics.hpp"
-#include "renderer/image.hpp"
+#include "renderer/reference/error_metrics.hpp"
+#include "renderer/model/image.hpp"
 #include "renderer/make_frame_renderer.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/scene.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/scene.hpp"
 #include "renderer/io/volume_source.hpp"
 #include "protocol/volume_name.hpp"
 

@@ -1,4 +1,4 @@
-#include "renderer/bspline_prefilter.hpp"
+#include "renderer/common/bspline_prefilter.hpp"
 
 #include <algorithm>
 #include <cmath>

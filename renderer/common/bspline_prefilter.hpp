@@ -3,7 +3,7 @@
 // turns samples into coefficients c such that sum_k c[k]·β³(x − k) passes through every
 // sample. Mirror (whole-sample symmetric) boundaries: c[−k] = c[k], c[n−1+k] = c[n−1−k].
 
-#include "renderer/math.hpp"
+#include "renderer/model/math.hpp"
 
 #include <cstddef>
 

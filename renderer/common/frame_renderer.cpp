@@ -1,4 +1,4 @@
-#include "renderer/frame_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
 
 #include <spdlog/spdlog.h>
 

@@ -3,11 +3,11 @@
 // so that tools, tests and the server depend on this interface and not on a back end. Also
 // the checks and the step choice every back end must make the same way.
 
-#include "renderer/camera.hpp"
-#include "renderer/image.hpp"
-#include "renderer/scene.hpp"
-#include "renderer/transfer_function.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/camera.hpp"
+#include "renderer/model/image.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/transfer_function.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <cstdint>
 #include <string>

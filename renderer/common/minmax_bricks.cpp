@@ -1,4 +1,4 @@
-#include "renderer/minmax_bricks.hpp"
+#include "renderer/common/minmax_bricks.hpp"
 
 #include <algorithm>
 #include <cmath>

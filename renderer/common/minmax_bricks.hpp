@@ -18,9 +18,9 @@
 // The stored values are the exact float min/max of those samples; a float-precision
 // reconstruction (GPU lerp) may round up to an ulp past them.
 
-#include "renderer/math.hpp"
-#include "renderer/transfer_function.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/math.hpp"
+#include "renderer/model/transfer_function.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <cstddef>
 #include <cstdint>

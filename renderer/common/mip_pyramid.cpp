@@ -1,4 +1,4 @@
-#include "renderer/mip_pyramid.hpp"
+#include "renderer/common/mip_pyramid.hpp"
 
 #include <algorithm>
 #include <stdexcept>

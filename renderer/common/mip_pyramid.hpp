@@ -10,8 +10,8 @@
 // data through this map: where n is not a multiple of 2^L, the level-L box reaches past the
 // level-0 box, and that overhang is never sampled.
 
-#include "renderer/math.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/math.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <cmath>
 #include <mutex>

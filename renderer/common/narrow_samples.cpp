@@ -1,4 +1,4 @@
-#include "renderer/narrow_samples.hpp"
+#include "renderer/common/narrow_samples.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -4,7 +4,7 @@
 // (Volume::narrowVoxels), a quarter (half) of float32's bytes, and both back ends sample that
 // store as it is. Widened back to float the values are exactly the same.
 
-#include "renderer/math.hpp"
+#include "renderer/model/math.hpp"
 
 #include <cstddef>
 #include <vector>

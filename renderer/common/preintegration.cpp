@@ -1,4 +1,4 @@
-#include "renderer/preintegration.hpp"
+#include "renderer/common/preintegration.hpp"
 
 #include <algorithm>
 #include <array>

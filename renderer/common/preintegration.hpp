@@ -49,7 +49,7 @@
 // which is exact for a constant value and a close approximation otherwise. `partialSegment`
 // implements this.
 
-#include "renderer/transfer_function.hpp"
+#include "renderer/model/transfer_function.hpp"
 
 #include <cmath>
 #include <vector>

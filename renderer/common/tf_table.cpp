@@ -1,4 +1,4 @@
-#include "renderer/tf_table.hpp"
+#include "renderer/common/tf_table.hpp"
 
 #include <algorithm>
 #include <cmath>

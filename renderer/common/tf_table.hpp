@@ -7,7 +7,7 @@
 // against the exact piecewise-linear function stays below a bound (docs/design.md: a table must
 // be fine enough that its error stays below the quality tolerance).
 
-#include "renderer/transfer_function.hpp"
+#include "renderer/model/transfer_function.hpp"
 
 #include <vector>
 

@@ -1,9 +1,9 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 
-#include "renderer/bspline_prefilter.hpp"
+#include "renderer/common/bspline_prefilter.hpp"
 #include "renderer/cpu/cpu_march.hpp"
-#include "renderer/preintegration.hpp"
-#include "renderer/tf_table.hpp"
+#include "renderer/common/preintegration.hpp"
+#include "renderer/common/tf_table.hpp"
 
 #include <algorithm>
 #include <atomic>

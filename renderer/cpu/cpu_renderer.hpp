@@ -8,11 +8,11 @@
 // clip planes, early termination, empty-space skipping, mip levels, image scale, shading,
 // cubic B-spline, pre-integration: every switch of the scene contract.
 
-#include "renderer/frame_renderer.hpp"
-#include "renderer/minmax_bricks.hpp"
-#include "renderer/mip_pyramid.hpp"
-#include "renderer/narrow_samples.hpp"
-#include "renderer/preintegration.hpp"
+#include "renderer/common/frame_renderer.hpp"
+#include "renderer/common/minmax_bricks.hpp"
+#include "renderer/common/mip_pyramid.hpp"
+#include "renderer/common/narrow_samples.hpp"
+#include "renderer/common/preintegration.hpp"
 
 #include <atomic>
 #include <map>

@@ -40,7 +40,7 @@
 //   links refused, entries, bytes and ratio bounded) into a fresh folder beside it, loaded as
 //   a folder, and the folder removed. Like every folder it is parsed first in the checker.
 
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <array>
 #include <cstdint>

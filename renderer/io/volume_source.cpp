@@ -1,6 +1,6 @@
 #include "renderer/io/volume_source.hpp"
 
-#include "renderer/synthetic.hpp"
+#include "renderer/model/synthetic.hpp"
 
 namespace volcast {
 

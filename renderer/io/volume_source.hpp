@@ -2,7 +2,7 @@
 // The volume a scene names: a file through the loader, or "builtin:NAME" for a synthetic
 // volume, which also brings its continuous field.
 
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 #include "renderer/io/volume_io.hpp"
 
 #include <functional>

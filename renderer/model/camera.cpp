@@ -1,6 +1,6 @@
-#include "renderer/camera.hpp"
+#include "renderer/model/camera.hpp"
 
-#include "renderer/scene.hpp"
+#include "renderer/model/scene.hpp"
 
 #include <cmath>
 #include <numbers>

@@ -3,7 +3,7 @@
 // (full view height in world units). Image x = forward × up, y up, pixel centres sampled,
 // row 0 at the top.
 
-#include "renderer/math.hpp"
+#include "renderer/model/math.hpp"
 
 namespace volcast {
 

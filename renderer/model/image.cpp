@@ -1,4 +1,4 @@
-#include "renderer/image.hpp"
+#include "renderer/model/image.hpp"
 
 #include <OpenImageIO/imageio.h>
 

@@ -1,4 +1,4 @@
-#include "renderer/orientation_correction.hpp"
+#include "renderer/model/orientation_correction.hpp"
 
 namespace volcast {
 

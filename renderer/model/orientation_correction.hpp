@@ -12,8 +12,8 @@
 // scene's quality (quality.orientation_correction, like the crop box) and every back end
 // maps world to index space through correctedPlacement().
 
-#include "renderer/math.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/math.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <array>
 #include <string>

@@ -1,4 +1,4 @@
-#include "renderer/presets.hpp"
+#include "renderer/model/presets.hpp"
 
 #include <algorithm>
 #include <cctype>

@@ -20,7 +20,7 @@
 // Every preset of every modality is resolved on every scan (a client lets the user pick
 // another modality than the one chosen here); the chosen modality's default comes first.
 
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <array>
 #include <string>
@@ -44,7 +44,7 @@ struct ResolvedPreset {
     std::string modality;
     double window = 1, level = 0;                // data units
     std::vector<std::array<double, 5>> points;   // [value, r, g, b, a], data units
-    bool shading = false;                        // gradient Phong lighting (renderer/phong_constants.h)
+    bool shading = false;                        // gradient Phong lighting (renderer/model/phong_constants.h)
 };
 
 // The modality a volume's header states (Volume::modality: a DICOM or NRRD-key code, or the

@@ -1,6 +1,6 @@
-#include "renderer/scene.hpp"
+#include "renderer/model/scene.hpp"
 
-#include "json_fields/json_fields.hpp"
+#include "util/json_fields.hpp"
 
 #include <nlohmann/json.hpp>
 

@@ -2,9 +2,9 @@
 // The scene contract of docs/design.md: volume + transfer function + camera + image size +
 // quality + clip planes. One JSON form, read by volcast-render and the server alike.
 
-#include "renderer/camera.hpp"
-#include "renderer/orientation_correction.hpp"
-#include "renderer/transfer_function.hpp"
+#include "renderer/model/camera.hpp"
+#include "renderer/model/orientation_correction.hpp"
+#include "renderer/model/transfer_function.hpp"
 
 #include <nlohmann/json.hpp>
 

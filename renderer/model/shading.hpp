@@ -4,7 +4,7 @@
 // gradient is taken by central differences one voxel apart on the reconstruction, so both
 // renderers light the same field; a zero gradient leaves the colour unlit.
 
-#include "renderer/phong_constants.h"
+#include "renderer/model/phong_constants.h"
 
 #include <algorithm>
 #include <cmath>

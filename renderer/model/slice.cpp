@@ -1,6 +1,6 @@
-#include "renderer/slice.hpp"
+#include "renderer/model/slice.hpp"
 
-#include "renderer/reconstruction.hpp"
+#include "renderer/reference/reconstruction.hpp"
 
 #include <algorithm>
 #include <array>

@@ -2,7 +2,7 @@
 // Planar slices of a volume in the patient frame: the axial, coronal and sagittal planes of
 // the world (ITK's LPS) axes of docs/design.md. A volume without orientation has the identity
 // direction, so its slices are its own axes. Each slice is resampled with the trilinear field
-// of renderer/reconstruction.hpp (clamp-to-edge inside the cell box); a pixel whose centre
+// of renderer/reference/reconstruction.hpp (clamp-to-edge inside the cell box); a pixel whose centre
 // lies outside the volume's cell box [-1/2, n - 1/2] is background.
 //
 // Image layout, as radiologists read them (the patient's right on the image's left):
@@ -11,8 +11,8 @@
 //   sagittal  columns +y (towards posterior),    rows -z: anterior on the left, superior on top
 // Pixel (c, r) samples world = origin + c·s·column + r·s·row, row 0 at the top.
 
-#include "renderer/orientation_correction.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/orientation_correction.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <cstdint>
 #include <optional>

@@ -1,4 +1,4 @@
-#include "renderer/synthetic.hpp"
+#include "renderer/model/synthetic.hpp"
 
 #include <algorithm>
 #include <cmath>

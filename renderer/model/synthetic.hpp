@@ -3,7 +3,7 @@
 // it also exposes, so the reference renderer can integrate the field itself; the difference
 // between the two is the reconstruction (interpolation) error.
 
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <functional>
 #include <string>

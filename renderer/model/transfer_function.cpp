@@ -1,4 +1,4 @@
-#include "renderer/transfer_function.hpp"
+#include "renderer/model/transfer_function.hpp"
 
 #include <algorithm>
 #include <stdexcept>

@@ -3,7 +3,7 @@
 // piecewise linear between points and clamped outside. `a` is the opacity of a segment
 // of length opacityUnit (world units), so the extinction is tau = -ln(1 - a) / opacityUnit.
 
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <cmath>
 #include <optional>

@@ -1,4 +1,4 @@
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -2,9 +2,9 @@
 // A scalar volume on a regular grid, in the coordinates of docs/design.md: voxel (i, j, k) is a
 // sample at world = origin + D·(i·sx, j·sy, k·sz), and owns the cell of size s around it.
 
-#include "renderer/huge_pages.hpp"
-#include "renderer/math.hpp"
-#include "renderer/narrow_samples.hpp"
+#include "renderer/model/huge_pages.hpp"
+#include "renderer/model/math.hpp"
+#include "renderer/common/narrow_samples.hpp"
 
 #include <cstddef>
 #include <cstdint>
@@ -54,7 +54,7 @@ struct Volume {
     bool orientationKnown = false;
     // What the file's header says the data is, and where: a modality code (DICOM Modality
     // (0008,0060), an NRRD key `modality:=CT`) or a description whose words may name one (NRRD
-    // `content`, NIfTI `descrip`); renderer/presets.cpp reads it. Both empty if none.
+    // `content`, NIfTI `descrip`); renderer/model/presets.cpp reads it. Both empty if none.
     std::string modality;
     std::string modalityField;      // "DICOM", "NRRD key", "NRRD content", "NIfTI descrip"; empty: a code
 

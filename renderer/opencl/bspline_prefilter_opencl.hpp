@@ -2,7 +2,7 @@
 // The cubic B-spline prefilter of bspline_prefilter.hpp on an OpenCL device
 // (kernels/bspline_prefilter.cl), kept apart so that header stays free of OpenCL.
 
-#include "renderer/math.hpp"
+#include "renderer/model/math.hpp"
 #include "renderer/opencl/opencl_context.hpp"
 
 #include <vector>

@@ -1,12 +1,12 @@
 #include "renderer/opencl/opencl_renderer.hpp"
 
-#include "renderer/bspline_prefilter.hpp"
+#include "renderer/common/bspline_prefilter.hpp"
 #include "renderer/opencl/bspline_prefilter_opencl.hpp"
-#include "renderer/camera.hpp"
+#include "renderer/model/camera.hpp"
 #include "renderer/opencl/embedded_kernels.hpp"
 #include "renderer/opencl/kernels/raycast_shared.h"
-#include "renderer/preintegration.hpp"
-#include "renderer/tf_table.hpp"
+#include "renderer/common/preintegration.hpp"
+#include "renderer/common/tf_table.hpp"
 
 #include <spdlog/spdlog.h>
 

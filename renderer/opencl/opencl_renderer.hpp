@@ -6,14 +6,14 @@
 // function changes), the pre-integration table (rebuilt when the transfer function or the
 // step changes). Everything is cached for the renderer's life.
 
-#include "renderer/frame_renderer.hpp"
-#include "renderer/image.hpp"
-#include "renderer/minmax_bricks.hpp"
-#include "renderer/mip_pyramid.hpp"
-#include "renderer/narrow_samples.hpp"
+#include "renderer/common/frame_renderer.hpp"
+#include "renderer/model/image.hpp"
+#include "renderer/common/minmax_bricks.hpp"
+#include "renderer/common/mip_pyramid.hpp"
+#include "renderer/common/narrow_samples.hpp"
 #include "renderer/opencl/opencl_context.hpp"
-#include "renderer/scene.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <map>
 #include <memory>

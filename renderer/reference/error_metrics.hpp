@@ -2,7 +2,7 @@
 // Error of an image against a reference (docs/design.md): RMSE over premultiplied RGBA in
 // [0, 1], PSNR = 20·log10(1 / RMSE), the largest absolute difference, and an error image.
 
-#include "renderer/image.hpp"
+#include "renderer/model/image.hpp"
 
 namespace volcast {
 

@@ -1,6 +1,6 @@
-#include "renderer/reconstruction.hpp"
+#include "renderer/reference/reconstruction.hpp"
 
-#include "renderer/bspline_prefilter.hpp"
+#include "renderer/common/bspline_prefilter.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -3,7 +3,7 @@
 // clamp-to-edge rule of docs/design.md: coordinates are clamped to [0, n − 1] per axis before
 // interpolating, so the outer half-cells repeat the edge value.
 
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <vector>
 

@@ -1,6 +1,6 @@
-#include "renderer/reference_renderer.hpp"
+#include "renderer/reference/reference_renderer.hpp"
 
-#include "renderer/shading.hpp"
+#include "renderer/model/shading.hpp"
 
 #include <algorithm>
 #include <array>

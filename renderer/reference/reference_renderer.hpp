@@ -11,12 +11,12 @@
 // no crossing is missed), leaving pieces on which the integrand is smooth; there it
 // integrates adaptively and keeps an error estimate weighted by the transmittance in front.
 
-#include "renderer/camera.hpp"
-#include "renderer/image.hpp"
-#include "renderer/reconstruction.hpp"
-#include "renderer/scene.hpp"
-#include "renderer/transfer_function.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/camera.hpp"
+#include "renderer/model/image.hpp"
+#include "renderer/reference/reconstruction.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/transfer_function.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <functional>
 #include <memory>

@@ -2,10 +2,10 @@
 // What every volcast-bench study shares: timing with warm-up and repeats, the machine it
 // ran on, the peers' camera and transfer function, and the files a study writes.
 
-#include "renderer/camera.hpp"
+#include "renderer/model/camera.hpp"
 #include "renderer/opencl/opencl_context.hpp"
-#include "renderer/transfer_function.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/transfer_function.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <nlohmann/json.hpp>
 

@@ -12,7 +12,7 @@
 
 #include "tests/bench/byos.hpp"
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "server/server.hpp"
 #include "tests/bench/bench.hpp"

@@ -2,8 +2,8 @@
 // The paper's Figure-5 configurations A–F as quality switches, and the scans the studies
 // render with a transfer function each.
 
-#include "renderer/scene.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <filesystem>
 #include <string>

@@ -12,7 +12,7 @@ against that PNG, both as 8-bit RGB over black (the protocol's composite for JPE
 the interactive target (docs/service.md): p95 motion-to-frame <= 40 ms with frames >= 30 dB.
 
 Runs with Debian's /usr/bin/python3 and its python3-numpy and python3-pil (frame decoding:
-protocol/python/volcast/frames.py). A benchmark, not a test: run it on a quiet machine and
+client/python/volcast/frames.py). A benchmark, not a test: run it on a quiet machine and
 interleave builds (--server) when comparing them.
 
     /usr/bin/python3 tests/bench/drag_quality.py --server build/server/volcast-server \\
@@ -31,7 +31,7 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "..", "protocol", "python"))
+sys.path.insert(0, os.path.join(HERE, "..", "..", "client", "python"))
 sys.path.insert(0, os.path.join(HERE, "..", "soak"))
 import numpy as np  # noqa: E402
 import volcast as vc  # noqa: E402

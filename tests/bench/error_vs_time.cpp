@@ -2,8 +2,8 @@
 // its error against the exact reference (docs/design.md: RMSE over premultiplied RGBA, PSNR), on
 // real scans, with the Pareto front (no other point both faster and more accurate) marked.
 
-#include "renderer/error_metrics.hpp"
-#include "renderer/reference_renderer.hpp"
+#include "renderer/reference/error_metrics.hpp"
+#include "renderer/reference/reference_renderer.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "tests/bench/configurations.hpp"
 #include "tests/bench/phantom.hpp"

@@ -2,7 +2,7 @@
 // orbit the peers' camera over a volume at 1 sample per voxel and time whole frames
 // (kernel, read-back to the host, and any upsampling: what a server pays before encoding).
 
-#include "renderer/image.hpp"
+#include "renderer/model/image.hpp"
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/io/volume_io.hpp"

@@ -5,7 +5,7 @@
 // [0, 1] scaled to 0..255 (8-bit) or 0..4095 (16-bit). The same shapes and values; the noise
 // comes from another generator, so voxels differ by the noise only.
 
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 namespace volcast::bench {
 

@@ -2,7 +2,7 @@
 // multithreaded against OpenCL, on 256³ and 512³, next to the memory-bandwidth floor:
 // reading and writing the volume three times (one pass per axis).
 
-#include "renderer/bspline_prefilter.hpp"
+#include "renderer/common/bspline_prefilter.hpp"
 #include "renderer/opencl/bspline_prefilter_opencl.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"

@@ -3,7 +3,7 @@
 // (its memory-bandwidth floor), median of 5. Small and quick so that two builds can be run
 // interleaved (docs/performance.md, Table 2); `volcast-bench prefilter` is the full study.
 
-#include "renderer/bspline_prefilter.hpp"
+#include "renderer/common/bspline_prefilter.hpp"
 
 #include <algorithm>
 #include <chrono>

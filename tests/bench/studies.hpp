@@ -2,9 +2,9 @@
 // The studies of volcast-bench, one function each (see tests/bench/README.md). Each writes
 // its JSON, CSV, Markdown table and SVG plot into options.out and prints the table.
 
-#include "renderer/frame_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
 #include "renderer/opencl/opencl_context.hpp"
-#include "renderer/scene.hpp"
+#include "renderer/model/scene.hpp"
 #include "tests/bench/bench.hpp"
 
 #include <filesystem>

@@ -9,7 +9,7 @@ session open, runs COMMAND (which should send SIGTERM to the server: `podman sto
 checks that the server closes the session with WebSocket close 1001 ("going away", the reason
 naming SIGTERM) and that COMMAND returns within S seconds. Prints one JSON line of figures;
 exits non-zero, naming what failed, otherwise. Uses the volcast package
-(protocol/python/volcast) and Debian's python3-websockets.
+(client/python/volcast) and Debian's python3-websockets.
 """
 
 import argparse
@@ -19,7 +19,7 @@ import os
 import sys
 import time
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "protocol", "python"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "client", "python"))
 import volcast as vc  # noqa: E402
 
 GOING_AWAY = 1001

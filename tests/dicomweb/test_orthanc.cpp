@@ -9,7 +9,7 @@
 #include "orthanc_fixture.hpp"
 
 #include "renderer/io/volume_io.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/volume.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
-#include "renderer/bspline_prefilter.hpp"
+#include "renderer/common/bspline_prefilter.hpp"
 #include "renderer/opencl/bspline_prefilter_opencl.hpp"
-#include "renderer/reconstruction.hpp"
+#include "renderer/reference/reconstruction.hpp"
 
 #include <gtest/gtest.h>
 

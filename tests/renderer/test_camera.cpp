@@ -1,4 +1,4 @@
-#include "renderer/camera.hpp"
+#include "renderer/model/camera.hpp"
 
 #include <gtest/gtest.h>
 

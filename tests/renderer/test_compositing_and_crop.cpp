@@ -2,10 +2,10 @@
 // the native CPU march) and the double-precision reference, against closed forms.
 
 #include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/error_metrics.hpp"
+#include "renderer/reference/error_metrics.hpp"
 #include "renderer/opencl/opencl_renderer.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 

@@ -1,4 +1,4 @@
-#include "renderer/error_metrics.hpp"
+#include "renderer/reference/error_metrics.hpp"
 
 #include <gtest/gtest.h>
 

@@ -6,11 +6,11 @@
 // test_opencl_remedies.cpp.
 
 #include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/error_metrics.hpp"
-#include "renderer/minmax_bricks.hpp"
+#include "renderer/reference/error_metrics.hpp"
+#include "renderer/common/minmax_bricks.hpp"
 #include "renderer/opencl/opencl_renderer.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 

@@ -1,7 +1,7 @@
 // The --device choice: what each value means, and that a wrong one is a clear error.
 
 #include "renderer/make_frame_renderer.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/model/synthetic.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
-#include "renderer/minmax_bricks.hpp"
-#include "renderer/reconstruction.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/common/minmax_bricks.hpp"
+#include "renderer/reference/reconstruction.hpp"
+#include "renderer/model/synthetic.hpp"
 
 #include <gtest/gtest.h>
 

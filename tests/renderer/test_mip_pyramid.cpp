@@ -1,6 +1,6 @@
-#include "renderer/mip_pyramid.hpp"
-#include "renderer/reconstruction.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/common/mip_pyramid.hpp"
+#include "renderer/reference/reconstruction.hpp"
+#include "renderer/model/synthetic.hpp"
 
 #include <gtest/gtest.h>
 
@@ -227,7 +227,7 @@ TEST(MipPyramid, CoarseIndexMapReproducesALinearRamp) {
 }
 
 // A narrow store of 2 MiB or more starts on a 2 MiB boundary, so that the kernel can back it
-// with huge pages (renderer/huge_pages.hpp: rays crossing slices otherwise miss the TLB); a
+// with huge pages (renderer/model/huge_pages.hpp: rays crossing slices otherwise miss the TLB); a
 // smaller one is an ordinary block. Either holds exactly the samples.
 TEST(NarrowStore, LargeStoresAreAlignedForHugePages) {
     for (const Vec3i dims : {Vec3i{256, 256, 40}, Vec3i{7, 5, 3}}) {

@@ -2,10 +2,10 @@
 // preprocessing on the device. The remedies themselves are checked against the reference
 // integrator on both back ends in test_frame_renderer_accuracy.cpp.
 
-#include "renderer/error_metrics.hpp"
+#include "renderer/reference/error_metrics.hpp"
 #include "renderer/opencl/opencl_renderer.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 

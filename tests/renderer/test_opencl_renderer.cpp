@@ -3,10 +3,10 @@
 // the native CPU path's in test_frame_renderer_accuracy.cpp. Each new feature set costs PoCL
 // about a second to build, so the tests share one context and few combinations.
 
-#include "renderer/error_metrics.hpp"
+#include "renderer/reference/error_metrics.hpp"
 #include "renderer/opencl/opencl_renderer.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 

@@ -4,12 +4,12 @@
 // volume — a flip is the mirror image of the uncorrected frame, which no camera move gives.
 
 #include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/error_metrics.hpp"
+#include "renderer/reference/error_metrics.hpp"
 #include "renderer/opencl/opencl_renderer.hpp"
-#include "renderer/orientation_correction.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/slice.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/model/orientation_correction.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/slice.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "opencl_test_context.hpp"
 #include "test_scenes.hpp"
 

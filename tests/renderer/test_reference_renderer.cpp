@@ -1,9 +1,9 @@
 // Closed-form checks of the reference integrator. Each tolerance says where it comes from.
 
-#include "renderer/image.hpp"
-#include "renderer/reconstruction.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/model/image.hpp"
+#include "renderer/reference/reconstruction.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "test_scenes.hpp"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-#include "renderer/scene.hpp"
+#include "renderer/model/scene.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

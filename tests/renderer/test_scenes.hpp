@@ -1,11 +1,11 @@
 #pragma once
 // Small scene pieces several test files use.
 
-#include "renderer/camera.hpp"
-#include "renderer/scene.hpp"
-#include "renderer/synthetic.hpp"
-#include "renderer/transfer_function.hpp"
-#include "renderer/volume.hpp"
+#include "renderer/model/camera.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/synthetic.hpp"
+#include "renderer/model/transfer_function.hpp"
+#include "renderer/model/volume.hpp"
 
 namespace volcast::test {
 

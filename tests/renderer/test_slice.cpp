@@ -1,9 +1,9 @@
-// Slices in the patient frame (renderer/slice.hpp) against closed forms: a linear ramp is
+// Slices in the patient frame (renderer/model/slice.hpp) against closed forms: a linear ramp is
 // reproduced exactly by trilinear reconstruction, a marker at a known patient position shows
 // on the side the radiological layout puts it whatever order the file stores its axes in,
 // and extreme requests are clear errors or background, never NaN.
 
-#include "renderer/slice.hpp"
+#include "renderer/model/slice.hpp"
 
 #include <gtest/gtest.h>
 

@@ -3,7 +3,7 @@
 // client that said hello, a GET, a request sent byte for byte as given (for the malformed
 // ones no client library would write), and a camera orbiting the demo.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "server/server.hpp"
 
 #include <gtest/gtest.h>

@@ -1,6 +1,6 @@
 #include "slow_renderer.hpp"
 
-#include "renderer/camera.hpp"
+#include "renderer/model/camera.hpp"
 
 #include <chrono>
 #include <thread>

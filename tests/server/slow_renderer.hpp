@@ -6,8 +6,8 @@
 // pre-integration or shading, as in OpenClRenderer) first costs `prepareMs` once, under the
 // renderer's lock, like the real renderer's B-spline prefilter.
 
-#include "renderer/frame_renderer.hpp"
-#include "renderer/reference_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
+#include "renderer/reference/reference_renderer.hpp"
 
 #include <atomic>
 #include <memory>

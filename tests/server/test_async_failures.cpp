@@ -8,7 +8,7 @@
 // Without the worker's catch the exception ends the process (std::terminate), so each test
 // here fails by crashing the test binary.
 
-#include "renderer/synthetic.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "server/render_scheduler.hpp"
 #include "slow_renderer.hpp"
 

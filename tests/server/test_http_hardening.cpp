@@ -4,7 +4,7 @@
 // the server executable out of file descriptors. Each request is written byte for byte, as
 // an attacker would, and each test then checks that the server still answers.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "server/http_session.hpp"
 #include "server/server.hpp"
 #include "tests/server/server_fixture.hpp"

@@ -1,15 +1,15 @@
 // probe, roi_stats, pick and thick slabs through a real server over loopback: the numbers
 // agree with closed forms on a volume the test writes itself (a linear ramp beside air, in
-// Hounsfield units) and with the renderer's own functions (renderer/slice.hpp,
+// Hounsfield units) and with the renderer's own functions (renderer/model/slice.hpp,
 // ReferenceRenderer::pick) on the same scene; hostile requests get their error, change nothing
 // in the session's scene, and the session carries on to a final frame.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/io/volume_source.hpp"
-#include "renderer/presets.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/slice.hpp"
+#include "renderer/model/presets.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/slice.hpp"
 #include "server/server.hpp"
 #include "tests/server/png_decode.hpp"
 #include "tests/server/server_fixture.hpp"
@@ -37,7 +37,7 @@ constexpr auto kTimeout = 20s;   // a cold PoCL cache builds programs for second
 // Voxel (i, j, k) of the ramp volume, spacing 1 mm, origin 0, identity direction: air
 // (−1000 HU) for i < 12, else the ramp 2i − 3j + k + 200 (integers, stored exactly in int16;
 // trilinear reconstruction reproduces a linear function exactly between its samples). Signed,
-// air at −1000 and values up to 277 are what renderer/presets.hpp takes for CT in HU.
+// air at −1000 and values up to 277 are what renderer/model/presets.hpp takes for CT in HU.
 double rampValue(double x, double y, double z) { return 2 * x - 3 * y + z + 200; }
 
 volcast::Volume rampVolume() {
@@ -107,7 +107,7 @@ TEST_F(MeasurementServerTest, ProbeGivesTheRampInHounsfieldUnitsAndNullOutside) 
     auto c = session("ramp_ct.nrrd");
     const volcast::Volume loaded = volcast::loadVolume(tmp / "data" / "ramp_ct.nrrd");
     ASSERT_TRUE(volcast::chooseModality(loaded, "ramp_ct.nrrd").hounsfield)
-        << "signed values with air at -1000 are CT in HU (renderer/presets.hpp)";
+        << "signed values with air at -1000 are CT in HU (renderer/model/presets.hpp)";
     // Between samples on every axis, inside the ramp part: exact up to double rounding.
     const Message m = answer(*c, {{"type", "probe"}, {"id", 10}, {"point", {20.25, 7.5, 3.75}}});
     const auto *p = m.decoded ? std::get_if<protocol::ProbeMessage>(&*m.decoded) : nullptr;
@@ -137,7 +137,7 @@ TEST_F(MeasurementServerTest, ProbeOfAGreyValueVolumeHasNoUnit) {
     ASSERT_TRUE(p) << m.text;
     ASSERT_FALSE(volcast::chooseModality(demo.volume, "builtin:demo").hounsfield);
     EXPECT_FALSE(p->unit) << "raw data units";
-    // The same reconstruction as the slices: renderer/slice.hpp's probeValue on the same voxels.
+    // The same reconstruction as the slices: renderer/model/slice.hpp's probeValue on the same voxels.
     EXPECT_EQ(p->value, volcast::probeValue(demo.volume, point));
 }
 
@@ -209,7 +209,7 @@ TEST_F(MeasurementServerTest, PickIsTheReferenceOnTheSessionsScene) {
     EXPECT_GE(hits, 2) << "the centre of the view hits the demo volume";
 }
 
-// A slab through the server is renderer/slice.hpp's sampleSlab, byte for byte, and its header
+// A slab through the server is renderer/model/slice.hpp's sampleSlab, byte for byte, and its header
 // echoes the slab with its number of planes.
 TEST_F(MeasurementServerTest, SlabSliceIsTheRenderersSlabAndEchoesIt) {
     auto c = session("ramp_ct.nrrd");

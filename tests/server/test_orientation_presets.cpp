@@ -13,7 +13,7 @@
 #include "protocol/server_messages.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/make_frame_renderer.hpp"
-#include "renderer/presets.hpp"
+#include "renderer/model/presets.hpp"
 #include "server/session_scene.hpp"
 #include "server/volume_registry.hpp"
 

@@ -4,7 +4,7 @@
 // interactive frames waiting at most one unit behind another session's expensive final
 // frame, preparation in the background, and a fair share between dragging sessions.
 
-#include "renderer/synthetic.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "server/render_scheduler.hpp"
 #include "slow_renderer.hpp"
 

@@ -4,7 +4,7 @@
 // test measures itself, with allowances that say where they come from; how fast PoCL renders
 // is left to the slow-renderer tests in test_render_scheduler.cpp.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "server/server.hpp"
 
 #include <OpenImageIO/filesystem.h>

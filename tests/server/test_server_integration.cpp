@@ -2,9 +2,9 @@
 // library exactly as a script would drive it. Viewports are tiny (64²) and the volumes are
 // built-in ones, so each test takes well under a few seconds on the 2-core PoCL machine.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "renderer/make_frame_renderer.hpp"
-#include "renderer/scene.hpp"
+#include "renderer/model/scene.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/io/volume_source.hpp"
 #include "server/frame_encoder.hpp"

@@ -3,7 +3,7 @@
 // ray-casting program, and SIGTERM that ends the process within its grace
 // period whatever is running.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "renderer/make_frame_renderer.hpp"
 #include "server/server.hpp"
 #include "tests/server/child_process.hpp"

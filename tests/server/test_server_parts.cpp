@@ -2,7 +2,7 @@
 // volume-file extensions.
 
 #include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "server/error_calibrator.hpp"
 #include "server/frame_encoder.hpp"
 #include "server/preprocess_worker.hpp"

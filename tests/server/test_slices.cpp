@@ -1,11 +1,11 @@
 // `slice` requests through a real server over loopback (server/slice_service.hpp): the three
 // orthogonal slices of a volume come back with the requested size and exactly the bytes the
-// renderer's slice functions (renderer/slice.hpp) give for the same volume; bad requests get
+// renderer's slice functions (renderer/model/slice.hpp) give for the same volume; bad requests get
 // their error and the session, its 3D frames included, carries on.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "renderer/io/volume_source.hpp"
-#include "renderer/slice.hpp"
+#include "renderer/model/slice.hpp"
 #include "server/server.hpp"
 #include "tests/server/server_fixture.hpp"
 
@@ -136,7 +136,7 @@ TEST_F(SliceServerTest, ThreeSlicesHaveTheRequestedSizeAndTheRendererSliceBytes)
         // The same code on the same voxels: the bytes agree exactly.
         size_t differing = 0;
         for (size_t i = 0; i < expected.size(); ++i) differing += expected[i] != m.slicePixels[i];
-        EXPECT_EQ(differing, 0u) << "pixels differing from renderer/slice.hpp's answer";
+        EXPECT_EQ(differing, 0u) << "pixels differing from renderer/model/slice.hpp's answer";
         // Not a blank image: the demo volume has structure on every one of these planes.
         size_t lit = 0;
         for (uint8_t v : m.slicePixels) lit += v > 0;

@@ -4,10 +4,10 @@
 // parts under it: the loader's parseInChild (a checker that crashes on a NRRD file) and the
 // zip unpacker against hostile archives.
 
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/io/zip_extract.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "server/http_session.hpp"
 #include "server/server.hpp"
 #include "server/upload_store.hpp"

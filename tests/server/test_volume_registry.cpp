@@ -4,7 +4,7 @@
 
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/io/volume_io.hpp"
-#include "renderer/mip_pyramid.hpp"
+#include "renderer/common/mip_pyramid.hpp"
 #include "server/volume_registry.hpp"
 #include "tests/server/registry_fixture.hpp"
 

@@ -4,7 +4,7 @@
 // it takes seconds; the built-in demo volume (128³) and 64² viewports keep renders cheap.
 
 #include "tests/server/server_fixture.hpp"
-#include "client/ws_client.hpp"
+#include "client/cpp/ws_client.hpp"
 #include "server/server.hpp"
 
 #include <boost/asio/connect.hpp>

@@ -27,7 +27,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.join(HERE, "..", "..", "protocol", "python"))
+sys.path.insert(0, os.path.join(HERE, "..", "..", "client", "python"))
 import volcast as vc  # noqa: E402
 
 from rawws import RawWebSocket, frame_bytes, OP_TEXT  # noqa: E402

@@ -158,7 +158,7 @@ async def stop_with_sessions_open(server: "Server", token=None, sessions: int = 
     the close codes those sessions got). server/README.md: each gets 1001, exit 0 within ~2 s."""
     import asyncio
     import sys as _sys
-    _sys.path.insert(0, os.path.join(REPO, "protocol", "python"))
+    _sys.path.insert(0, os.path.join(REPO, "client", "python"))
     import volcast as vc
     from rawws import Closed, ConnectionLost, RawWebSocket
 

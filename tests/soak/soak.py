@@ -29,7 +29,7 @@ from typing import Dict, List, Optional
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.join(HERE, "..", "..", "protocol", "python"))
+sys.path.insert(0, os.path.join(HERE, "..", "..", "client", "python"))
 import volcast as vc  # noqa: E402
 
 from hostile import Generator, Hostile, strict_parse  # noqa: E402

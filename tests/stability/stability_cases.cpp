@@ -1,12 +1,12 @@
 #include "tests/stability/stability_cases.hpp"
 
-#include "renderer/camera.hpp"
+#include "renderer/model/camera.hpp"
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/opencl/opencl_renderer.hpp"
-#include "renderer/preintegration.hpp"
-#include "renderer/reference_renderer.hpp"
-#include "renderer/scene.hpp"
-#include "renderer/synthetic.hpp"
+#include "renderer/common/preintegration.hpp"
+#include "renderer/reference/reference_renderer.hpp"
+#include "renderer/model/scene.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "tests/renderer/test_scenes.hpp"
 

@@ -8,7 +8,7 @@
 // command that prints docs/accuracy.md's "Numerical stability" table, run this same code, so
 // the table shows what the tests check.
 
-#include "renderer/frame_renderer.hpp"
+#include "renderer/common/frame_renderer.hpp"
 #include "renderer/opencl/opencl_context.hpp"
 
 #include <cstddef>

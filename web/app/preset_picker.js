@@ -1,6 +1,6 @@
 // The transfer-function preset picker fed by the server: a modality picker (the server's
 // choice first, every modality it has presets for) and the presets of the modality shown,
-// in the volume's own data units (volume object `modality`, renderer/presets.cpp); the line
+// in the volume's own data units (volume object `modality`, renderer/model/presets.cpp); the line
 // under them says which modality and preset are shown and why, and follows the user's
 // choice. Volumes the server sends no presets for (built-in phantoms, older servers) keep
 // the page's named presets (core/protocol.js TF_PRESETS) and no modality picker.

@@ -1,5 +1,5 @@
 // What a frame really is, from its header: the size of the ray grid the server rendered
-// (the viewport × quality.image_scale, renderer/frame_renderer.cpp's raysForScale), the size
+// (the viewport × quality.image_scale, renderer/common/frame_renderer.cpp's raysForScale), the size
 // it was sent at (the server scales a reduced grid up to the viewport), and its level.
 
 // The server's raysForScale: max(1, lround(pixels · scale)).

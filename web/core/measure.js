@@ -154,7 +154,7 @@ export function scrolledPoint(point, normal, steps, step, lo, hi) {
 // quality.crop is in the volume's own index axes, normalised: 0 and 1 the outer faces of the
 // outermost cells, so f on an axis of n samples is index −½ + f·n, at world
 // origin + D·(index·s); the orientation correction C then places it at c + C·(x − c), c the
-// volume's centre (renderer/orientation_correction.hpp).
+// volume's centre (renderer/model/orientation_correction.hpp).
 
 export function cropGeometry(volume, correction) {
   const n = volume.dims, s = volume.spacing ?? [1, 1, 1], o = volume.origin ?? [0, 0, 0];

@@ -68,7 +68,7 @@ export function screenLabels(camera) {
 
 // The user's correction of where the volume lies in patient space: the scene's
 // quality.orientation_correction, a signed permutation of the world axes (rows; flips and
-// quarter turns only) applied about the volume's centre (renderer/orientation_correction.hpp).
+// quarter turns only) applied about the volume's centre (renderer/model/orientation_correction.hpp).
 // Each step below is one such matrix; pressing it again after others composes them.
 export const IDENTITY_CORRECTION = Object.freeze([[1, 0, 0], [0, 1, 0], [0, 0, 1]]);
 
@@ -92,7 +92,7 @@ export function isIdentityCorrection(m) {
 
 // The axis-aligned box a volume is drawn in after the correction: `bounds` (camera.js's
 // volumeBounds) turned by the signed permutation C about its centre, as the renderer places
-// it (renderer/orientation_correction.hpp: the voxel at x is drawn at c + C·(x − c)). Along
+// it (renderer/model/orientation_correction.hpp: the voxel at x is drawn at c + C·(x − c)). Along
 // world axis r the box spans the volume's extent along the axis k with C[r][k] ≠ 0, so a
 // quarter turn of a non-cubic volume swaps two extents. Clip planes are in world space:
 // their slider spans this box, not the file's.

@@ -10,7 +10,7 @@ export const FRAME_MAGIC = "VCF1";
 export const FRAME_PREAMBLE_BYTES = 8;            // bytes: magic + uint32 little-endian header length
 export const MAX_FRAME_HEADER_BYTES = 64 * 1024;  // bytes; real headers are ~600
 
-// Transfer-function presets the server resolves by name (renderer/transfer_function.hpp).
+// Transfer-function presets the server resolves by name (renderer/model/transfer_function.hpp).
 export const TF_PRESETS = Object.freeze([
   { name: "ct_bone", label: "CT bone" },
   { name: "ct_soft_tissue", label: "CT soft tissue" },

@@ -2,7 +2,7 @@
 // units, strictly increasing values, components in [0, 1], piecewise linear, clamped
 // outside. Pure functions over arrays of points (rows), for the editor and its tests.
 
-// The server resolves presets by name (renderer/transfer_function.cpp). The editor needs
+// The server resolves presets by name (renderer/model/transfer_function.cpp). The editor needs
 // their points to draw and edit them, so they are mirrored here; a preset sent by name
 // stays a name on the wire and in saved scenes, so a drift would show only in the editor.
 // Values in Hounsfield units for CT; MR and micro-CT are placed on the volume's range.
@@ -102,7 +102,7 @@ export function setColor(points, i, [r, g, b]) {
 
 // Window/level of a curve: the span from its first to its last point (outside it the curve
 // is clamped, as a CT viewer's ramp is outside its window). The server's presets
-// (renderer/presets.hpp) put their points exactly across their window, so a preset reads
+// (renderer/model/presets.hpp) put their points exactly across their window, so a preset reads
 // as its radiology window: bone W 2000 / L 400.
 export function windowLevelOf(points) {
   const lo = points[0][0], hi = points[points.length - 1][0];

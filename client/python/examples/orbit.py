@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """Open a volume, orbit the camera once around it, wait for the final frame and save it.
 
-    /usr/bin/python3 protocol/python/examples/orbit.py --volume bonsai -o out/orbit.png
-    /usr/bin/python3 protocol/python/examples/orbit.py --file head.nii.gz -o out/orbit.png
+    /usr/bin/python3 client/python/examples/orbit.py --volume bonsai -o out/orbit.png
+    /usr/bin/python3 client/python/examples/orbit.py --file head.nii.gz -o out/orbit.png
 
 Needs a running volcast server and websockets (Debian: python3-websockets, so run it with
 /usr/bin/python3). Uses the volcast package beside this folder, or the installed one
-(pip install ./protocol/python). Prints one line per frame: sequence number, level, codec,
+(pip install ./client/python). Prints one line per frame: sequence number, level, codec,
 size, render and encode times and the error estimate, so the ladder from interactive to final
 frames can be watched; with numpy and Pillow, also the final frame's mean colour.
 """

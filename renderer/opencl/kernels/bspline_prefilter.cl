@@ -1,5 +1,5 @@
 // Cubic B-spline prefilter (Unser; Ruijters & Thevenaz), the OpenCL twin of
-// renderer/bspline_prefilter.cpp: one work-item filters one line in place, one launch per
+// renderer/common/bspline_prefilter.cpp: one work-item filters one line in place, one launch per
 // axis. Mirror (whole-sample symmetric) boundaries; exact on any n >= 1.
 
 // Pole of the cubic B-spline's inverse filter, sqrt(3) - 2.

@@ -18,7 +18,7 @@
  *                        (narrow_samples.hpp): widened exactly, so the image is the float one's
  */
 #ifndef VOLCAST_EMBEDDED
-#include "../../phong_constants.h"
+#include "../../model/phong_constants.h"
 #include "raycast_shared.h"
 #endif
 

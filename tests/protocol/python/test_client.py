@@ -1,7 +1,7 @@
-"""Offline tests of the volcast package (protocol/python/volcast): frames, message building,
+"""Offline tests of the volcast package (client/python/volcast): frames, message building,
 the README's example session, and the Client's request/frame logic against a stand-in socket.
 
-Run: PYTHONPATH=protocol/python /usr/bin/python3 -m unittest discover -s tests/protocol/python
+Run: PYTHONPATH=client/python /usr/bin/python3 -m unittest discover -s tests/protocol/python
 (ctest runs it as protocol.python_client)."""
 
 import asyncio

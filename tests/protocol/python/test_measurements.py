@@ -2,7 +2,7 @@
 projection window in the volcast package, and of the Client's measurement calls against a
 stand-in socket.
 
-Run: PYTHONPATH=protocol/python /usr/bin/python3 -m unittest discover -s tests/protocol/python"""
+Run: PYTHONPATH=client/python /usr/bin/python3 -m unittest discover -s tests/protocol/python"""
 
 import asyncio
 import json

@@ -1,4 +1,4 @@
-"""`pip install ./protocol/python` works offline: into a fresh venv that sees the system's
+"""`pip install ./client/python` works offline: into a fresh venv that sees the system's
 packages (python3 -m venv --system-site-packages), with --no-index --no-build-isolation so
 that nothing is fetched, and the installed package imports and decodes a frame.
 
@@ -15,7 +15,7 @@ import unittest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PACKAGE = os.environ.get("VOLCAST_PYTHON_PACKAGE",
-                         os.path.join(HERE, "..", "..", "..", "protocol", "python"))
+                         os.path.join(HERE, "..", "..", "..", "client", "python"))
 
 MISSING = [name for name, module in (("python3-venv", "ensurepip"),
                                       ("python3-setuptools", "setuptools"),

@@ -1,7 +1,7 @@
 """Offline tests of the slice request and message in the volcast package (slices.py) and of
 Client.slice against a stand-in socket.
 
-Run: PYTHONPATH=protocol/python /usr/bin/python3 -m unittest discover -s tests/protocol/python"""
+Run: PYTHONPATH=client/python /usr/bin/python3 -m unittest discover -s tests/protocol/python"""
 
 import asyncio
 import json

@@ -3,7 +3,7 @@ by tests/soak/serverproc.py): what a script does with MIP, the crop box and slic
 end. The offline tests beside it (../python) check the messages; these check that the server
 does what they ask.
 
-Run: VOLCAST_SERVER_EXE=build/server/volcast-server PYTHONPATH=protocol/python \
+Run: VOLCAST_SERVER_EXE=build/server/volcast-server PYTHONPATH=client/python \
      /usr/bin/python3 -m unittest discover -s tests/protocol/python_live -v"""
 
 import asyncio

@@ -6,7 +6,7 @@ server's refusals reach the script as UploadError with their HTTP status. The of
 tests (../python/test_upload.py, test_nrrd.py) check the bytes the client sends; these check
 that the server reads them as meant.
 
-Run: VOLCAST_SERVER_EXE=build/server/volcast-server PYTHONPATH=protocol/python \\
+Run: VOLCAST_SERVER_EXE=build/server/volcast-server PYTHONPATH=client/python \\
      /usr/bin/python3 -m unittest discover -s tests/protocol/python_live -v"""
 
 import asyncio

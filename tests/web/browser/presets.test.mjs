@@ -57,7 +57,7 @@ test("the 8-bit chest CT is CT, every modality is offered, and the lung preset s
   // W/L fields: grey values at three significant digits at most, never a long decimal.
   for (const id of ["#tf-window", "#tf-level"]) assert.match(await page.inputValue(id), /^-?\d+(\.\d)?$/, id);
   // The lungs fill much of a chest's projection: with the lung preset a large share of the
-  // canvas is lit (air and soft tissue are clear in it, renderer/presets.cpp), and the
+  // canvas is lit (air and soft tissue are clear in it, renderer/model/presets.cpp), and the
   // picture differs from the bone preset's.
   const lung = await canvasSummary(page);
   assert.ok(lung.litFraction > 0.1, `lit fraction ${lung.litFraction} with the lung preset`);

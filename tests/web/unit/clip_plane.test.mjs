@@ -14,7 +14,7 @@ import { composeCorrection, CORRECTION_STEPS, correctedBounds, IDENTITY_CORRECTI
 const volume = { dims: [40, 20, 10], spacing: [1, 1.5, 2], origin: [5, -7, 11] };
 
 // The box the renderer draws: every corner x of the file's box moved to c + C·(x − c)
-// (renderer/orientation_correction.cpp, correctedPlacement), then the extent of the eight.
+// (renderer/model/orientation_correction.cpp, correctedPlacement), then the extent of the eight.
 function drawnBox(bounds, C) {
   const c = bounds.center;
   const moved = [];

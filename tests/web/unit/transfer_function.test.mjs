@@ -14,11 +14,11 @@ import { TF_PRESETS } from "../../../web/core/protocol.js";
 
 const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../../..");
 
-// The presets as renderer/transfer_function.cpp writes them, read from the source so that
+// The presets as renderer/model/transfer_function.cpp writes them, read from the source so that
 // a change there fails here instead of drifting silently. Relative presets are read on
 // the unit range (at(f) = f).
 function rendererPresets() {
-  const src = readFileSync(path.join(root, "renderer/transfer_function.cpp"), "utf8");
+  const src = readFileSync(path.join(root, "renderer/model/transfer_function.cpp"), "utf8");
   const rows = (block) => [...block.matchAll(/\{([^{}]+)\}/g)].map((m) =>
     m[1].split(",").map((x) => Number(x.trim().replace(/^at\((.*)\)$/, "$1"))));
   const out = {};
@@ -34,7 +34,7 @@ function rendererPresets() {
   return out;
 }
 
-test("the mirrored presets are renderer/transfer_function.cpp's, name for name", () => {
+test("the mirrored presets are renderer/model/transfer_function.cpp's, name for name", () => {
   const cpp = rendererPresets();
   assert.deepEqual([...PRESET_NAMES].sort(), Object.keys(cpp).sort());
   assert.deepEqual(TF_PRESETS.map((p) => p.name).sort(), Object.keys(cpp).sort());
