@@ -7,28 +7,6 @@
 
 namespace volcast {
 
-namespace {
-
-// The OpenCL renderer holds its context by reference; this one also owns it.
-class ContextOwningOpenClRenderer final : public FrameRenderer {
-  public:
-    ContextOwningOpenClRenderer(std::shared_ptr<OpenClContext> cl, std::shared_ptr<const Volume> volume)
-        : cl_(std::move(cl)), renderer_(*cl_, std::move(volume)) {}
-    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) override {
-        return renderer_.render(tf, camera, width, height, quality, clipPlanes, stats);
-    }
-    std::string description() const override { return renderer_.description(); }
-    PreprocessCounts preprocessCounts() const override { return renderer_.preprocessCounts(); }
-    const Volume &volume() const override { return renderer_.volume(); }
-
-  private:
-    std::shared_ptr<OpenClContext> cl_;
-    OpenClRenderer renderer_;
-};
-
-} // namespace
-
 DeviceChoice DeviceChoice::parse(std::string_view text) {
     DeviceChoice c;
     if (text == "auto" || text.empty()) c.kind = Kind::Auto;
@@ -95,7 +73,7 @@ std::string backEndDescription(const std::shared_ptr<OpenClContext> &cl) {
 std::unique_ptr<FrameRenderer> makeFrameRenderer(std::shared_ptr<OpenClContext> cl,
                                                  std::shared_ptr<const Volume> volume) {
     if (!cl) return std::make_unique<CpuRenderer>(std::move(volume));
-    return std::make_unique<ContextOwningOpenClRenderer>(std::move(cl), std::move(volume));
+    return std::make_unique<OpenClRenderer>(std::move(cl), std::move(volume));
 }
 
 std::unique_ptr<FrameRenderer> makeFrameRenderer(const DeviceChoice &choice, std::shared_ptr<const Volume> volume,

@@ -67,8 +67,10 @@ struct OpenClRenderer::PreintegrationCache {
     cl::Buffer rgba, nodes, locator;
 };
 
-OpenClRenderer::OpenClRenderer(OpenClContext &cl, std::shared_ptr<const Volume> volume, OpenClRendererOptions options)
-    : cl_(cl), volume_(std::move(volume)), options_(options), pyramid_(*volume_) {
+OpenClRenderer::OpenClRenderer(std::shared_ptr<OpenClContext> cl, std::shared_ptr<const Volume> volume,
+                               OpenClRendererOptions options)
+    : cl_(std::move(cl)), volume_(std::move(volume)), options_(options), pyramid_(*volume_) {
+    if (!cl_) throw std::invalid_argument("OpenClRenderer: no OpenCL context");
     if (options_.brickSize < 1) throw std::invalid_argument("brick size must be at least 1");
     // Level 0's voxels go to the device now: every frame needs them unless it asks for
     // cubic or a coarser level, and an upload failure is best reported when a volume opens.
@@ -76,11 +78,11 @@ OpenClRenderer::OpenClRenderer(OpenClContext &cl, std::shared_ptr<const Volume> 
     dataSet(0, false, unused);
 }
 
-OpenClRenderer::OpenClRenderer(OpenClContext &cl, const Volume &volume, OpenClRendererOptions options)
-    : OpenClRenderer(cl, std::make_shared<const Volume>(volume), options) {}
+OpenClRenderer::OpenClRenderer(std::shared_ptr<OpenClContext> cl, const Volume &volume, OpenClRendererOptions options)
+    : OpenClRenderer(std::move(cl), std::make_shared<const Volume>(volume), options) {}
 
 bool OpenClRenderer::cubicFromImage() const {
-    if (options_.cubicFetch == CubicFetch::Auto) return cl_.isGpu();
+    if (options_.cubicFetch == CubicFetch::Auto) return cl_->isGpu();
     return options_.cubicFetch == CubicFetch::Trilinear8;
 }
 
@@ -102,7 +104,7 @@ std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes, i
     return o.empty() ? o : o.substr(1);
 }
 
-std::string OpenClRenderer::description() const { return "opencl: " + cl_.deviceName(); }
+std::string OpenClRenderer::description() const { return "opencl: " + cl_->deviceName(); }
 
 int OpenClRenderer::bandRows() const { return int(kGroupEdge); }
 
@@ -133,24 +135,24 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
         // As the volume holds it: a narrow store goes up as uchar or ushort, without its slack.
         data.width = samples.width;
         const size_t bytes = samples.count() * size_t(samples.width.bytes); // 4 for float
-        data.buffer = upload(cl_, samples.isNarrow() ? static_cast<const void *>(samples.narrow) : samples.floats, bytes,
+        data.buffer = upload(*cl_, samples.isNarrow() ? static_cast<const void *>(samples.narrow) : samples.floats, bytes,
                              "volume " + volume_->name);
     } else {
         // Prefilter on the device (the paper's Table 2), pad on the host, upload.
         t = Clock::now();
-        const std::vector<float> coefficients = bsplinePrefilterOpenCl(cl_, samples.toFloats().data(), dims);
+        const std::vector<float> coefficients = bsplinePrefilterOpenCl(*cl_, samples.toFloats().data(), dims);
         const std::vector<float> padded = padMirror(coefficients, dims);
         if (cubicFromImage()) {
             try {
-                data.image = cl::Image3D(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
+                data.image = cl::Image3D(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
                                          cl::ImageFormat(CL_R, CL_FLOAT), size_t(dims.x + 3), size_t(dims.y + 3),
                                          size_t(dims.z + 3), 0, 0, const_cast<float *>(padded.data()));
             } catch (const cl::Error &e) {
                 throw OpenClError("cannot upload B-spline coefficients of " + volume_->name + " as a 3-D image to " +
-                                  cl_.deviceName() + ": " + describe(e));
+                                  cl_->deviceName() + ": " + describe(e));
             }
         } else {
-            data.buffer = upload(cl_, padded, "B-spline coefficients of " + volume_->name);
+            data.buffer = upload(*cl_, padded, "B-spline coefficients of " + volume_->name);
         }
         st.coefficientSeconds = secondsSince(t);
         std::lock_guard lock(countsMutex_);
@@ -164,10 +166,10 @@ std::vector<float> OpenClRenderer::readBackCoefficients(const DataSet &data) {
     std::vector<float> padded(size_t(p.x) * size_t(p.y) * size_t(p.z));
     try {
         if (cubicFromImage())
-            cl_.queue().enqueueReadImage(data.image, CL_TRUE, {0, 0, 0}, {size_t(p.x), size_t(p.y), size_t(p.z)}, 0, 0,
+            cl_->queue().enqueueReadImage(data.image, CL_TRUE, {0, 0, 0}, {size_t(p.x), size_t(p.y), size_t(p.z)}, 0, 0,
                                          padded.data());
         else
-            cl_.queue().enqueueReadBuffer(data.buffer, CL_TRUE, 0, padded.size() * sizeof(float), padded.data());
+            cl_->queue().enqueueReadBuffer(data.buffer, CL_TRUE, 0, padded.size() * sizeof(float), padded.data());
     } catch (const cl::Error &e) {
         throw OpenClError("cannot read back the B-spline coefficients: " + describe(e));
     }
@@ -204,10 +206,10 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
     for (uint8_t v : visible) empty += v == 0;
     data.emptyFraction = visible.empty() ? 0 : double(empty) / double(visible.size());
     try {
-        data.brickVisible = cl::Buffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, visible.size(),
+        data.brickVisible = cl::Buffer(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, visible.size(),
                                        const_cast<uint8_t *>(visible.data()));
     } catch (const cl::Error &e) {
-        throw OpenClError("cannot upload the brick classification to " + cl_.deviceName() + ": " + describe(e));
+        throw OpenClError("cannot upload the brick classification to " + cl_->deviceName() + ": " + describe(e));
     }
     data.classifiedFor = tf;
     st.brickClassifySeconds = secondsSince(t);
@@ -239,7 +241,7 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
     const bool cubic = quality.interpolation == Interpolation::Cubic;
     DataSet &data = dataSet(quality.mipLevel, cubic, st);
     st.buildOptions = buildOptions(quality, !clipPlanes.empty(), data.width.bytes);
-    const auto built = cl_.program(kRaycastKernelSource, st.buildOptions);
+    const auto built = cl_->program(kRaycastKernelSource, st.buildOptions);
     st.kernelBuildSeconds = built.buildSeconds;
 
     if (quality.emptySpaceSkipping) classify(data, tf, st);
@@ -261,10 +263,10 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
             const double hi = volume_->range.max > lo ? double(volume_->range.max)
                                                       : lo + std::max(1.0, std::fabs(lo)) * 1e-3;
             cache->table = buildPreintegrationTable(tf, step, opacityUnit, lo, hi);
-            cache->rgba = upload(cl_, cache->table.rgba, "the pre-integration table");
-            cache->nodes = upload(cl_, cache->table.nodes, "the pre-integration nodes");
+            cache->rgba = upload(*cl_, cache->table.rgba, "the pre-integration table");
+            cache->nodes = upload(*cl_, cache->table.nodes, "the pre-integration nodes");
             try {
-                cache->locator = cl::Buffer(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
+                cache->locator = cl::Buffer(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
                                             cache->table.locator.size() * sizeof(int),
                                             const_cast<int *>(cache->table.locator.data()));
             } catch (const cl::Error &e) {
@@ -283,7 +285,7 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
     if (!tfTableFor_ || !(*tfTableFor_ == tf)) {
         const auto t = Clock::now();
         const TfTable table = buildTfTable(tf);
-        tfTable_ = upload(cl_, table.rgba, "the transfer-function table");
+        tfTable_ = upload(*cl_, table.rgba, "the transfer-function table");
         tfMin_ = table.minValue;
         tfScale_ = table.scale;
         tfEntries_ = table.entries();
@@ -364,12 +366,12 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
     const RayWindow &win = window ? *window : all;
     Image cast(win.width, win.height);
     try {
-        auto &queue = cl_.queue();
-        cl::Buffer params(cl_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof p, &p);
+        auto &queue = cl_->queue();
+        cl::Buffer params(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof p, &p);
         const size_t rowBytes = size_t(raysWide) * 4 * sizeof(float);
-        cl::Buffer out(cl_.context(), CL_MEM_WRITE_ONLY, size_t(raysHigh) * rowBytes);
+        cl::Buffer out(cl_->context(), CL_MEM_WRITE_ONLY, size_t(raysHigh) * rowBytes);
         cl_uint zeros[VC_STAT_COUNT] = {};
-        cl::Buffer counters(cl_.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, sizeof zeros, zeros);
+        cl::Buffer counters(cl_->context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, sizeof zeros, zeros);
         // Arguments in the order of the kernel's signature for this feature set.
         cl::Kernel kernel(built.program, "raycast");
         cl_uint arg = 0;
@@ -407,7 +409,7 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
         st.earlyTerminatedFraction = counts[VC_STAT_TERMINATED_EARLY] / hit;
         st.raysTruncated = counts[VC_STAT_TRUNCATED];
     } catch (const cl::Error &e) {
-        throw OpenClError("rendering on " + cl_.deviceName() + " failed: " + describe(e));
+        throw OpenClError("rendering on " + cl_->deviceName() + " failed: " + describe(e));
     }
     Image image = window || (raysWide == width && raysHigh == height) ? std::move(cast)
                                                                       : resizeBilinear(cast, width, height);

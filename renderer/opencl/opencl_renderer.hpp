@@ -35,10 +35,12 @@ struct OpenClRendererOptions {
 
 class OpenClRenderer : public FrameRenderer {
   public:
-    // Shares the volume: mip levels, bricks and coefficients are computed from it on demand.
-    OpenClRenderer(OpenClContext &cl, std::shared_ptr<const Volume> volume, OpenClRendererOptions options = {});
-    // Convenience for tools and tests: keeps a copy.
-    OpenClRenderer(OpenClContext &cl, const Volume &volume, OpenClRendererOptions options = {});
+    // Shares the context (several renderers may draw on one device) and the volume: mip
+    // levels, bricks and coefficients are computed from it on demand.
+    OpenClRenderer(std::shared_ptr<OpenClContext> cl, std::shared_ptr<const Volume> volume,
+                   OpenClRendererOptions options = {});
+    // Convenience for tools and tests: keeps a copy of the volume.
+    OpenClRenderer(std::shared_ptr<OpenClContext> cl, const Volume &volume, OpenClRendererOptions options = {});
 
     // Thread-safe; frames are rendered one at a time.
     Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
@@ -80,7 +82,7 @@ class OpenClRenderer : public FrameRenderer {
     void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
     std::vector<float> readBackCoefficients(const DataSet &data);
 
-    OpenClContext &cl_;
+    std::shared_ptr<OpenClContext> cl_;
     std::shared_ptr<const Volume> volume_;
     OpenClRendererOptions options_;
     MipPyramid pyramid_;

@@ -34,7 +34,7 @@ constexpr double kReferenceTolerance = 1e-5;
 
 } // namespace
 
-void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, const std::vector<std::string> &scans) {
+void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport, const std::vector<std::string> &scans) {
     const std::vector<double> steps = options.quick ? std::vector<double>{1, 2} : std::vector<double>{0.25, 0.5, 1, 2, 4};
     if (options.quick) viewport = std::min(viewport, 24);
     // D is A on more voxels: the same image, so it adds nothing to error against time.
@@ -44,7 +44,7 @@ void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, c
 
     nlohmann::json j;
     j["study"] = "error_vs_time";
-    j["machine"] = machineInfo(&cl);
+    j["machine"] = machineInfo(cl.get());
     j["viewport"] = {viewport, viewport};
     j["reference_tolerance"] = kReferenceTolerance;
     j["quality"] = "empty-space skipping on, early termination off, boundary segment on";

@@ -13,7 +13,7 @@
 
 namespace volcast::bench {
 
-void figure5(OpenClContext &cl, const StudyOptions &options, int viewport) {
+void figure5(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport) {
     // The paper's 256³ dataset: bonsai (256³, 8-bit CT); D doubles it to 511³ (phantom.hpp).
     // Quick runs use a small phantom instead, so they need no data folder.
     std::shared_ptr<const Volume> base, doubled;
@@ -32,7 +32,7 @@ void figure5(OpenClContext &cl, const StudyOptions &options, int viewport) {
 
     nlohmann::json j;
     j["study"] = "figure5";
-    j["machine"] = machineInfo(&cl);
+    j["machine"] = machineInfo(cl.get());
     j["volume"] = base->name;
     j["viewport"] = {viewport, viewport};
     j["camera"] = "peers' framing (bounding sphere fits a 30° view, 20° elevation), frame 0";

@@ -89,7 +89,7 @@ CellResult timeOrbit(FrameRenderer &renderer, const TransferFunction &tf, const 
 
 } // namespace
 
-std::unique_ptr<FrameRenderer> makeStudyRenderer(OpenClContext &cl, const std::string &backEnd,
+std::unique_ptr<FrameRenderer> makeStudyRenderer(const std::shared_ptr<OpenClContext> &cl, const std::string &backEnd,
                                                  std::shared_ptr<const Volume> volume) {
     if (backEnd == "cpu") return std::make_unique<CpuRenderer>(std::move(volume));
     if (backEnd == "opencl") return std::make_unique<OpenClRenderer>(cl, std::move(volume));
@@ -132,7 +132,7 @@ Quality table1Quality(double step) {
     return q;
 }
 
-void table1(OpenClContext &cl, const StudyOptions &options) {
+void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options) {
     // paper: the row of the paper's Table 1 to set it beside. The peers place their ramp on a
     // phantom's nominal range and on a scan's own range.
     struct Entry {
@@ -162,7 +162,7 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
 
     nlohmann::json j;
     j["study"] = "table1";
-    j["machine"] = machineInfo(&cl);
+    j["machine"] = machineInfo(cl.get());
     j["quality"] = {{"step", quality.step}, {"interpolation", "linear"}, {"empty_space_skipping", true},
                     {"early_termination", quality.earlyTermination}};
     j["camera"] = "peers' framing: bounding sphere fits a 30° view, 20° elevation, 3° orbit per frame";
@@ -251,7 +251,7 @@ void table1(OpenClContext &cl, const StudyOptions &options) {
     out.writeSvg(renderSvg(plot));
 }
 
-void peerMode(OpenClContext &cl, const PeerModeOptions &options) {
+void peerMode(const std::shared_ptr<OpenClContext> &cl, const PeerModeOptions &options) {
     auto volume = std::make_shared<Volume>(loadVolume(options.volume));
     const std::unique_ptr<FrameRenderer> frameRenderer = makeStudyRenderer(cl, options.backEnd, volume);
     FrameRenderer &renderer = *frameRenderer;

@@ -26,10 +26,10 @@ struct StudyOptions {
     std::vector<std::string> backEnds = {"opencl"};
 };
 
-void table1(OpenClContext &cl, const StudyOptions &options);
+void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options);
 void prefilter(OpenClContext &cl, const StudyOptions &options);
-void figure5(OpenClContext &cl, const StudyOptions &options, int viewport);
-void errorVsTime(OpenClContext &cl, const StudyOptions &options, int viewport, const std::vector<std::string> &scans);
+void figure5(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport);
+void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport, const std::vector<std::string> &scans);
 
 // run_table.py's --extra interface: one JSON line per size on stdout.
 struct PeerModeOptions {
@@ -44,9 +44,9 @@ struct PeerModeOptions {
 
 // The ray caster a study times: "opencl" on `cl`, or "cpu" (the native path). Throws
 // std::invalid_argument for anything else.
-std::unique_ptr<FrameRenderer> makeStudyRenderer(OpenClContext &cl, const std::string &backEnd,
+std::unique_ptr<FrameRenderer> makeStudyRenderer(const std::shared_ptr<OpenClContext> &cl, const std::string &backEnd,
                                                  std::shared_ptr<const Volume> volume);
-void peerMode(OpenClContext &cl, const PeerModeOptions &options);
+void peerMode(const std::shared_ptr<OpenClContext> &cl, const PeerModeOptions &options);
 
 // A CT-like int16 NRRD (detached .raw beside the header) of `dims`, written slice by slice.
 void writeSyntheticCt(const std::filesystem::path &header, Vec3i dims);

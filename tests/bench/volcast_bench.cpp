@@ -136,15 +136,15 @@ int main(int argc, char **argv) {
     // stdout carries the tables (and the peers' JSON lines); progress and warnings go to stderr.
     spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
     try {
-        volcast::OpenClContext cl(device);
-        std::cerr << "volcast-bench: OpenCL device " << cl.deviceName() << "\n";
+        const auto cl = std::make_shared<volcast::OpenClContext>(device);
+        std::cerr << "volcast-bench: OpenCL device " << cl->deviceName() << "\n";
         if (peers->parsed()) {
             peer.sizes = parseSizes(sizes);
             peerMode(cl, peer);
             return 0;
         }
         if (t1->parsed() || all->parsed()) table1(cl, options);
-        if (t2->parsed() || all->parsed()) prefilter(cl, options);
+        if (t2->parsed() || all->parsed()) prefilter(*cl, options);
         if (f5->parsed() || all->parsed()) figure5(cl, options, viewportFigure5);
         if (ev->parsed() || all->parsed()) errorVsTime(cl, options, viewportError, scans);
         std::cerr << "volcast-bench: results in " << options.out << "\n";

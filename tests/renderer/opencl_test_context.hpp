@@ -4,12 +4,14 @@
 
 #include "renderer/opencl/opencl_context.hpp"
 
+#include <memory>
+
 namespace volcast::test {
 
 // One OpenCL context for every test file: each new feature set costs PoCL about a second to
 // build, and the program cache lives in the context.
-inline OpenClContext &sharedOpenClContext() {
-    static OpenClContext cl;
+inline const std::shared_ptr<OpenClContext> &sharedOpenClContext() {
+    static const auto cl = std::make_shared<OpenClContext>();
     return cl;
 }
 

@@ -2,6 +2,7 @@
 
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/model/synthetic.hpp"
+#include "test_scenes.hpp"
 
 #include <gtest/gtest.h>
 
@@ -38,6 +39,31 @@ TEST(MakeFrameRenderer, CpuIsTheNativePathAndOpenClAnOpenClDevice) {
     const std::string automatic = makeFrameRenderer(DeviceChoice::parse("auto"), box)->description();
     if (automatic.rfind("opencl: ", 0) == 0) EXPECT_EQ(automatic.find("pthread"), std::string::npos) << automatic;
     else EXPECT_EQ(automatic.rfind("cpu: ", 0), 0u) << automatic;
+}
+
+// The renderer made for OpenCL is the OpenCL ray caster with all it offers the server's
+// scheduler: a window casts only its own rays, and frames are cut in bands of its
+// work-group's height. A renderer that forwarded only render() would cast the whole grid for
+// every window, so that one scheduler unit would cost a whole pass.
+TEST(MakeFrameRenderer, OpenClCastsAWindowAloneAndReportsItsBandRows) {
+    const auto box = std::make_shared<const Volume>(makeConstantBox({16, 16, 16}, {1, 1, 1}, 1).volume);
+    const auto r = makeFrameRenderer(DeviceChoice::parse("opencl"), box);
+    EXPECT_TRUE(r->rendersWindowsCheaply());
+    EXPECT_EQ(r->bandRows(), 8) << "the OpenCL work-group is 8 rows high";
+    const TransferFunction tf = test::constantTf(1, 1, 1, 0.5, 1);
+    const Camera camera = test::obliqueCamera(*box, 10); // the box fills the view: every ray hits
+    const Quality q = test::plainQuality(1);
+    RenderStats whole, part;
+    const Image frame = r->render(tf, camera, 32, 32, q, {}, &whole);
+    ASSERT_EQ(whole.raysHit, 32u * 32u) << "the box must fill the view for the window's count to tell";
+    const RayWindow window{8, 16, 8, 8};
+    const Image cast = r->renderWindow(tf, camera, 32, 32, q, {}, window, &part);
+    EXPECT_LE(part.raysHit, uint64_t(window.width * window.height)) << "the whole grid was cast for one window";
+    // Each ray of the window exactly as the whole frame casts it.
+    for (int y = 0; y < window.height; ++y)
+        for (int x = 0; x < window.width; ++x)
+            for (int c = 0; c < 4; ++c)
+                ASSERT_EQ(cast.pixel(x, y)[c], frame.pixel(window.x + x, window.y + y)[c]) << x << "," << y;
 }
 
 } // namespace

@@ -32,7 +32,7 @@ int runKernel(OpenClContext &cl, const cl::Program &program, const char *name) {
 }
 
 TEST(OpenClProgramCache, TwoSourcesWithTheSameOptionsAreTwoPrograms) {
-    OpenClContext &cl = test::sharedOpenClContext();
+    OpenClContext &cl = *test::sharedOpenClContext();
     // Options no other test uses, so the cache holds neither program yet.
     const std::string options = "-DVOLCAST_PROGRAM_CACHE_TEST=1";
     const std::string first = "kernel void first(global int *out) { out[0] = 1; }";
@@ -45,7 +45,7 @@ TEST(OpenClProgramCache, TwoSourcesWithTheSameOptionsAreTwoPrograms) {
 }
 
 TEST(OpenClProgramCache, TheSameSourceAndOptionsAreBuiltOnce) {
-    OpenClContext &cl = test::sharedOpenClContext();
+    OpenClContext &cl = *test::sharedOpenClContext();
     const std::string options = "-DVOLCAST_PROGRAM_CACHE_TEST=2";
     const std::string source = "kernel void once(global int *out) { out[0] = 3; }";
     const size_t before = cl.programsBuilt();

@@ -15,7 +15,7 @@
 namespace volcast {
 namespace {
 
-OpenClContext &cl() { return test::sharedOpenClContext(); }
+const std::shared_ptr<OpenClContext> &cl() { return test::sharedOpenClContext(); }
 
 Quality plain(double step) { return test::plainQuality(step); }
 
@@ -85,7 +85,7 @@ TEST(OpenClRemedies, CubicFromEightTrilinearFetchesEqualsSixtyFourTaps) {
     EXPECT_NE(a.buildOptions(q, false), b.buildOptions(q, false));
     // PoCL filters 3-D images in float (docs/platform.md: 1.2e-7 of a trilinear); GPUs use ~8-bit
     // weights, 1/256 of a coefficient step, which an opacity of 0.7 turns into ~1e-2.
-    EXPECT_LT(compareImages(ia, ib).maxAbs, cl().isGpu() ? 2e-2 : 1e-4);
+    EXPECT_LT(compareImages(ia, ib).maxAbs, cl()->isGpu() ? 2e-2 : 1e-4);
 }
 
 } // namespace

@@ -16,14 +16,14 @@
 namespace volcast {
 namespace {
 
-OpenClContext &sharedContext() { return test::sharedOpenClContext(); }
+const std::shared_ptr<OpenClContext> &sharedContext() { return test::sharedOpenClContext(); }
 
 TransferFunction constantTf(double a) { return test::constantTf(0.9, 0.5, 0.2, a, 1.0); }
 Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 30); }
 
 Quality plain(double step) { return test::plainQuality(step); }
 
-TEST(OpenClRenderer, ReportsItsDevice) { EXPECT_FALSE(sharedContext().deviceName().empty()); }
+TEST(OpenClRenderer, ReportsItsDevice) { EXPECT_FALSE(sharedContext()->deviceName().empty()); }
 
 TEST(OpenClRenderer, ProgramsHoldOnlyTheFeaturesInUseAndAreBuiltOnce) {
     const SyntheticVolume box = makeConstantBox({4, 4, 4}, {1, 1, 1}, 1);
@@ -40,16 +40,16 @@ TEST(OpenClRenderer, ProgramsHoldOnlyTheFeaturesInUseAndAreBuiltOnce) {
     q.emptySpaceSkipping = true;
     q.shading = true;
     EXPECT_EQ(r.buildOptions(q, false), std::string("-DJITTER -DBOUNDARY_SEGMENT -DEARLY_TERMINATION ") +
-                                            (sharedContext().isGpu() ? "-DCUBIC_IMAGE" : "-DCUBIC") +
+                                            (sharedContext()->isGpu() ? "-DCUBIC_IMAGE" : "-DCUBIC") +
                                             " -DPREINTEGRATED -DEMPTY_SPACE_SKIPPING -DSHADING");
 
     RenderStats first, second;
     r.render(constantTf(0.5), obliqueCamera(box.volume), 8, 8, plain(0.5), {}, &first);
-    const size_t built = sharedContext().programsBuilt();
+    const size_t built = sharedContext()->programsBuilt();
     r.render(constantTf(0.2), obliqueCamera(box.volume), 8, 8, plain(0.25), {}, &second);
     // The box is built as float32 and not held narrow (only loaders and holdNarrow do that).
     EXPECT_EQ(first.buildOptions, "-DBOUNDARY_SEGMENT");
-    EXPECT_EQ(sharedContext().programsBuilt(), built); // same feature set: no new program
+    EXPECT_EQ(sharedContext()->programsBuilt(), built); // same feature set: no new program
     EXPECT_EQ(second.kernelBuildSeconds, 0);
 }
 

@@ -1115,8 +1115,8 @@ std::vector<Row> nonFiniteData(const Backend &be) {
 
 } // namespace
 
-Backend openClBackend(OpenClContext &cl) {
-    return {"OpenCL", [&cl](const Volume &v) -> std::unique_ptr<FrameRenderer> { return std::make_unique<OpenClRenderer>(cl, v); }};
+Backend openClBackend(std::shared_ptr<OpenClContext> cl) {
+    return {"OpenCL", [cl](const Volume &v) -> std::unique_ptr<FrameRenderer> { return std::make_unique<OpenClRenderer>(cl, v); }};
 }
 Backend cpuBackend() {
     return {"CPU", [](const Volume &v) -> std::unique_ptr<FrameRenderer> { return std::make_unique<CpuRenderer>(v); }};

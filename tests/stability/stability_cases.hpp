@@ -41,7 +41,7 @@ struct Backend {
     std::string name;
     std::function<std::unique_ptr<FrameRenderer>(const Volume &)> make;
 };
-Backend openClBackend(OpenClContext &cl); // cl must outlive the renderers made
+Backend openClBackend(std::shared_ptr<OpenClContext> cl); // the renderers made share it
 Backend cpuBackend();                     // the native SIMD ray caster (renderer/cpu/)
 
 // One stability case: its rows, run on the given back end.

@@ -23,10 +23,10 @@ int main(int argc, char **argv) {
     // replaced), and spdlog writes to stdout, where the table goes.
     spdlog::set_level(spdlog::level::err);
     try {
-        std::unique_ptr<volcast::OpenClContext> cl;
-        if (backend == "opencl") cl = std::make_unique<volcast::OpenClContext>(volcast::DeviceOptions{device, ""});
+        std::shared_ptr<volcast::OpenClContext> cl;
+        if (backend == "opencl") cl = std::make_shared<volcast::OpenClContext>(volcast::DeviceOptions{device, ""});
         const volcast::stability::Backend be =
-            cl ? volcast::stability::openClBackend(*cl) : volcast::stability::cpuBackend();
+            cl ? volcast::stability::openClBackend(cl) : volcast::stability::cpuBackend();
         std::vector<volcast::stability::Row> rows;
         bool found = false;
         for (const auto &c : volcast::stability::cases()) {
