@@ -1,9 +1,10 @@
 #include "renderer/common/bspline_prefilter.hpp"
 
+#include "renderer/common/parallel_for.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <thread>
 #include <vector>
 
 #if defined(__SSE2__)
@@ -180,17 +181,6 @@ void filterContiguousLines(float *lines, size_t n, size_t count, float *block) {
     }
 }
 
-// Runs work(begin, end) over [0, count) split in contiguous shares, the caller taking the first.
-template <typename Work>
-void splitAmong(size_t threads, size_t count, Work work) {
-    threads = std::max<size_t>(1, std::min(threads, count));
-    std::vector<std::thread> pool;
-    pool.reserve(threads - 1);
-    for (size_t t = 1; t < threads; ++t) pool.emplace_back(work, count * t / threads, count * (t + 1) / threads);
-    work(0, count / threads);
-    for (std::thread &th : pool) th.join();
-}
-
 #ifndef VOLCAST_PREFILTER_Z_BLOCK_BYTES
 #define VOLCAST_PREFILTER_Z_BLOCK_BYTES (256 * 1024)
 #endif
@@ -207,12 +197,11 @@ size_t zChunkWidth(size_t nz, size_t plane) {
 void bsplinePrefilterMultithreaded(float *data, Vec3i dims, int threads) {
     const auto nx = size_t(dims.x), ny = size_t(dims.y), nz = size_t(dims.z);
     if (nx == 0 || ny == 0 || nz == 0) return;
-    const size_t wanted = threads > 0 ? size_t(threads) : size_t(std::max(1u, std::thread::hardware_concurrency()));
     const size_t plane = nx * ny;
     // x then y, one z slice at a time: the slice is still in cache when its y lines (all nx
     // of a slice side by side, row by row) follow its x lines.
     if (nx > 1 || ny > 1)
-        splitAmong(wanted, nz, [&](size_t begin, size_t end) {
+        parallelFor(nz, threads, [&](size_t begin, size_t end) {
             std::vector<float> block(nx * kLines), carry(nx);
             for (size_t k = begin; k < end; ++k) {
                 float *slice = data + k * plane;
@@ -223,7 +212,7 @@ void bsplinePrefilterMultithreaded(float *data, Vec3i dims, int threads) {
     // z: the plane's nx·ny lines side by side, a chunk of them at a time.
     if (nz > 1) {
         const size_t chunk = zChunkWidth(nz, plane);
-        splitAmong(wanted, (plane + chunk - 1) / chunk, [&](size_t begin, size_t end) {
+        parallelFor((plane + chunk - 1) / chunk, threads, [&](size_t begin, size_t end) {
             std::vector<float> carry(chunk);
             for (size_t c = begin; c < end; ++c) {
                 const size_t first = c * chunk, width = std::min(chunk, plane - first);

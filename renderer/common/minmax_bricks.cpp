@@ -1,30 +1,18 @@
 #include "renderer/common/minmax_bricks.hpp"
 
+#include "renderer/common/parallel_for.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
-#include <thread>
 
 namespace volcast {
 
 namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
-
-// Runs work(begin, end) on contiguous shares of [0, count), the calling thread taking the first.
-template <typename Work>
-void parallelRanges(size_t count, int threads, const Work &work) {
-    const size_t wanted = threads > 0 ? size_t(threads) : size_t(std::max(1u, std::thread::hardware_concurrency()));
-    const size_t shares = std::max<size_t>(1, std::min(wanted, count));
-    std::vector<std::thread> pool;
-    pool.reserve(shares - 1);
-    for (size_t t = 1; t < shares; ++t)
-        pool.emplace_back([&work, count, shares, t] { work(count * t / shares, count * (t + 1) / shares); });
-    work(size_t(0), count / shares);
-    for (std::thread &th : pool) th.join();
-}
 
 // Samples brick b reads on an axis of n samples: [b·B − border, (b+1)·B − 1 + border] ∩ [0, n − 1].
 struct Footprint {
@@ -73,7 +61,7 @@ MinMaxBricks buildMinMaxBricks(const SampleGrid &data, int brickSize, int border
     // Min and max are separable: reduce over y, then x, within each slice, then over z.
     // Each sample is read from memory once; the overlapping footprints re-read cached rows.
     std::vector<float> sliceMin(nz * nby * nbx), sliceMax(nz * nby * nbx);
-    parallelRanges(nz, threads, [&](size_t kBegin, size_t kEnd) {
+    parallelFor(nz, threads, [&](size_t kBegin, size_t kEnd) {
         std::vector<float> rowMin(nby * nx), rowMax(nby * nx), scratch;
         for (size_t k = kBegin; k < kEnd; ++k) {
             const float *slice = data.slice(int64_t(k), scratch);
@@ -104,7 +92,7 @@ MinMaxBricks buildMinMaxBricks(const SampleGrid &data, int brickSize, int border
     // Reduce the per-slice results over each brick layer's z footprint, then interleave.
     grid.minmax.resize(2 * grid.brickCount());
     const size_t layer = nby * nbx;
-    parallelRanges(nbz, threads, [&](size_t bzBegin, size_t bzEnd) {
+    parallelFor(nbz, threads, [&](size_t bzBegin, size_t bzEnd) {
         std::vector<float> mn(layer), mx(layer);
         for (size_t bz = bzBegin; bz < bzEnd; ++bz) {
             std::fill(mn.begin(), mn.end(), kInf);

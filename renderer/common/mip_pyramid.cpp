@@ -1,9 +1,10 @@
 #include "renderer/common/mip_pyramid.hpp"
 
+#include "renderer/common/parallel_for.hpp"
+
 #include <algorithm>
 #include <stdexcept>
 #include <string>
-#include <thread>
 
 namespace volcast {
 
@@ -39,13 +40,8 @@ std::vector<float> downsampleMip(const SampleGrid &fine) {
         }
     };
     // Two halves of the coarse slices on two threads when there is enough work to share.
-    if (m.z >= 2 && size_t(m.x * m.y * m.z) >= (size_t(1) << 16) && std::thread::hardware_concurrency() > 1) {
-        std::thread other(slices, m.z / 2, m.z);
-        slices(0, m.z / 2);
-        other.join();
-    } else {
-        slices(0, m.z);
-    }
+    const bool share = m.z >= 2 && size_t(m.x * m.y * m.z) >= (size_t(1) << 16) && resolveThreadCount(0) > 1;
+    parallelFor(m.z, share ? 2 : 1, slices);
     return coarse;
 }
 

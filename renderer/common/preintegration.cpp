@@ -1,12 +1,13 @@
 #include "renderer/common/preintegration.hpp"
 
+#include "renderer/common/parallel_for.hpp"
+
 #include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
 #include <limits>
 #include <stdexcept>
-#include <thread>
 
 namespace volcast {
 
@@ -329,17 +330,6 @@ bool splittable(double a, double b) {
     return mid > a && mid < b;
 }
 
-void parallelFor(int count, int threads, const auto &body) {
-    std::atomic<int> next{0};
-    auto work = [&] {
-        for (int i = next++; i < count; i = next++) body(i);
-    };
-    std::vector<std::thread> pool;
-    for (int t = 1; t < std::min(threads, count); ++t) pool.emplace_back(work);
-    work();
-    for (auto &t : pool) t.join();
-}
-
 // Builds the uniform bucket locator over the final nodes: buckets are doubled until a bucket
 // holds at most 8 node intervals, up to max(256, 16·N) buckets (64 bytes per node, small
 // beside the N²·16-byte table); past that the kernel's binary search takes a few more steps.
@@ -380,7 +370,6 @@ PreintegrationTable buildPreintegrationTable(const TransferFunction &tf, double 
     if (!(float(valueMax) > float(valueMin)) || !std::isfinite(float(valueMin)) || !std::isfinite(float(valueMax)))
         throw std::invalid_argument("pre-integration: needs a finite value range with max > min (as floats)");
     if (!(tolerance > 0)) throw std::invalid_argument("pre-integration: tolerance must be positive");
-    if (threads <= 0) threads = int(std::max(1u, std::thread::hardware_concurrency()));
     maxNodes = std::max(maxNodes, 2);
     const auto started = Clock::now();
 

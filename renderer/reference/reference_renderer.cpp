@@ -1,16 +1,15 @@
 #include "renderer/reference/reference_renderer.hpp"
 
+#include "renderer/common/parallel_for.hpp"
 #include "renderer/model/shading.hpp"
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <optional>
 #include <stdexcept>
-#include <thread>
 #include <vector>
 
 namespace volcast {
@@ -661,38 +660,30 @@ Image ReferenceRenderer::render(const Camera &camera, int width, int height, std
     const auto start = Clock::now();
     const RayGenerator rays(camera, width, height);
     Image image(width, height);
-    const int threadCount = options.threads > 0 ? options.threads
-                                                : std::max(1, int(std::thread::hardware_concurrency()));
-    std::atomic<int> nextRow{0};
-    std::vector<ReferenceStats> perThread(static_cast<size_t>(threadCount));
-    std::vector<double> worstError(size_t(threadCount), 0.0);
-
-    auto work = [&](int id) {
-        ReferenceStats &st = perThread[size_t(id)];
-        for (int y; (y = nextRow.fetch_add(1)) < height;) {
-            for (int x = 0; x < width; ++x) {
-                const RayIntegral r = integrate(rays.pixelRay(x, y), clipPlanes, options.tolerance, &st);
-                float *px = image.pixel(x, y);
-                px[0] = float(r.color.r);
-                px[1] = float(r.color.g);
-                px[2] = float(r.color.b);
-                px[3] = float(r.color.a);
-                worstError[size_t(id)] = std::max(worstError[size_t(id)], r.errorEstimate);
-            }
+    // Rows handed out one at a time (their cost varies with what the rays cross); each row
+    // keeps its own statistics, merged after in row order.
+    std::vector<ReferenceStats> perRow(size_t(std::max(height, 0)));
+    std::vector<double> worstError(perRow.size(), 0.0);
+    parallelFor(height, options.threads, [&](int y) {
+        ReferenceStats &st = perRow[size_t(y)];
+        for (int x = 0; x < width; ++x) {
+            const RayIntegral r = integrate(rays.pixelRay(x, y), clipPlanes, options.tolerance, &st);
+            float *px = image.pixel(x, y);
+            px[0] = float(r.color.r);
+            px[1] = float(r.color.g);
+            px[2] = float(r.color.b);
+            px[3] = float(r.color.a);
+            worstError[size_t(y)] = std::max(worstError[size_t(y)], r.errorEstimate);
         }
-    };
-    std::vector<std::thread> threads;
-    for (int i = 1; i < threadCount; ++i) threads.emplace_back(work, i);
-    work(0);
-    for (auto &t : threads) t.join();
+    });
 
     if (stats) {
         *stats = {};
         stats->toleranceRequested = options.tolerance;
-        for (int i = 0; i < threadCount; ++i) {
-            stats->intervals += perThread[size_t(i)].intervals;
-            stats->analyticFitError = std::max(stats->analyticFitError, perThread[size_t(i)].analyticFitError);
-            stats->toleranceReached = std::max(stats->toleranceReached, worstError[size_t(i)]);
+        for (size_t y = 0; y < perRow.size(); ++y) {
+            stats->intervals += perRow[y].intervals;
+            stats->analyticFitError = std::max(stats->analyticFitError, perRow[y].analyticFitError);
+            stats->toleranceReached = std::max(stats->toleranceReached, worstError[y]);
         }
         stats->renderSeconds = std::chrono::duration<double>(Clock::now() - start).count();
     }
