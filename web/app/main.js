@@ -240,7 +240,9 @@ function resetView() {
 
 session.on("connection", (s) => {
   indicator.show(s, session.connection);
-  if (s.state === "ready") { view.resetSequence(); updateViewport(); }
+  // The indicator's new text can re-wrap the top bar and so resize the view: measure it now,
+  // not at the last resize the observer reported, so the first frames have the view's size.
+  if (s.state === "ready") { view.resetSequence(); view.measure(); updateViewport(); }
   updateMessage();
 });
 

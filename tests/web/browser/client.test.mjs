@@ -45,6 +45,10 @@ test("the canvas shows a non-blank rendering of the demo volume", async () => {
   const css = await page.$eval("#view-canvas", (el) => [el.clientWidth, el.clientHeight]);
   assert.deepEqual([c.width, c.height], css);
   assert.deepEqual([final.width, final.height], css, "the final frame has the view's size (CSS pixels on a CPU server)");
+  // So has every frame before it: the "Connected" text re-wraps the top bar as the session
+  // starts, and the size sent then is the view's after that, not the one measured before.
+  const sizes = await page.evaluate(() => window.volcast.frames.map((h) => `${h.width}×${h.height}`));
+  assert.deepEqual([...new Set(sizes)], [css.join("×")], "the sizes of the frames since the page connected");
   await screenshot(page, "02-demo-volume.png");
 });
 
@@ -271,14 +275,23 @@ test("after the server restarts, the page reconnects by itself and restores the 
   const port = setup.server.port;
   const camera = await page.evaluate(() => window.volcast.session.scene.camera);
   const stopped = await setup.server.stop();
-  assert.ok(stopped.code === 0 || stopped.signal === "SIGTERM", `server stopped cleanly: ${JSON.stringify(stopped)}`);
-  await page.waitForFunction(() => document.getElementById("connection").dataset.state === "waiting", null, { timeout: 15000 });
-  assert.match(await page.textContent("#connection-text"), /Disconnected · retrying in/);
-  assert.ok(await page.isVisible("#view-message"), "the stale image is explained");
-  await screenshot(page, "07-server-down.png");
-
-  const sentBefore = await page.evaluate(() => window.sentLog.length);
-  setup.server = await startServer(port);
+  let sentBefore;
+  try {
+    assert.ok(stopped.code === 0 || stopped.signal === "SIGTERM", `server stopped cleanly: ${JSON.stringify(stopped)}`);
+    // The client goes on retrying (waiting, connecting, waiting, ...) and the indicator's
+    // state and text change together: read both in one look, not one round trip apart.
+    const down = await (await page.waitForFunction(() => {
+      const box = document.getElementById("connection");
+      return box.dataset.state === "waiting" ? document.getElementById("connection-text").textContent : null;
+    }, null, { timeout: 15000 })).jsonValue();
+    assert.match(down, /Disconnected · retrying in/);
+    assert.ok(await page.isVisible("#view-message"), "the stale image is explained");
+    await screenshot(page, "07-server-down.png");
+    sentBefore = await page.evaluate(() => window.sentLog.length);
+  } finally {
+    // Up again whatever failed above: the later tests need a server.
+    setup.server = await startServer(port);
+  }
   await page.waitForFunction(() => document.getElementById("connection").dataset.state === "ready", null, { timeout: 30000 });
   // Request ids keep counting across connections: the first frame of the new session
   // answers the reopened volume or a later request.
