@@ -1,8 +1,10 @@
 // The CPU ray march: packets of rays from a small screen block, one ray per SIMD lane, each
-// lane with its own segment state and a mask of lanes still marching. The arithmetic follows
-// kernels/raycast.cl step by step (same ray setup in float, same segment boundaries, jitter
-// hash, opacity polynomial, Kahan sums and transmittance refresh every 16 samples), so the
-// two back ends draw the same image up to float rounding.
+// lane with its own segment state and a mask of lanes still marching. The per-sample formulas
+// (ray set-up and clipping, jitter hash, table coordinates, opacity correction and polynomial,
+// Kahan sums, transmittance refresh, Phong, brick walls) are renderer/common/ray_math.h's,
+// which the OpenCL kernel compiles too, here on Highway vectors; the march around them walks
+// the same segments as kernels/raycast.cl, so the two back ends draw the same image up to
+// float rounding.
 //
 // Highway compiles this file once per instruction set (foreach_target.h re-includes it) and
 // marchTile() calls the best one the machine supports.
@@ -33,14 +35,28 @@ using MF = hn::Mask<DF>;
 constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
-// PCG hash: the kernel's random01, so jittered images match.
-inline float random01(uint32_t x, uint32_t y, uint32_t seed, uint32_t pass) {
-    uint32_t s = x * 1973u + y * 9277u + seed * 26699u + pass * 104729u;
-    s = s * 747796405u + 2891336453u;
-    uint32_t w = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
-    w = (w >> 22u) ^ w;
-    return float(w >> 8) * (1.0f / 16777216.0f);
-}
+// ray_math.h's formulas on this target's vectors, one ray per lane: its value type, mask and
+// operations as Highway's (+ − * / and comparisons are Highway's operators).
+#define VC_INLINE HWY_INLINE
+#define VC_REAL VF
+#define VC_MASK MF
+#define VC_CONST(c) hn::Set(DF(), c)
+#define VC_INFINITY kInf
+#define vc_select(m, a, b) hn::IfThenElse(m, a, b)
+#define vc_any(m) (!hn::AllFalse(DF(), m))
+#define vc_and(a, b) hn::And(a, b)
+#define vc_or(a, b) hn::Or(a, b)
+#define vc_neg(x) hn::Neg(x)
+#define vc_mad(a, b, c) hn::MulAdd(a, b, c)
+#define vc_min(a, b) hn::Min(a, b)
+#define vc_max(a, b) hn::Max(a, b)
+#define vc_abs(x) hn::Abs(x)
+#define vc_sqrt(x) hn::Sqrt(x)
+#define vc_floor(x) hn::Floor(x)
+#define vc_exp(x) hn::Exp(DF(), x)
+#define vc_log1p(x) hn::Log1p(DF(), x)
+#define vc_isinf(x) hn::IsInf(x)
+#include "renderer/common/ray_math.h"
 
 // The rays of a packet, lane-wise in the kernel's float arithmetic (raycast.cl's ray set-up):
 // entry and exit t at the box (the volume's or the crop box) and the clip planes, the level
@@ -60,10 +76,8 @@ inline VF dot3(const float *m, const VF v[3]) {
 
 PacketRays setUpPacket(const FrameParams &P, VF x, VF y, MF inside) {
     const DF df;
-    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), two = hn::Set(df, 2.0f), half = hn::Set(df, 0.5f);
-    const VF inf = hn::Set(df, kInf), minusInf = hn::Set(df, -kInf);
-    const VF u = hn::Sub(hn::Div(hn::Mul(two, hn::Add(x, half)), hn::Set(df, float(P.width))), one);
-    const VF v = hn::Sub(one, hn::Div(hn::Mul(two, hn::Add(y, half)), hn::Set(df, float(P.height))));
+    const VF zero = hn::Zero(df), half = hn::Set(df, 0.5f), inf = hn::Set(df, kInf);
+    const VF u = vcImageU(x, hn::Set(df, float(P.width))), v = vcImageV(y, hn::Set(df, float(P.height)));
     VF origin[3], dir[3];
     for (int a = 0; a < 3; ++a) {
         const VF offset = hn::Add(hn::Mul(u, hn::Set(df, P.right[a])), hn::Mul(v, hn::Set(df, P.up[a])));
@@ -80,23 +94,11 @@ PacketRays setUpPacket(const FrameParams &P, VF x, VF y, MF inside) {
         dq[a] = dot3(P.indexFromWorld[a], dir);
     }
     VF t0 = zero, t1 = inf;
-    for (int a = 0; a < 3; ++a) {
-        const VF lo = hn::Set(df, P.boxLo[a]), hi = hn::Set(df, P.boxHi[a]);
-        const MF parallel = hn::Eq(dq[a], zero);
-        const MF outside = hn::And(parallel, hn::Or(hn::Lt(p0[a], lo), hn::Gt(p0[a], hi)));
-        const VF ta = hn::Div(hn::Sub(lo, p0[a]), dq[a]), tb = hn::Div(hn::Sub(hi, p0[a]), dq[a]);
-        t0 = hn::IfThenElse(parallel, t0, hn::Max(t0, hn::Min(ta, tb)));
-        t1 = hn::IfThenElse(parallel, t1, hn::Min(t1, hn::Max(ta, tb)));
-        t1 = hn::IfThenElse(outside, minusInf, t1);
-    }
+    for (int a = 0; a < 3; ++a) vcClipToSlab(p0[a], dq[a], hn::Set(df, P.boxLo[a]), hn::Set(df, P.boxHi[a]), &t0, &t1);
     if (P.features.clipPlanes)
         for (int c = 0; c < P.clipPlaneCount; ++c) {
             const float *plane = P.clipPlanes[c];
-            const VF g0 = hn::Add(dot3(plane, origin), hn::Set(df, plane[3])), gd = dot3(plane, dir);
-            const VF at = hn::Div(hn::Neg(g0), gd);
-            t1 = hn::IfThenElse(hn::And(hn::Eq(gd, zero), hn::Lt(g0, zero)), minusInf, t1);
-            t0 = hn::IfThenElse(hn::Gt(gd, zero), hn::Max(t0, at), t0);
-            t1 = hn::IfThenElse(hn::Lt(gd, zero), hn::Min(t1, at), t1);
+            vcClipToPlane(hn::Add(dot3(plane, origin), hn::Set(df, plane[3])), dot3(plane, dir), &t0, &t1);
         }
     PacketRays r;
     r.hit = hn::And(inside, hn::Gt(t1, t0));
@@ -247,8 +249,7 @@ struct TableSpot {
 inline TableSpot tableSpot(const FrameParams &P, VF value) {
     const DF df;
     const DI di;
-    const VF x = hn::Min(hn::Max(hn::Mul(hn::Sub(value, hn::Set(df, P.tfMin)), hn::Set(df, P.tfScale)), hn::Zero(df)),
-                         hn::Set(df, float(P.tfEntries - 1)));
+    const VF x = vcTableCoordinate(value, hn::Set(df, P.tfMin), hn::Set(df, P.tfScale), hn::Set(df, float(P.tfEntries - 1)));
     const VI i = hn::Min(hn::ConvertTo(di, x), hn::Set(di, P.tfEntries - 2));
     return {hn::ShiftLeft<2>(i), hn::Sub(x, hn::ConvertTo(df, i))};
 }
@@ -279,8 +280,7 @@ VF nodeCoordinate(const FrameParams &P, VF v) {
         last = hn::IfThenElse(hn::AndNot(above, open), hn::Sub(m, hn::Set(di, 1)), last);
     }
     const VF lo = hn::GatherIndex(df, P.preNodes, i), hi = hn::GatherIndex(df, P.preNodes, hn::Add(i, hn::Set(di, 1)));
-    const VF f = hn::Min(hn::Max(hn::Div(hn::Sub(v, lo), hn::Sub(hi, lo)), hn::Zero(df)), hn::Set(df, 1.0f));
-    return hn::Add(hn::ConvertTo(df, i), f);
+    return hn::Add(hn::ConvertTo(df, i), vcNodeFraction(v, lo, hi));
 }
 
 // Segment from value sf to sb of a full step: premultiplied colour and opacity, bilinear in
@@ -303,10 +303,11 @@ void preintegratedSegment(const FrameParams &P, VF sf, VF sb, VF out[4]) {
 
 // The incremental brick walk (DDA) over the 8³ brick grid, per lane: the brick holding the
 // point the ray has reached, whether the transfer function leaves it visible, and the t at
-// which the ray crosses each of its walls. Moving on costs a comparison per segment and a
-// division per brick crossed, instead of recomputing the brick and its exit per segment.
-// A point reached within float rounding of a wall may be put in either brick: harmless, as
-// each brick's value range covers half a voxel beyond its box (minmax_bricks.hpp, border).
+// which the ray crosses each of its walls (ray_math.h's vcBrickOf, vcBrickWall, vcBrickExit).
+// Moving on costs a comparison per segment and a division per brick crossed, instead of
+// recomputing the brick and its exit per segment. A point reached within float rounding of a
+// wall may be put in either brick: harmless, as each brick's value range covers half a voxel
+// beyond its box (minmax_bricks.hpp, border). The kernel walks one ray with the same formulas.
 struct BrickWalk {
     VI b[3];
     VF wall[3]; // t where the ray leaves the brick across its wall on each axis (inf if parallel)
@@ -321,10 +322,7 @@ struct BrickWalk {
 
     VF wallAt(const FrameParams &P, const VF q0[3], const VF dq[3], int a) const {
         const DF df;
-        const float B = float(P.brickSize);
-        const VF lo = hn::Sub(hn::Mul(hn::ConvertTo(df, b[a]), hn::Set(df, B)), hn::Set(df, 0.5f));
-        const VF w = hn::IfThenElse(hn::Gt(dq[a], hn::Zero(df)), hn::Add(lo, hn::Set(df, B)), lo);
-        return hn::IfThenElse(hn::Ne(dq[a], hn::Zero(df)), hn::Div(hn::Sub(w, q0[a]), dq[a]), hn::Set(df, kInf));
+        return vcBrickWall(hn::ConvertTo(df, b[a]), hn::Set(df, float(P.brickSize)), q0[a], dq[a]);
     }
     void lookUp(const FrameParams &P, MF lanes) {
         const DI di;
@@ -343,14 +341,14 @@ struct BrickWalk {
         const VF inverseB = hn::Set(df, 1.0f / float(P.brickSize));
         for (int a = 0; a < 3; ++a) {
             const VF q = hn::MulAdd(t, dq[a], q0[a]);
-            b[a] = hn::ConvertTo(di, hn::Floor(hn::Mul(hn::Add(q, hn::Set(df, 0.5f)), inverseB)));
+            b[a] = hn::ConvertTo(di, vcBrickOf(q, inverseB));
             b[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
             wall[a] = wallAt(P, q0, dq, a);
         }
         visible = hn::FirstN(df, 0);
         lookUp(P, lanes);
     }
-    VF exit() const { return hn::Min(wall[0], hn::Min(wall[1], wall[2])); }
+    VF exit() const { return vcBrickExit(wall[0], wall[1], wall[2]); }
     // Moves the lanes of `lanes` on to the brick holding q(t), t not before where they are.
     void advance(const FrameParams &P, const VF q0[3], const VF dq[3], VF t, MF lanes) {
         const DF df;
@@ -374,29 +372,18 @@ struct BrickWalk {
     }
 };
 
-// 1 − exp(−x): the kernel's Taylor polynomial below 1/2, exp above.
-HWY_INLINE VF opacityFromDepth(VF x) {
-    const DF df;
-    const VF one = hn::Set(df, 1.0f);
-    VF r = hn::Sub(one, hn::Mul(x, hn::Set(df, 1.0f / 8.0f)));
-    for (float n : {7.0f, 6.0f, 5.0f, 4.0f, 3.0f, 2.0f}) r = hn::Sub(one, hn::Mul(hn::Mul(x, hn::Set(df, 1.0f / n)), r));
-    VF result = hn::Mul(x, r);
-    const MF large = hn::Ge(x, hn::Set(df, 0.5f));
-    if (!hn::AllFalse(df, large)) result = hn::IfThenElse(large, hn::Sub(one, hn::Exp(df, hn::Neg(x))), result);
-    return result;
-}
-
-// Kahan sum += x in the lanes of `m`; an infinite sum keeps a zero carry (if `guardInf`).
-inline void addCompensated(MF m, VF &sum, VF &carry, VF x, bool guardInf) {
-    const VF y = hn::Sub(x, carry);
-    const VF t = hn::Add(sum, y);
-    VF c = hn::Sub(hn::Sub(t, sum), y);
-    if (guardInf) c = hn::IfThenZeroElse(hn::IsInf(t), c);
+// Kahan sum += x in the lanes of `m` (ray_math.h); the optical depth's (`depth`) keeps a zero
+// carry once infinite.
+inline void addCompensated(MF m, VF &sum, VF &carry, VF x, bool depth) {
+    VF t = sum, c = carry;
+    if (depth) vcAddCompensatedDepth(&t, &c, x);
+    else vcAddCompensated(&t, &c, x);
     carry = hn::IfThenElse(m, c, carry);
     sum = hn::IfThenElse(m, t, sum);
 }
 
-// Headlight Phong on the central-difference gradient (shading.hpp): diffuse factor, specular.
+// Headlight Phong (ray_math.h's vcPhong) on the gradient by central differences, one level
+// voxel apart, taken into world space: diffuse factor, specular term.
 void phong(const FrameParams &P, const VF q[3], const VF dir[3], VF &diffuse, VF &specular) {
     const DF df;
     const VF one = hn::Set(df, 1.0f);
@@ -407,19 +394,11 @@ void phong(const FrameParams &P, const VF q[3], const VF dir[3], VF &diffuse, VF
         minus[a] = hn::Sub(q[a], one);
         g[a] = hn::Sub(sampleVolume(P, plus[0], plus[1], plus[2]), sampleVolume(P, minus[0], minus[1], minus[2]));
     }
-    VF w[3]; // world gradient = (index-from-world linear part)ᵀ · index gradient
+    VF w[3];
     for (int c = 0; c < 3; ++c)
-        w[c] = hn::MulAdd(g[2], hn::Set(df, P.indexFromWorld[2][c]),
-                          hn::MulAdd(g[1], hn::Set(df, P.indexFromWorld[1][c]),
-                                     hn::Mul(g[0], hn::Set(df, P.indexFromWorld[0][c]))));
-    const VF len = hn::Sqrt(hn::MulAdd(w[2], w[2], hn::MulAdd(w[1], w[1], hn::Mul(w[0], w[0]))));
-    const VF gd = hn::MulAdd(w[2], dir[2], hn::MulAdd(w[1], dir[1], hn::Mul(w[0], dir[0])));
-    const VF ndl = hn::Min(hn::Div(hn::Abs(gd), len), one);
-    const VF n2 = hn::Mul(ndl, ndl), n4 = hn::Mul(n2, n2), n16 = hn::Mul(hn::Mul(n4, n4), hn::Mul(n4, n4));
-    static_assert(int(20.0f) == 20, "ndl^20 below is the shininess");
-    const MF lit = hn::Gt(len, hn::Zero(df)); // a zero gradient leaves the colour unlit
-    diffuse = hn::IfThenElse(lit, hn::MulAdd(ndl, hn::Set(df, 0.7f), hn::Set(df, 0.3f)), one);
-    specular = hn::IfThenElseZero(lit, hn::Mul(hn::Set(df, 0.2f), hn::Mul(n16, n4)));
+        w[c] = vcWorldGradient(g[0], g[1], g[2], hn::Set(df, P.indexFromWorld[0][c]), hn::Set(df, P.indexFromWorld[1][c]),
+                               hn::Set(df, P.indexFromWorld[2][c]));
+    vcPhong(w[0], w[1], w[2], dir[0], dir[1], dir[2], &diffuse, &specular);
 }
 
 // Intensity projection of one packet (raycast.cl's COMPOSITING_MAX / _MIN): the extreme of the
@@ -464,7 +443,7 @@ void projectPacket(const FrameParams &P, VF t0, VF t1, VF j, const VF q0[3], con
     }
     VF c[4];
     classify(P, extreme, c);
-    const VF a = hn::IfThenElseZero(found, opacityFromDepth(c[3])); // the table holds sigma = −ln(1 − a)
+    const VF a = hn::IfThenElseZero(found, vcOpacityFromDepth(c[3])); // the table holds sigma = −ln(1 − a)
     for (int ch = 0; ch < 3; ++ch) hn::Store(hn::Mul(a, c[ch]), df, out[ch]);
     hn::Store(a, df, out[3]);
     hn::Store(samples, di, samplesOut);
@@ -498,10 +477,10 @@ struct StepState {
 // A pre-integrated segment's contribution: the segment from the table for a full step; a
 // partial one scales the depth by len/step (Eq. 3) and the colour with its opacity, unless
 // the full step's alpha is too close to 1 to hold its depth: then it is classified at its
-// centre (raycast.cl, VC_ALPHA_HOLDS_DEPTH). The front value is sampled afresh after skips.
+// centre (ray_math.h's VC_ALPHA_HOLDS_DEPTH). The front value is sampled afresh after skips.
 HWY_INLINE void preintegratedContribution(const FrameParams &P, PacketMarch &m, StepState &s) {
     const DF df;
-    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step);
+    const VF d = hn::Set(df, P.step);
     const MF fresh = hn::And(s.take, m.sfStale);
     if (!hn::AllFalse(df, fresh)) {
         m.sf = hn::IfThenElse(fresh, sampleVolume(P, hn::MulAdd(m.segStart, m.dq[0], m.q0[0]),
@@ -515,22 +494,21 @@ HWY_INLINE void preintegratedContribution(const FrameParams &P, PacketMarch &m, 
     VF seg[4];
     preintegratedSegment(P, m.sf, sb, seg);
     m.sf = hn::IfThenElse(s.take, sb, m.sf);
-    const MF opaque = hn::Ge(seg[3], one); // −log1p(−1) = +inf: T becomes 0
-    s.segDepth = hn::IfThenElse(opaque, hn::Set(df, kInf), hn::Neg(hn::Log1p(df, hn::Neg(hn::IfThenZeroElse(opaque, seg[3])))));
+    s.segDepth = vcDepthFromOpacity(seg[3]); // +inf behind opaque material: T becomes 0
     s.alpha = seg[3];
     for (int a = 0; a < 3; ++a) s.segColor[a] = seg[a];
     const MF partialHere = hn::And(s.take, s.partial);
     if (!hn::AllFalse(df, partialHere)) {
         const VF fraction = hn::Div(s.len, d);
-        const MF holds = hn::And(partialHere, hn::Le(seg[3], hn::Set(df, 1.0f - 1.0f / 4096.0f)));
+        const MF holds = hn::And(partialHere, hn::Le(seg[3], hn::Set(df, VC_ALPHA_HOLDS_DEPTH)));
         const VF scaledDepth = hn::Mul(s.segDepth, fraction);
-        const VF scaledAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(holds), scaledDepth));
-        const VF colourScale = hn::IfThenElse(hn::Gt(seg[3], zero), hn::Div(scaledAlpha, seg[3]), fraction);
+        const VF scaledAlpha = vcOpacityFromDepth(hn::IfThenZeroElse(hn::Not(holds), scaledDepth));
+        const VF colourScale = vcPartialColourScale(seg[3], scaledAlpha, fraction);
         VF c[4];
         classify(P, sampleVolume(P, s.q[0], s.q[1], s.q[2]), c);
-        const VF centreDepth = hn::Mul(c[3], hn::Div(s.len, hn::Set(df, P.opacityUnit)));
+        const VF centreDepth = vcSegmentDepth(c[3], s.len, hn::Set(df, P.opacityUnit));
         const MF centre = hn::AndNot(holds, partialHere);
-        const VF centreAlpha = opacityFromDepth(hn::IfThenZeroElse(hn::Not(centre), centreDepth));
+        const VF centreAlpha = vcOpacityFromDepth(hn::IfThenZeroElse(hn::Not(centre), centreDepth));
         s.segDepth = hn::IfThenElse(holds, scaledDepth, hn::IfThenElse(centre, centreDepth, s.segDepth));
         s.alpha = hn::IfThenElse(holds, scaledAlpha, hn::IfThenElse(centre, centreAlpha, s.alpha));
         for (int a = 0; a < 3; ++a)
@@ -541,7 +519,7 @@ HWY_INLINE void preintegratedContribution(const FrameParams &P, PacketMarch &m, 
         // Light the premultiplied colour; the highlight is weighted by the opacity.
         VF diffuse, specular;
         phong(P, s.q, m.dir, diffuse, specular);
-        for (int a = 0; a < 3; ++a) s.segColor[a] = hn::Min(hn::MulAdd(s.segColor[a], diffuse, hn::Mul(specular, s.alpha)), s.alpha);
+        for (int a = 0; a < 3; ++a) s.segColor[a] = vcShadePremultiplied(s.segColor[a], s.alpha, diffuse, specular);
     }
 }
 
@@ -641,10 +619,10 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
             const bool opaqueSomewhere = !hn::AllFalse(df, hn::And(s.take, hn::Gt(s.segDepth, zero)));
             for (int a = 0; a < 3; ++a) s.segColor[a] = opaqueSomewhere ? tableChannel(P, s.spot, a) : zero;
             // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
-            s.segDepth = hn::Mul(s.segDepth, hn::Div(s.len, hn::Set(df, P.opacityUnit)));
+            s.segDepth = vcSegmentDepth(s.segDepth, s.len, hn::Set(df, P.opacityUnit));
         }
         for (int p = 0; p < N; ++p)
-            if (st[p].any) st[p].alpha = opacityFromDepth(st[p].segDepth);
+            if (st[p].any) st[p].alpha = vcOpacityFromDepth(st[p].segDepth);
         for (int p = 0; p < N; ++p) {
             StepState &s = st[p];
             if (!s.any) continue;
@@ -654,8 +632,7 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
                     VF diffuse, specular;
                     phong(P, s.q, ms[p].dir, diffuse, specular);
                     for (int a = 0; a < 3; ++a)
-                        s.segColor[a] = hn::IfThenElse(lit, hn::Min(hn::MulAdd(s.segColor[a], diffuse, specular), one),
-                                                       s.segColor[a]);
+                        s.segColor[a] = hn::IfThenElse(lit, vcShade(s.segColor[a], diffuse, specular), s.segColor[a]);
                 }
             }
             s.weight = s.alpha;
@@ -668,12 +645,10 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
         const VF tw = hn::Mul(m.T, s.weight);
         for (int a = 0; a < 3; ++a) addCompensated(s.take, m.color[a], m.colorCarry[a], hn::Mul(tw, s.segColor[a]), false);
         addCompensated(s.take, m.depth, m.depthCarry, s.segDepth, true);
-        // T = exp(−depth), kept by products and made exact every 16 samples.
-        VF nextT = hn::Mul(m.T, hn::Sub(one, s.alpha));
-        const MF exact = hn::And(s.take, hn::RebindMask(df, hn::Eq(hn::And(m.samples, hn::Set(di, 15)), hn::Zero(di))));
-        if (!hn::AllFalse(df, exact))
-            nextT = hn::IfThenElse(exact, hn::Exp(df, hn::Neg(hn::Sub(m.depth, m.depthCarry))), nextT);
-        m.T = hn::IfThenElse(s.take, nextT, m.T);
+        // T = exp(−depth), kept by products and made exact every few samples.
+        const VI refresh = hn::And(m.samples, hn::Set(di, int32_t(VC_EXACT_TRANSMITTANCE_EVERY - 1)));
+        const MF exact = hn::And(s.take, hn::RebindMask(df, hn::Eq(refresh, hn::Zero(di))));
+        m.T = hn::IfThenElse(s.take, vcNextTransmittance(m.T, s.alpha, m.depth, m.depthCarry, exact), m.T);
         if (F.earlyTermination) {
             const MF stop = hn::And(s.take, hn::Ge(m.depth, hn::Set(df, P.terminationDepth)));
             if (!hn::AllFalse(df, stop)) {
@@ -724,7 +699,7 @@ HWY_INLINE bool startPacket(const FrameParams &P, int bx, int by, int x1, int y1
         if (x < x1 && y < y1 && !m.hita[l])
             std::fill_n(rgba + (size_t(y - P.outY) * size_t(P.outWidth) + size_t(x - P.outX)) * 4, 4, 0.0f);
         m.hits += m.hita[l];
-        ja[l] = m.hita[l] && F.jitter ? random01(uint32_t(x), uint32_t(y), P.seed, P.pass) : 0.0f;
+        ja[l] = m.hita[l] && F.jitter ? vcRandom01(uint32_t(x), uint32_t(y), P.seed, P.pass) : 0.0f;
     }
     if (m.hits == 0) return false;
     m.t0 = rays.t0;
@@ -809,7 +784,7 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
             for (int p = 0; p < kPackets; ++p) {
                 if (!marching[p]) continue;
                 for (int a = 0; a < 3; ++a) hn::Store(hn::Sub(m[p].color[a], m[p].colorCarry[a]), df, outa[a]);
-                hn::Store(opacityFromDepth(hn::Sub(m[p].depth, m[p].depthCarry)), df, outa[3]);
+                hn::Store(vcOpacityFromDepth(hn::Sub(m[p].depth, m[p].depthCarry)), df, outa[3]);
                 hn::Store(m[p].samples, di, samplesa);
                 writePacket(P, m[p], outa, samplesa, rgba, totals);
             }

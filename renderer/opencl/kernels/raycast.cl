@@ -16,9 +16,17 @@
  *                        early termination, pre-integration nor shading with these two)
  *   VOXEL_BYTES=1 or 2   trilinear voxels held narrow, as uchar or ushort sample − narrowOffset
  *                        (narrow_samples.hpp): widened exactly, so the image is the float one's
+ *
+ * The per-sample formulas (ray_math.h: clipping, jitter hash, table coordinates, opacity
+ * correction, Kahan sums, transmittance, Phong, brick walls) are the native path's too
+ * (renderer/cpu/cpu_march.cpp); the build embeds that header before this file. The kernel is
+ * cut into stages, each switch inside a short function: ray set-up and clipping, the
+ * segments, reconstruction (sampleVolume), classification, shading, empty-space skipping,
+ * compositing, early termination.
  */
 #ifndef VOLCAST_EMBEDDED
 #include "../../model/phong_constants.h"
+#include "../../common/ray_math.h"
 #include "raycast_shared.h"
 #endif
 
@@ -131,11 +139,33 @@ float3 levelFromIndex(__global const RayCastParams *P, float3 p) {
     return (p + 0.5f) * P->levelScale - 0.5f;
 }
 
+/* What every stage reads besides the volume (VOLUME_ARG): the parameters, tables, counters. */
+typedef struct {
+    __global const RayCastParams *P;
+    __global const float4 *tfTable;
 #ifdef PREINTEGRATED
-/* Largest full-step alpha from which a partial segment takes its depth, −ln(1 − alpha): 1 − 2^-12
- * (D ≈ 8.3), where float rounding of alpha already moves D by 2^-24 · 2^12 / 8.3 ≈ 3e-5 of itself. */
-#define VC_ALPHA_HOLDS_DEPTH (1.0f - 1.0f / 4096.0f)
+    __global const float4 *preTable;
+    __global const float *preNodes;
+    __global const int *preLocator;
+#endif
+#ifdef EMPTY_SPACE_SKIPPING
+    __global const uchar *brickVisible;
+#endif
+    __global volatile uint *stats;
+    int4 n; /* samples per axis of the level sampled */
+} Frame;
 
+/* ---- classification ---------------------------------------------------------------------- */
+
+/* Transfer function: colour and sigma = −ln(1 − a), the optical depth of one opacity unit,
+ * linear between table entries (tf_table.hpp). */
+float4 classify(__global const float4 *table, __global const RayCastParams *P, float v) {
+    const float x = vcTableCoordinate(v, P->tfMin, P->tfScale, (float)(P->tfEntries - 1));
+    const int i = min((int)x, P->tfEntries - 2);
+    return mix(table[i], table[i + 1], x - (float)i);
+}
+
+#ifdef PREINTEGRATED
 /* Fractional node coordinate of value v: the locator gives the node intervals a uniform
  * bucket overlaps, a binary search the one holding v (preintegration.hpp). */
 float nodeCoordinate(__global const float *nodes, __global const int *locator, __global const RayCastParams *P,
@@ -148,108 +178,217 @@ float nodeCoordinate(__global const float *nodes, __global const int *locator, _
         if (v >= nodes[m]) i = m;
         else last = m - 1;
     }
-    return (float)i + clamp((v - nodes[i]) / (nodes[i + 1] - nodes[i]), 0.0f, 1.0f);
+    return (float)i + vcNodeFraction(v, nodes[i], nodes[i + 1]);
 }
 
 /* Segment of length step from value sf to sb: premultiplied colour and opacity. */
-float4 preintegratedSegment(__global const float4 *table, __global const float *nodes,
-                            __global const int *locator, __global const RayCastParams *P, float sf, float sb) {
-    const int N = P->preNodes;
-    const float x = nodeCoordinate(nodes, locator, P, sf), y = nodeCoordinate(nodes, locator, P, sb);
+float4 preintegratedSegment(const Frame *f, float sf, float sb) {
+    const int N = f->P->preNodes;
+    const float x = nodeCoordinate(f->preNodes, f->preLocator, f->P, sf);
+    const float y = nodeCoordinate(f->preNodes, f->preLocator, f->P, sb);
     const int i = min((int)x, N - 2), j = min((int)y, N - 2);
     const float fx = x - (float)i, fy = y - (float)j;
+    __global const float4 *table = f->preTable;
     const float4 a = mix(table[j * N + i], table[j * N + i + 1], fx);
     const float4 b = mix(table[(j + 1) * N + i], table[(j + 1) * N + i + 1], fx);
     return mix(a, b, fy);
 }
 #endif
 
-/* Transfer function: colour and sigma = −ln(1 − a), the optical depth of one opacity unit,
- * linear between table entries (tf_table.hpp). */
-float4 classify(__global const float4 *table, __global const RayCastParams *P, float v) {
-    const float x = clamp((v - P->tfMin) * P->tfScale, 0.0f, (float)(P->tfEntries - 1));
-    const int i = min((int)x, P->tfEntries - 2);
-    return mix(table[i], table[i + 1], x - (float)i);
-}
-
 #ifdef SHADING
-/* Headlight Phong on the gradient by central differences (one level voxel apart), taken
- * into world space: (diffuse factor, specular term). A zero gradient leaves the colour
- * unlit, (1, 0). The same model as shading.hpp. */
-float2 phong(VOLUME_ARG, int4 n, __global const RayCastParams *P, float3 q, float3 dir) {
+/* Headlight Phong (vcPhong) on the gradient by central differences (one level voxel apart),
+ * taken into world space: (diffuse factor, specular term). */
+float2 phong(VOLUME_ARG, const Frame *f, float3 q, float3 dir) {
+    const int4 n = f->n;
     const float gx = sampleVolume(VOLUME, n, q + (float3)(1.0f, 0.0f, 0.0f)) -
                      sampleVolume(VOLUME, n, q - (float3)(1.0f, 0.0f, 0.0f));
     const float gy = sampleVolume(VOLUME, n, q + (float3)(0.0f, 1.0f, 0.0f)) -
                      sampleVolume(VOLUME, n, q - (float3)(0.0f, 1.0f, 0.0f));
     const float gz = sampleVolume(VOLUME, n, q + (float3)(0.0f, 0.0f, 1.0f)) -
                      sampleVolume(VOLUME, n, q - (float3)(0.0f, 0.0f, 1.0f));
-    /* World gradient = (index-from-world linear part)ᵀ · index gradient. */
-    const float3 g = gx * P->indexFromWorld[0].xyz + gy * P->indexFromWorld[1].xyz + gz * P->indexFromWorld[2].xyz;
-    const float len = length(g);
-    if (!(len > 0.0f)) return (float2)(1.0f, 0.0f);
-    const float ndl = fmin(fabs(dot(g, dir)) / len, 1.0f);
-    return (float2)(VC_PHONG_AMBIENT + VC_PHONG_DIFFUSE * ndl, VC_PHONG_SPECULAR * pow(ndl, VC_PHONG_SHININESS));
+    __global const float4 *m = f->P->indexFromWorld;
+    float diffuse, specular;
+    vcPhong(vcWorldGradient(gx, gy, gz, m[0].x, m[1].x, m[2].x), vcWorldGradient(gx, gy, gz, m[0].y, m[1].y, m[2].y),
+            vcWorldGradient(gx, gy, gz, m[0].z, m[1].z, m[2].z), dir.x, dir.y, dir.z, &diffuse, &specular);
+    return (float2)(diffuse, specular);
 }
 #endif
 
-/* Opacity of optical depth x, 1 − exp(−x), to ~1e-7 relative at every x ≥ 0: its Taylor
- * series below 1/2 (where 1 − exp cancels; error x⁹/9! < 6e-9), exp above. On PoCL this is
- * half the cost of expm1, the most expensive step of a sample. */
-float opacityFromDepth(float x) {
-    if (x >= 0.5f) return 1.0f - exp(-x);
-    return x * (1.0f - x * (1.0f / 2.0f) * (1.0f - x * (1.0f / 3.0f) * (1.0f - x * (1.0f / 4.0f) *
-           (1.0f - x * (1.0f / 5.0f) * (1.0f - x * (1.0f / 6.0f) * (1.0f - x * (1.0f / 7.0f) *
-           (1.0f - x * (1.0f / 8.0f))))))));
+/* ---- ray set-up ---------------------------------------------------------------------------- */
+
+typedef struct {
+    float3 origin, dir; /* world; dir is a unit vector */
+    float3 p0, dq;      /* level-0 index space: p(t) = p0 + t·dq */
+    float3 q0, dqL;     /* the sampled level's coordinates: q(t) = q0 + t·dqL */
+    float t0, t1;       /* the part inside the box (or crop box) and the clip planes */
+} Ray;
+
+/* Ray through the pixel centre (docs/design.md's camera), world space, and into index space,
+ * where the volume is the box [-1/2, n - 1/2]. */
+Ray cameraRay(__global const RayCastParams *P, int x, int y) {
+    const float u = vcImageU((float)x, (float)P->width), v = vcImageV((float)y, (float)P->height);
+    const float3 offset = u * P->right.xyz + v * P->up.xyz;
+    Ray r;
+    r.origin = P->eye.xyz;
+    if (P->orthographic) {
+        r.origin += offset;
+        r.dir = P->forward.xyz;
+    } else {
+        r.dir = normalize(P->forward.xyz + offset);
+    }
+    __global const float4 *m = P->indexFromWorld;
+    r.p0 = (float3)(dot(m[0].xyz, r.origin) + m[0].w, dot(m[1].xyz, r.origin) + m[1].w,
+                    dot(m[2].xyz, r.origin) + m[2].w);
+    r.dq = (float3)(dot(m[0].xyz, r.dir), dot(m[1].xyz, r.dir), dot(m[2].xyz, r.dir));
+    return r;
 }
 
-/* Kahan-compensated sum += x. A plain float sum of n terms can lose up to n·2^-24 of itself:
- * in faint media, 819,200 terms of 1e-9 build a sum near 8e-4 whose half ulp is 3 % of a
- * term, rounded away mostly the same way (0.6 % in all, more on longer chords). The carry
- * keeps the sum exact to a few roundings, for ~5 % more time per sample on PoCL. An infinite
- * sum keeps a zero carry, since inf − inf is NaN. */
-void addCompensated(float *sum, float *carry, float x) {
-    const float y = x - *carry;
-    const float t = *sum + y;
-    *carry = isinf(t) ? 0.0f : (t - *sum) - y;
-    *sum = t;
+/* [t0, t1]: the ray inside the volume's box [-1/2, n - 1/2], or the crop box inside it. */
+void clipToBox(__global const RayCastParams *P, Ray *r) {
+    float t0 = 0.0f, t1 = INFINITY;
+    vcClipToSlab(r->p0.x, r->dq.x, P->boxLo.x, P->boxHi.x, &t0, &t1);
+    vcClipToSlab(r->p0.y, r->dq.y, P->boxLo.y, P->boxHi.y, &t0, &t1);
+    vcClipToSlab(r->p0.z, r->dq.z, P->boxLo.z, P->boxHi.z, &t0, &t1);
+    r->t0 = t0;
+    r->t1 = t1;
 }
 
-void addCompensated3(float3 *sum, float3 *carry, float3 x) {
-    const float3 y = x - *carry;
-    const float3 t = *sum + y;
-    *carry = (t - *sum) - y; /* colour stays below 1: never infinite */
-    *sum = t;
+/* CLIP_PLANES: [t0, t1] within the half spaces the scene's clip planes keep. */
+void clipToPlanes(__global const RayCastParams *P, Ray *r) {
+#ifdef CLIP_PLANES
+    float t0 = r->t0, t1 = r->t1;
+    for (int c = 0; c < P->clipPlaneCount; ++c) {
+        const float4 plane = P->clipPlanes[c];
+        vcClipToPlane(dot(plane.xyz, r->origin) + plane.w, dot(plane.xyz, r->dir), &t0, &t1);
+    }
+    r->t0 = t0;
+    r->t1 = t1;
+#endif
 }
 
-/* PCG hash: a reproducible uniform number in [0, 1) per pixel, seed and pass. */
-float random01(uint x, uint y, uint seed, uint pass) {
-    uint s = x * 1973u + y * 9277u + seed * 26699u + pass * 104729u;
-    s = s * 747796405u + 2891336453u;
-    uint w = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
-    w = (w >> 22u) ^ w;
-    return (float)(w >> 8) * (1.0f / 16777216.0f);
+/* ---- the segments -------------------------------------------------------------------------- */
+
+/* Segment boundaries at t0 + (k + j)·step along [t0, t1], j the jitter offset in [0, 1): from
+ * k = 0 under jitter (a partial first segment), else from 1. */
+typedef struct {
+    float t0, t1, j, d;
+    int k;       /* the current segment ends at boundary k */
+    float start; /* where it starts */
+} Segments;
+
+typedef struct {
+    float boundary, end, len;
+    bool partial; /* the first one under jitter, or the last at the exit */
+} Segment;
+
+/* JITTER: a random start offset per ray and pass (against onion rings), else 0. */
+float jitterOffset(__global const RayCastParams *P, int x, int y) {
+#ifdef JITTER
+    return vcRandom01((uint)x, (uint)y, P->seed, P->pass);
+#else
+    return 0.0f;
+#endif
 }
+
+Segments firstSegment(const Ray *r, float d, float j) {
+    Segments s;
+    s.t0 = r->t0;
+    s.t1 = r->t1;
+    s.j = j;
+    s.d = d;
+    s.k = j > 0.0f ? 0 : 1;
+    s.start = r->t0;
+    return s;
+}
+
+Segment segmentAt(const Segments *s) {
+    Segment g;
+    g.boundary = s->t0 + ((float)s->k + s->j) * s->d;
+    g.end = fmin(g.boundary, s->t1);
+    g.len = g.end - s->start;
+    g.partial = g.boundary > s->t1 || (s->k == 0);
+    return g;
+}
+
+/* BOUNDARY_SEGMENT: every non-empty segment is sampled, partial ones included (no jerky
+ * edges); without it only full ones. */
+bool segmentTaken(Segment g) {
+#ifdef BOUNDARY_SEGMENT
+    return g.len > 0.0f;
+#else
+    return g.len > 0.0f && !g.partial;
+#endif
+}
+
+/* Moves on to the next segment; false past the ray's exit. */
+bool nextSegment(Segments *s, Segment g) {
+    if (g.boundary >= s->t1) return false;
+    s->start = g.end;
+    ++s->k;
+    return true;
+}
+
+/* Counts a sample; false, and the ray counted as truncated, beyond the per-ray limit. */
+bool countSample(const Frame *f, uint *samples) {
+    if ((int)*samples >= f->P->maxSamples) {
+        atomic_inc(&f->stats[VC_STAT_TRUNCATED]);
+        return false;
+    }
+    ++*samples;
+    return true;
+}
+
+/* ---- intensity projection ------------------------------------------------------------------ */
+
+#if defined(COMPOSITING_MAX) || defined(COMPOSITING_MIN)
+/* COMPOSITING_MAX: the larger value, COMPOSITING_MIN: the smaller. */
+float extremeOf(float a, float b) {
+#ifdef COMPOSITING_MAX
+    return fmax(a, b);
+#else
+    return fmin(a, b);
+#endif
+}
+
+/* The extreme of the values sampled at the segments' centres (the same segments, partial ones
+ * included, as emission–absorption samples), mapped through the transfer function:
+ * premultiplied colour and its opacity a(v). */
+float4 projectIntensity(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint *samples) {
+    Segments s = firstSegment(r, f->P->step, j);
+    bool found = false;
+    float extreme = 0.0f;
+    for (;;) {
+        const Segment g = segmentAt(&s);
+        if (segmentTaken(g)) {
+            if (!countSample(f, samples)) break;
+            const float v = sampleVolume(VOLUME, f->n, r->q0 + (s.start + 0.5f * g.len) * r->dqL);
+            extreme = found ? extremeOf(extreme, v) : v;
+            found = true;
+        }
+        if (!nextSegment(&s, g)) break;
+    }
+    if (!found) return (float4)(0.0f);
+    const float4 rgbs = classify(f->tfTable, f->P, extreme);
+    const float a = vcOpacityFromDepth(rgbs.w); /* the table holds sigma = −ln(1 − a) */
+    return (float4)(a * rgbs.xyz, a);
+}
+#endif
+
+/* ---- emission–absorption ------------------------------------------------------------------- */
 
 #ifdef EMPTY_SPACE_SKIPPING
 /* The incremental brick walk (DDA) over the brick grid: the brick holding the point the ray has
  * reached, whether the transfer function leaves it visible, and the t at which the ray crosses
- * each of its walls. Moving on costs a comparison per segment and a division per wall crossed.
- * A point within float rounding of a wall may be put in either brick: harmless, as each
- * brick's value range covers half a voxel beyond its box (minmax_bricks.hpp). The CPU path's
- * BrickWalk (renderer/cpu/cpu_march.cpp) does the same arithmetic. */
+ * each of its walls (vcBrickOf, vcBrickWall, vcBrickExit). Moving on costs a comparison per
+ * segment and a division per wall crossed. A point within float rounding of a wall may be put
+ * in either brick: harmless, as each brick's value range covers half a voxel beyond its box
+ * (minmax_bricks.hpp). The native path walks a packet of rays with the same formulas. */
 typedef struct {
+    float q0[3], dq[3]; /* the ray in level coordinates */
     int b[3];
     float wall[3];
     bool visible;
 } BrickWalk;
-
-/* Brick b covers level coordinates [b·B − 1/2, (b + 1)·B − 1/2] on each axis. */
-float brickWall(__global const RayCastParams *P, int b, float q0, float dq) {
-    if (dq == 0.0f) return INFINITY;
-    const float B = (float)P->brickSize;
-    const float lo = (float)b * B - 0.5f;
-    return ((dq > 0.0f ? lo + B : lo) - q0) / dq;
-}
 
 void brickLookUp(__global const uchar *visible, __global const RayCastParams *P, BrickWalk *w) {
     const int bx = clamp(w->b[0], 0, P->bricks[0] - 1), by = clamp(w->b[1], 0, P->bricks[1] - 1),
@@ -257,34 +396,280 @@ void brickLookUp(__global const uchar *visible, __global const RayCastParams *P,
     w->visible = visible[((size_t)bz * P->bricks[1] + by) * P->bricks[0] + bx] != 0;
 }
 
-void brickWalkStart(__global const uchar *visible, __global const RayCastParams *P, const float *q0, const float *dq,
-                    float t, BrickWalk *w) {
+float brickWalkExit(const BrickWalk *w) { return vcBrickExit(w->wall[0], w->wall[1], w->wall[2]); }
+
+/* The brick of q(t) for the ray entering at t. */
+void brickWalkStart(const Frame *f, const Ray *r, BrickWalk *w) {
+    __global const RayCastParams *P = f->P;
     const float inverseB = 1.0f / (float)P->brickSize;
+    w->q0[0] = r->q0.x, w->q0[1] = r->q0.y, w->q0[2] = r->q0.z;
+    w->dq[0] = r->dqL.x, w->dq[1] = r->dqL.y, w->dq[2] = r->dqL.z;
     for (int a = 0; a < 3; ++a) {
-        const float q = fma(t, dq[a], q0[a]);
-        w->b[a] = clamp((int)floor((q + 0.5f) * inverseB), 0, P->bricks[a] - 1);
-        w->wall[a] = brickWall(P, w->b[a], q0[a], dq[a]);
+        const float q = fma(r->t0, w->dq[a], w->q0[a]);
+        w->b[a] = clamp((int)vcBrickOf(q, inverseB), 0, P->bricks[a] - 1);
+        w->wall[a] = vcBrickWall((float)w->b[a], (float)P->brickSize, w->q0[a], w->dq[a]);
     }
-    brickLookUp(visible, P, w);
+    brickLookUp(f->brickVisible, P, w);
 }
 
-float brickWalkExit(const BrickWalk *w) { return fmin(w->wall[0], fmin(w->wall[1], w->wall[2])); }
-
 /* Moves on to the brick holding q(t), t not before where the walk is. */
-void brickWalkTo(__global const uchar *visible, __global const RayCastParams *P, const float *q0, const float *dq,
-                 float t, BrickWalk *w) {
+void brickWalkTo(const Frame *f, float t, BrickWalk *w) {
     bool moved = false;
     for (;;) {
         const float first = brickWalkExit(w);
         if (!(t >= first)) break;
         moved = true;
         const int a = w->wall[0] == first ? 0 : (w->wall[1] == first ? 1 : 2);
-        w->b[a] += dq[a] > 0.0f ? 1 : -1;
-        w->wall[a] = brickWall(P, w->b[a], q0[a], dq[a]);
+        w->b[a] += w->dq[a] > 0.0f ? 1 : -1;
+        w->wall[a] = vcBrickWall((float)w->b[a], (float)f->P->brickSize, w->q0[a], w->dq[a]);
     }
-    if (moved) brickLookUp(visible, P, w);
+    if (moved) brickLookUp(f->brickVisible, f->P, w);
+}
+
+#ifdef PREINTEGRATED
+/* A pre-integrated segment reads the values at both ends and between: it is empty when it lies
+ * wholly in a brick the transfer function makes transparent. A later full segment k' is
+ * decided by its end, t0 + (k' + j)·d. */
+#define SKIP_DECIDING_POINT 0.0f
+bool emptySegment(const Frame *f, const Segments *s, Segment g, BrickWalk *w) {
+    brickWalkTo(f, s->start, w);
+    return !w->visible && g.end <= brickWalkExit(w);
+}
+#else
+/* A sampled segment is empty when its sample, at its centre, lies in such a brick (it would add
+ * exactly 0); a later full segment k' is decided by its centre, t0 + (k' + j − ½)·d. */
+#define SKIP_DECIDING_POINT 0.5f
+bool emptySegment(const Frame *f, const Segments *s, Segment g, BrickWalk *w) {
+    brickWalkTo(f, fma(0.5f, g.len, s->start), w);
+    return !w->visible;
 }
 #endif
+#endif
+
+/* One ray's emission–absorption march: the compensated sums, the transmittance, counters. */
+typedef struct {
+    float opticalDepth, depthCarry; /* accumulated, so faint media keep their precision */
+    float T;                        /* transmittance in front of the current segment */
+    float color[3], colorCarry[3];
+    uint samples, skipped;
+    bool terminated;
+#ifdef PREINTEGRATED
+    float sf;     /* the value at the segment's front */
+    bool sfStale; /* after a skip: sf must be sampled at the segment's start first */
+#endif
+#ifdef EMPTY_SPACE_SKIPPING
+    BrickWalk walk;
+#endif
+} March;
+
+March startMarch(VOLUME_ARG, const Frame *f, const Ray *r) {
+    March m;
+    m.opticalDepth = m.depthCarry = 0.0f;
+    m.T = 1.0f;
+    for (int c = 0; c < 3; ++c) m.color[c] = m.colorCarry[c] = 0.0f;
+    m.samples = m.skipped = 0u;
+    m.terminated = false;
+#ifdef PREINTEGRATED
+    m.sf = sampleVolume(VOLUME, f->n, r->q0 + r->t0 * r->dqL);
+    m.sfStale = false;
+#endif
+#ifdef EMPTY_SPACE_SKIPPING
+    brickWalkStart(f, r, &m.walk);
+#endif
+    return m;
+}
+
+/* EMPTY_SPACE_SKIPPING: whether segment g is empty by the brick walk (it is then not taken),
+ * and *jumpTo, the last later full segment k' that is empty too: its deciding point before the
+ * brick's exit (one fewer for rounding), ending before t1. */
+bool inEmptySpace(const Frame *f, const Segments *s, Segment g, March *m, float *jumpTo) {
+#ifdef EMPTY_SPACE_SKIPPING
+    if (!emptySegment(f, s, g, &m->walk)) return false;
+    *jumpTo = fmin(floor((brickWalkExit(&m->walk) - s->t0) / s->d - s->j + SKIP_DECIDING_POINT) - 1.0f,
+                   floor((s->t1 - s->t0) / s->d - s->j) - 1.0f);
+#ifdef PREINTEGRATED
+    m->sfStale = true;
+#endif
+    return true;
+#else
+    return false;
+#endif
+}
+
+/* Skips the full segments k … jumpTo at once (segment k is the current one): moves on to
+ * jumpTo + 1 and returns how many. */
+uint skipSegmentsTo(Segments *s, float jumpTo) {
+    if (!(jumpTo >= (float)s->k)) return 0u;
+    const uint n = (uint)(jumpTo - (float)s->k) + 1u;
+    s->k = (int)jumpTo + 1;
+    s->start = fma(jumpTo + s->j, s->d, s->t0);
+    return n;
+}
+
+/* A segment's part of the pixel: T·weight·rgb, its optical depth and opacity. weight is alpha
+ * for a sampled segment's colour, 1 for a premultiplied (pre-integrated) one. */
+typedef struct {
+    float3 rgb;
+    float weight, depth, alpha;
+} SegmentColour;
+
+/* SHADING: a sample's colour lit by the headlight where it is not transparent. */
+float3 shadeSample(VOLUME_ARG, const Frame *f, const Ray *r, float3 q, float3 rgb, float alpha) {
+#ifdef SHADING
+    if (alpha > 0.0f) {
+        const float2 light = phong(VOLUME, f, q, r->dir);
+        rgb = (float3)(vcShade(rgb.x, light.x, light.y), vcShade(rgb.y, light.x, light.y),
+                       vcShade(rgb.z, light.x, light.y));
+    }
+#endif
+    return rgb;
+}
+
+/* SHADING: a premultiplied segment colour lit at the segment's centre q. */
+float3 shadeSegment(VOLUME_ARG, const Frame *f, const Ray *r, float3 q, float3 rgb, float alpha) {
+#ifdef SHADING
+    const float2 light = phong(VOLUME, f, q, r->dir);
+    rgb = (float3)(vcShadePremultiplied(rgb.x, alpha, light.x, light.y),
+                   vcShadePremultiplied(rgb.y, alpha, light.x, light.y),
+                   vcShadePremultiplied(rgb.z, alpha, light.x, light.y));
+#endif
+    return rgb;
+}
+
+/* The segment sampled at its centre and classified, its opacity corrected for its length. */
+SegmentColour sampledColour(VOLUME_ARG, const Frame *f, const Ray *r, const Segments *s, Segment g) {
+    const float3 q = r->q0 + (s->start + 0.5f * g.len) * r->dqL;
+    const float4 rgba = classify(f->tfTable, f->P, sampleVolume(VOLUME, f->n, q));
+    SegmentColour c;
+    c.depth = vcSegmentDepth(rgba.w, g.len, f->P->opacityUnit);
+    c.alpha = vcOpacityFromDepth(c.depth);
+    c.rgb = shadeSample(VOLUME, f, r, q, rgba.xyz, c.alpha);
+    c.weight = c.alpha;
+    return c;
+}
+
+#ifdef PREINTEGRATED
+/* The segment's colour and optical depth from the table for a full step; a partial one scales
+ * the depth by len/step (Eq. 3) and the colour with its opacity. Partial by position, not by
+ * len < d: far from the eye, float rounding of the boundaries makes full segments a little
+ * shorter or longer than d, and scaling only the shorter ones would bias the sum (by 0.7 %
+ * over 800,000 faint segments). Where the full step's alpha is too close to 1 to hold its
+ * depth (VC_ALPHA_HOLDS_DEPTH), the partial segment is classified at its centre instead. */
+SegmentColour preintegratedColour(VOLUME_ARG, const Frame *f, const Ray *r, const Segments *s, Segment g, March *m) {
+    if (m->sfStale) {
+        m->sf = sampleVolume(VOLUME, f->n, r->q0 + s->start * r->dqL);
+        m->sfStale = false;
+    }
+    const float sb = sampleVolume(VOLUME, f->n, r->q0 + g.end * r->dqL);
+    const float4 seg = preintegratedSegment(f, m->sf, sb);
+    m->sf = sb;
+    SegmentColour c;
+    c.depth = vcDepthFromOpacity(seg.w); /* +inf behind opaque material: T becomes 0 */
+    c.alpha = seg.w;
+    c.rgb = seg.xyz;
+    c.weight = 1.0f;
+    if (g.partial && seg.w <= VC_ALPHA_HOLDS_DEPTH) {
+        const float fraction = g.len / s->d;
+        c.depth *= fraction;
+        c.alpha = vcOpacityFromDepth(c.depth);
+        c.rgb *= vcPartialColourScale(seg.w, c.alpha, fraction);
+    } else if (g.partial) {
+        const float4 rgba = classify(f->tfTable, f->P, sampleVolume(VOLUME, f->n, r->q0 + (s->start + 0.5f * g.len) * r->dqL));
+        c.depth = vcSegmentDepth(rgba.w, g.len, f->P->opacityUnit);
+        c.alpha = vcOpacityFromDepth(c.depth);
+        c.rgb = c.alpha * rgba.xyz;
+    }
+    c.rgb = shadeSegment(VOLUME, f, r, r->q0 + (s->start + 0.5f * g.len) * r->dqL, c.rgb, c.alpha);
+    return c;
+}
+#endif
+
+/* PREINTEGRATED: the segment from the pre-integration table, else sampled at its centre. */
+SegmentColour segmentColour(VOLUME_ARG, const Frame *f, const Ray *r, const Segments *s, Segment g, March *m) {
+#ifdef PREINTEGRATED
+    return preintegratedColour(VOLUME, f, r, s, g, m);
+#else
+    return sampledColour(VOLUME, f, r, s, g);
+#endif
+}
+
+/* Front to back (Eq. 2): colour += T·weight·rgb and depth += the segment's, compensated, and T
+ * behind the segment (vcNextTransmittance). */
+void composite(March *m, SegmentColour c) {
+    const float w = m->T * c.weight;
+    vcAddCompensated(&m->color[0], &m->colorCarry[0], w * c.rgb.x);
+    vcAddCompensated(&m->color[1], &m->colorCarry[1], w * c.rgb.y);
+    vcAddCompensated(&m->color[2], &m->colorCarry[2], w * c.rgb.z);
+    vcAddCompensatedDepth(&m->opticalDepth, &m->depthCarry, c.depth);
+    const bool exact = (m->samples & (VC_EXACT_TRANSMITTANCE_EVERY - 1u)) == 0u;
+    m->T = vcNextTransmittance(m->T, c.alpha, m->opticalDepth, m->depthCarry, exact);
+}
+
+/* EARLY_TERMINATION: whether the ray stops, its optical depth at the threshold's. */
+bool terminatesEarly(const Frame *f, March *m) {
+#ifdef EARLY_TERMINATION
+    if (m->opticalDepth >= f->P->terminationDepth) {
+        m->terminated = true;
+        return true;
+    }
+#endif
+    return false;
+}
+
+float4 emissionAbsorption(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint *samples) {
+    Segments s = firstSegment(r, f->P->step, j);
+    March m = startMarch(VOLUME, f, r);
+    for (;;) {
+        const Segment g = segmentAt(&s);
+        if (segmentTaken(g)) {
+            float jumpTo;
+            if (inEmptySpace(f, &s, g, &m, &jumpTo)) {
+                ++m.skipped;
+                if (!nextSegment(&s, g)) break;
+                m.skipped += skipSegmentsTo(&s, jumpTo);
+                continue;
+            }
+            if (!countSample(f, &m.samples)) break;
+            composite(&m, segmentColour(VOLUME, f, r, &s, g, &m));
+            if (terminatesEarly(f, &m)) break;
+        }
+        if (!nextSegment(&s, g)) break;
+    }
+    __global volatile uint *stats = f->stats;
+    if (m.terminated) atomic_inc(&stats[VC_STAT_TERMINATED_EARLY]);
+    if (m.skipped && atomic_add(&stats[VC_STAT_SEGMENTS_SKIPPED], m.skipped) > UINT_MAX - m.skipped)
+        atomic_inc(&stats[VC_STAT_SEGMENTS_SKIPPED_HIGH]);
+    *samples = m.samples;
+    return (float4)(m.color[0] - m.colorCarry[0], m.color[1] - m.colorCarry[1], m.color[2] - m.colorCarry[2],
+                    vcOpacityFromDepth(m.opticalDepth - m.depthCarry));
+}
+
+/* ---- the pixel ----------------------------------------------------------------------------- */
+
+/* COMPOSITING_MAX or _MIN: an intensity projection, else emission–absorption. */
+float4 compositeRay(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint *samples) {
+#if defined(COMPOSITING_MAX) || defined(COMPOSITING_MIN)
+    return projectIntensity(VOLUME, f, r, j, samples);
+#else
+    return emissionAbsorption(VOLUME, f, r, j, samples);
+#endif
+}
+
+float4 castRay(VOLUME_ARG, const Frame *f, int x, int y) {
+    __global const RayCastParams *P = f->P;
+    Ray r = cameraRay(P, x, y);
+    clipToBox(P, &r);
+    clipToPlanes(P, &r);
+    if (!(r.t1 > r.t0)) return (float4)(0.0f);
+    r.q0 = levelFromIndex(P, r.p0);
+    r.dqL = r.dq * P->levelScale;
+    uint samples = 0u;
+    const float4 pixel = compositeRay(VOLUME, f, &r, jitterOffset(P, x, y), &samples);
+    if (atomic_add(&f->stats[VC_STAT_SAMPLES], samples) > UINT_MAX - samples)
+        atomic_inc(&f->stats[VC_STAT_SAMPLES_HIGH]);
+    atomic_inc(&f->stats[VC_STAT_RAYS_HIT]);
+    return pixel;
+}
 
 __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #ifdef PREINTEGRATED
@@ -299,259 +684,18 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #ifdef VOXEL_BYTES
     const float narrowOffset = P->narrowOffset;
 #endif
-
-    /* Ray through the pixel centre (docs/design.md's camera), world space. */
-    const float u = 2.0f * ((float)x + 0.5f) / (float)P->width - 1.0f;
-    const float v = 1.0f - 2.0f * ((float)y + 0.5f) / (float)P->height;
-    const float3 offset = u * P->right.xyz + v * P->up.xyz;
-    float3 origin = P->eye.xyz, dir;
-    if (P->orthographic) {
-        origin += offset;
-        dir = P->forward.xyz;
-    } else {
-        dir = normalize(P->forward.xyz + offset);
-    }
-
-    /* Into index space, where the volume is the box [-1/2, n - 1/2]. */
-    const float3 p0 = (float3)(dot(P->indexFromWorld[0].xyz, origin) + P->indexFromWorld[0].w,
-                               dot(P->indexFromWorld[1].xyz, origin) + P->indexFromWorld[1].w,
-                               dot(P->indexFromWorld[2].xyz, origin) + P->indexFromWorld[2].w);
-    const float3 dq = (float3)(dot(P->indexFromWorld[0].xyz, dir), dot(P->indexFromWorld[1].xyz, dir),
-                               dot(P->indexFromWorld[2].xyz, dir));
-    float t0 = 0.0f, t1 = INFINITY;
-    for (int a = 0; a < 3; ++a) {
-        const float pa = a == 0 ? p0.x : (a == 1 ? p0.y : p0.z);
-        const float da = a == 0 ? dq.x : (a == 1 ? dq.y : dq.z);
-        /* The volume's box [-1/2, n - 1/2], or the crop box inside it. */
-        const float lo = a == 0 ? P->boxLo.x : (a == 1 ? P->boxLo.y : P->boxLo.z);
-        const float hi = a == 0 ? P->boxHi.x : (a == 1 ? P->boxHi.y : P->boxHi.z);
-        if (da == 0.0f) {
-            if (pa < lo || pa > hi) t1 = -INFINITY;
-            continue;
-        }
-        const float ta = (lo - pa) / da, tb = (hi - pa) / da;
-        t0 = fmax(t0, fmin(ta, tb));
-        t1 = fmin(t1, fmax(ta, tb));
-    }
-#ifdef CLIP_PLANES
-    for (int c = 0; c < P->clipPlaneCount; ++c) {
-        const float4 plane = P->clipPlanes[c];
-        const float g0 = dot(plane.xyz, origin) + plane.w, gd = dot(plane.xyz, dir);
-        if (gd == 0.0f) {
-            if (g0 < 0.0f) t1 = -INFINITY;
-        } else if (gd > 0.0f) {
-            t0 = fmax(t0, -g0 / gd);
-        } else {
-            t1 = fmin(t1, -g0 / gd);
-        }
-    }
-#endif
-    if (!(t1 > t0)) {
-        image[y * P->width + x] = (float4)(0.0f);
-        return;
-    }
-
-    /* The sampled level's coordinates along the ray: q(t) = q0 + t·dqL. */
-    const int4 n = (int4)(P->levelDims[0], P->levelDims[1], P->levelDims[2], 0);
-    const float3 q0 = levelFromIndex(P, p0), dqL = dq * P->levelScale;
-
-    /* Segment boundaries at t0 + (k + j)·step; j is the jitter offset in [0, 1). */
-    const float d = P->step;
-#ifdef JITTER
-    const float j = random01((uint)x, (uint)y, P->seed, P->pass);
-#else
-    const float j = 0.0f;
-#endif
-#if defined(COMPOSITING_MAX) || defined(COMPOSITING_MIN)
-    {
-        /* Intensity projection: the extreme of the values sampled at the segments' centres
-         * (the same segments, partial ones included, as emission–absorption samples), mapped
-         * through the transfer function: premultiplied colour and its opacity a(v). */
-        uint samples = 0;
-        bool found = false;
-        float extreme = 0.0f;
-        float segStart = t0;
-        for (int k = (j > 0.0f ? 0 : 1);; ++k) {
-            const float boundary = t0 + ((float)k + j) * d;
-            const float segEnd = fmin(boundary, t1);
-            const float len = segEnd - segStart;
-#ifdef BOUNDARY_SEGMENT
-            const bool take = len > 0.0f;
-#else
-            const bool take = len > 0.0f && !(boundary > t1 || k == 0);
-#endif
-            if (take) {
-                if ((int)samples >= P->maxSamples) {
-                    atomic_inc(&stats[VC_STAT_TRUNCATED]);
-                    break;
-                }
-                ++samples;
-                const float v = sampleVolume(VOLUME, n, q0 + (segStart + 0.5f * len) * dqL);
-#ifdef COMPOSITING_MAX
-                extreme = found ? fmax(extreme, v) : v;
-#else
-                extreme = found ? fmin(extreme, v) : v;
-#endif
-                found = true;
-            }
-            if (boundary >= t1) break;
-            segStart = segEnd;
-        }
-        float4 pixel = (float4)(0.0f);
-        if (found) {
-            const float4 rgbs = classify(tfTable, P, extreme);
-            const float a = opacityFromDepth(rgbs.w); /* the table holds sigma = −ln(1 − a) */
-            pixel = (float4)(a * rgbs.xyz, a);
-        }
-        image[y * P->width + x] = pixel;
-        if (atomic_add(&stats[VC_STAT_SAMPLES], samples) > UINT_MAX - samples) atomic_inc(&stats[VC_STAT_SAMPLES_HIGH]);
-        atomic_inc(&stats[VC_STAT_RAYS_HIT]);
-        return;
-    }
-#endif
-    float opticalDepth = 0.0f, depthCarry = 0.0f; /* accumulated, so faint media keep their precision */
-    float T = 1.0f;            /* transmittance in front of the current segment */
-    float3 color = (float3)(0.0f), colorCarry = (float3)(0.0f);
-    uint samples = 0, skipped = 0;
-    bool terminated = false;
-    float segStart = t0;
+    Frame f;
+    f.P = P;
+    f.tfTable = tfTable;
 #ifdef PREINTEGRATED
-    float sf = sampleVolume(VOLUME, n, q0 + t0 * dqL); /* value at the segment's front */
+    f.preTable = preTable;
+    f.preNodes = preNodes;
+    f.preLocator = preLocator;
 #endif
 #ifdef EMPTY_SPACE_SKIPPING
-    const float q0a[3] = {q0.x, q0.y, q0.z}, dqa[3] = {dqL.x, dqL.y, dqL.z};
-    BrickWalk walk;
-    brickWalkStart(brickVisible, P, q0a, dqa, t0, &walk);
+    f.brickVisible = brickVisible;
 #endif
-#if defined(EMPTY_SPACE_SKIPPING) && defined(PREINTEGRATED)
-    bool sfStale = false; /* sf must be sampled at segStart first */
-#endif
-    for (int k = (j > 0.0f ? 0 : 1);; ++k) {
-        const float boundary = t0 + ((float)k + j) * d;
-        const float segEnd = fmin(boundary, t1);
-        const float len = segEnd - segStart;
-        /* A partial segment: the first one under jitter, or the last at the exit. */
-        const bool partial = boundary > t1 || (k == 0);
-#ifdef BOUNDARY_SEGMENT
-        const bool take = len > 0.0f;
-#else
-        const bool take = len > 0.0f && !partial;
-#endif
-#ifdef EMPTY_SPACE_SKIPPING
-        /* Skipping by sample position: a sampled segment is not taken when its centre lies in
-         * a brick the transfer function makes empty (it would add exactly 0); a pre-integrated
-         * one, which reads the values at both ends and between, when it lies wholly in one. */
-        if (take) {
-#ifdef PREINTEGRATED
-            brickWalkTo(brickVisible, P, q0a, dqa, segStart, &walk);
-            const bool skip = !walk.visible && segEnd <= brickWalkExit(&walk);
-            const float decidingPoint = 0.0f; /* the segment's end: t0 + (k' + j)·d */
-#else
-            brickWalkTo(brickVisible, P, q0a, dqa, fma(0.5f, len, segStart), &walk);
-            const bool skip = !walk.visible;
-            const float decidingPoint = 0.5f; /* its centre: t0 + (k' + j − ½)·d */
-#endif
-            if (skip) {
-                ++skipped;
-#ifdef PREINTEGRATED
-                sfStale = true;
-#endif
-                if (boundary >= t1) break;
-                /* Later full segments k' whose deciding point is before the brick's exit (one
-                 * fewer for rounding) and that end before t1: skipped at once. */
-                const float jumpTo = fmin(floor((brickWalkExit(&walk) - t0) / d - j + decidingPoint) - 1.0f,
-                                          floor((t1 - t0) / d - j) - 1.0f);
-                if (jumpTo >= (float)(k + 1)) {
-                    skipped += (uint)(jumpTo - (float)k);
-                    k = (int)jumpTo; /* the loop moves on to jumpTo + 1 */
-                    segStart = fma(jumpTo + j, d, t0);
-                } else {
-                    segStart = segEnd;
-                }
-                continue;
-            }
-        }
-#endif
-        if (take) {
-            if ((int)samples >= P->maxSamples) {
-                atomic_inc(&stats[VC_STAT_TRUNCATED]);
-                break;
-            }
-            ++samples;
-#ifdef PREINTEGRATED
-            /* The segment's colour and optical depth from the table for a full step; a
-             * partial one scales the depth by len/step (Eq. 3) and the colour with its opacity.
-             * Partial by position, not by len < d: far from the eye, float rounding of the
-             * boundaries makes full segments a little shorter or longer than d, and scaling
-             * only the shorter ones would bias the sum (by 0.7 % over 800,000 faint segments). */
-#ifdef EMPTY_SPACE_SKIPPING
-            if (sfStale) {
-                sf = sampleVolume(VOLUME, n, q0 + segStart * dqL);
-                sfStale = false;
-            }
-#endif
-            const float sb = sampleVolume(VOLUME, n, q0 + segEnd * dqL);
-            const float4 seg = preintegratedSegment(preTable, preNodes, preLocator, P, sf, sb);
-            sf = sb;
-            float segDepth = -log1p(-seg.w); /* +inf behind opaque material: T becomes 0 */
-            float alpha = seg.w;
-            float3 segColor = seg.xyz;
-            if (partial && seg.w <= VC_ALPHA_HOLDS_DEPTH) {
-                segDepth *= len / d;
-                alpha = opacityFromDepth(segDepth);
-                segColor *= seg.w > 0.0f ? alpha / seg.w : len / d;
-            } else if (partial) {
-                /* The full step's alpha is too close to 1 to hold its depth (1 − exp(−D) is 1 in
-                 * float beyond D ≈ 16): classify the partial segment at its centre instead, as
-                 * without pre-integration, or a thin silhouette would turn opaque. */
-                const float4 rgba = classify(tfTable, P, sampleVolume(VOLUME, n, q0 + (segStart + 0.5f * len) * dqL));
-                segDepth = rgba.w * (len / P->opacityUnit);
-                alpha = opacityFromDepth(segDepth);
-                segColor = alpha * rgba.xyz;
-            }
-#ifdef SHADING
-            /* Light the premultiplied colour; the highlight is weighted by the opacity. */
-            const float2 light = phong(VOLUME, n, P, q0 + (segStart + 0.5f * len) * dqL, dir);
-            segColor = fmin(segColor * light.x + light.y * alpha, alpha);
-#endif
-            addCompensated3(&color, &colorCarry, T * segColor);
-#else
-            /* Sample the segment at its centre and classify. */
-            const float3 q = q0 + (segStart + 0.5f * len) * dqL;
-            const float4 rgba = classify(tfTable, P, sampleVolume(VOLUME, n, q));
-            /* Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u). */
-            const float segDepth = rgba.w * (len / P->opacityUnit);
-            const float alpha = opacityFromDepth(segDepth);
-            float3 rgb = rgba.xyz;
-#ifdef SHADING
-            if (alpha > 0.0f) {
-                const float2 light = phong(VOLUME, n, P, q, dir);
-                rgb = fmin(rgb * light.x + light.y, 1.0f);
-            }
-#endif
-            addCompensated3(&color, &colorCarry, T * alpha * rgb);
-#endif
-            addCompensated(&opticalDepth, &depthCarry, segDepth);
-            /* T = exp(−opticalDepth), kept by products (one exp per sample saved) and made
-             * exact again every 16 samples: a factor 1 − alpha that rounds to 1 in faint media
-             * would otherwise stop T from falling while the depth grows. */
-            T = (samples & 15u) == 0u ? exp(-(opticalDepth - depthCarry)) : T * (1.0f - alpha);
-#ifdef EARLY_TERMINATION
-            if (opticalDepth >= P->terminationDepth) {
-                terminated = true;
-                break;
-            }
-#endif
-        }
-        if (boundary >= t1) break;
-        segStart = segEnd;
-    }
-    image[y * P->width + x] = (float4)(color - colorCarry, opacityFromDepth(opticalDepth - depthCarry));
-    if (atomic_add(&stats[VC_STAT_SAMPLES], samples) > UINT_MAX - samples) atomic_inc(&stats[VC_STAT_SAMPLES_HIGH]);
-    atomic_inc(&stats[VC_STAT_RAYS_HIT]);
-    if (terminated) atomic_inc(&stats[VC_STAT_TERMINATED_EARLY]);
-#ifdef EMPTY_SPACE_SKIPPING
-    if (skipped && atomic_add(&stats[VC_STAT_SEGMENTS_SKIPPED], skipped) > UINT_MAX - skipped)
-        atomic_inc(&stats[VC_STAT_SEGMENTS_SKIPPED_HIGH]);
-#endif
+    f.stats = stats;
+    f.n = (int4)(P->levelDims[0], P->levelDims[1], P->levelDims[2], 0);
+    image[y * P->width + x] = castRay(VOLUME, &f, x, y);
 }
