@@ -1,11 +1,12 @@
-// The loader's own checks on a volume file, without ITK: what renderer/io/volume_io.cpp
-// itself parses before and beside ITK's readers. fuzz_volume_header goes through ITK as
-// well and runs at ~100 executions a second; this one runs the same functions of
-// volume_io.cpp alone, thousands of times faster, so they reach 1 M executions.
+// The loader's own checks on a volume file, without ITK: what renderer/io/ itself parses
+// before and beside ITK's readers. fuzz_volume_header goes through ITK as well and runs at
+// ~100 executions a second; this one runs the same functions of the loader alone, thousands
+// of times faster, so they reach 1 M executions.
 //
-// The checks are private to volume_io.cpp (an anonymous namespace), so the file is
-// included here whole: the target runs the very code the loader runs, with no copy and no
-// change to the loader. This target is linked instead of volcast_renderer_io, never with it.
+// The checks are internal to renderer/io/, so the loader's sources that hold them (and what
+// those call) are included here whole: the target runs the very code the loader runs, with
+// no copy and no change to the loader. This target is linked instead of volcast_renderer_io,
+// never with it.
 //
 // One file per input in a folder in /dev/shm. Byte 0 picks the check, bytes 1-4 are the
 // byte count the header's sizes would need (little-endian, below 1 MiB; ITK's part in the
@@ -28,7 +29,12 @@
 // server paths); an accepted data file is a regular file inside the canonical folder; no
 // check opens the FIFO (it would block: a libFuzzer timeout).
 
-#include "renderer/io/volume_io.cpp"
+#include "renderer/io/dicom_series.cpp"
+#include "renderer/io/itk_reading.cpp"
+#include "renderer/io/metaimage.cpp"
+#include "renderer/io/nifti.cpp"
+#include "renderer/io/nrrd.cpp"
+#include "renderer/io/volume_checks.cpp"
 
 #include "fuzz/fuzz_check.hpp"
 
@@ -88,7 +94,7 @@ const Folder &folder() {
 
 // An accepted data file: a regular file inside the header's folder, never the secret.
 void checkAccepted(const fs::path &resolved, const Folder &f) {
-    volcast::fuzz::check(volcast::isInside(resolved, f.folder), "an accepted data file lies outside the header's folder",
+    volcast::fuzz::check(volcast::io::isInside(resolved, f.folder), "an accepted data file lies outside the header's folder",
                          resolved.string());
     volcast::fuzz::check(fs::is_regular_file(resolved), "an accepted data file is not a regular file", resolved.string());
 }
@@ -96,6 +102,7 @@ void checkAccepted(const fs::path &resolved, const Folder &f) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     using namespace volcast;
+    using namespace volcast::io;
     if (size < 5) return 0;
     const Folder &f = folder();
     const unsigned pick = data[0] % kNames.size();

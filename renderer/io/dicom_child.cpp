@@ -1,0 +1,442 @@
+// The checker process, both sides: the caller's (dicom_child.hpp) and the checker's main
+// (dicom_check.hpp, runDicomCheck).
+
+#include "renderer/io/dicom_child.hpp"
+#include "renderer/io/dicom_check.hpp"
+
+#include <itkMetaImageIO.h>
+#include <itkNiftiImageIO.h>
+#include <itkNrrdImageIO.h>
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <cstdlib>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <vector>
+
+extern char **environ;
+
+#if defined(__SANITIZE_ADDRESS__)
+#define VOLCAST_ADDRESS_SANITIZER 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define VOLCAST_ADDRESS_SANITIZER 1
+#endif
+#endif
+
+namespace volcast::io {
+
+// ---------------------------------------------------------------------------------------
+// DICOM in a child process
+//
+// GDCM (Debian's build keeps its assertions) aborts the whole process on some damaged files,
+// from inside ITK's CanReadFile, before any check of ours can look at the bytes (fuzz/README.md,
+// finding 7); the next such assertion or crash would do the same. So every load that will reach
+// GDCM runs first, whole, in a child process with its own memory and CPU limits; a child that
+// dies by a signal or runs out of memory means the file is refused, and only a file the child
+// loaded (or refused with an ordinary VolumeLoadError) is loaded here.
+
+namespace {
+
+// The DICOM checker's exit statuses.
+constexpr int kCheckLoaded = 0;
+constexpr int kCheckRefused = 1;      // a VolumeLoadError: the load here repeats it, same words, same type
+constexpr int kCheckUsage = 2;
+constexpr int kCheckOutOfMemory = 3;  // past its RLIMIT_AS
+constexpr int kCheckFailed = 4;       // anything else thrown
+
+constexpr const char *kCheckerName = "volcast-dicom-check";
+
+// The child's limits. Memory: the float32 volume (at most maxBytes), ITK's image of it during
+// the read, and GDCM's buffer of the stored pixels, plus 2 GiB for the libraries themselves.
+uint64_t checkerMemoryLimit(const LoadOptions &options) {
+    return 3 * std::min(options.maxBytes, uint64_t(1) << 40) + (uint64_t(2) << 30);
+}
+// CPU seconds: the load's own time limit (kept, by wall clock, by the caller too) plus a
+// margin, or 10 minutes where the caller sets none (volcast-render).
+uint64_t checkerCpuLimit(const LoadOptions &options) {
+    return options.timeLimitSeconds > 0 ? uint64_t(std::ceil(options.timeLimitSeconds)) + 5 : 600;
+}
+
+std::optional<fs::path> dicomCheckerPath() {
+    const auto runnable = [](const fs::path &p) {
+        std::error_code ec;
+        return fs::is_regular_file(p, ec) && ::access(p.c_str(), X_OK) == 0;
+    };
+    if (const char *given = std::getenv("VOLCAST_DICOM_CHECK"); given && *given)
+        return runnable(given) ? std::optional<fs::path>(given) : std::nullopt;  // set, so meant: no guessing
+    std::error_code ec;
+    const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+    if (!ec && runnable(self.parent_path() / kCheckerName)) return self.parent_path() / kCheckerName;  // installed
+#ifdef VOLCAST_DICOM_CHECK_BUILD_PATH
+    if (runnable(VOLCAST_DICOM_CHECK_BUILD_PATH)) return fs::path(VOLCAST_DICOM_CHECK_BUILD_PATH);  // the build tree
+#endif
+    return std::nullopt;
+}
+
+} // namespace
+
+// Whether ITK's factory would ask GDCM about this file: only if none of the readers registered
+// before it (registerItkFactories' order) claims it.
+bool reachesGdcm(const fs::path &path) {
+    const std::string name = path.string();
+    return !itk::NrrdImageIO::New()->CanReadFile(name.c_str()) && !itk::MetaImageIO::New()->CanReadFile(name.c_str()) &&
+           !itk::NiftiImageIO::New()->CanReadFile(name.c_str());
+}
+
+namespace {
+
+std::string signalName(int sig) {
+    switch (sig) {
+    case SIGABRT: return "SIGABRT, an assertion or abort";
+    case SIGSEGV: return "SIGSEGV, a crash";
+    case SIGBUS: return "SIGBUS, a crash";
+    case SIGFPE: return "SIGFPE, an arithmetic fault";
+    case SIGILL: return "SIGILL, a crash";
+    case SIGXCPU: return "SIGXCPU, its CPU time limit";
+    case SIGKILL: return "SIGKILL";
+    default: return fmt::format("signal {}", sig);
+    }
+}
+
+// The child, killed and reaped however the wait for it ends (a time limit, a stop request).
+struct Child {
+    pid_t pid = -1;
+    int output = -1;  // the read end of its stdout and stderr
+    Child() = default;
+    Child(const Child &) = delete;
+    Child &operator=(const Child &) = delete;
+    ~Child() {
+        if (pid > 0) {
+            ::kill(pid, SIGKILL);
+            while (::waitpid(pid, nullptr, 0) < 0 && errno == EINTR) {}
+        }
+        if (output >= 0) ::close(output);
+    }
+};
+
+// `dicom`: the file may reach GDCM (the messages say so); otherwise it is checked because the
+// caller asked for every file to be (LoadOptions::parseInChild).
+// A progress line from the checker: the mark, the fraction, a space, the task.
+constexpr char kProgressMark = '\x1e';
+
+// A task name from the child, fit for the client: printable ASCII, one line, short.
+std::string quotableTask(std::string_view text) {
+    std::string out;
+    for (char c : text)
+        if (c >= 0x20 && c < 0x7f && out.size() < 64) out += c;
+    return out;
+}
+
+// What the checker hands back: the volume it loaded, so that the file is parsed once, in the
+// child, and never again in the caller. A fixed header, the file's modality, then the samples
+// as the volume holds them (narrow integers or float32). The caller reads it as it reads any
+// file from outside: a child that a hostile file took over could have written anything here,
+// so every field is checked and the statistics are computed again.
+struct CheckedHeader {
+    char magic[16] = "volcast-checked";
+    uint32_t version = 2;
+    int32_t sourceType = 0;
+    int64_t dims[3] = {0, 0, 0};
+    double spacing[3] = {1, 1, 1};
+    double origin[3] = {0, 0, 0};
+    double direction[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    int32_t narrowBytes = 4;
+    float narrowOffset = 0;
+    uint64_t nonFiniteReplaced = 0;
+    uint32_t orientationKnown = 0;
+    uint32_t modalityBytes = 0;
+    uint32_t modalityFieldBytes = 0;
+};
+constexpr uint32_t kMaxCheckedModalityBytes = 64;
+
+void writeCheckedVolume(const Volume &v, const fs::path &to) {
+    CheckedHeader h;
+    h.sourceType = int32_t(v.sourceType);
+    for (int a = 0; a < 3; ++a) {
+        h.dims[a] = v.dims[a];
+        h.spacing[a] = v.spacing[a];
+        h.origin[a] = v.origin[a];
+    }
+    for (int i = 0; i < 9; ++i) h.direction[i] = v.direction.m[size_t(i)];
+    h.narrowBytes = v.narrow.bytes;
+    h.narrowOffset = v.narrow.offset;
+    h.nonFiniteReplaced = v.nonFiniteReplaced;
+    h.orientationKnown = v.orientationKnown ? 1 : 0;
+    const std::string modality = v.modality.substr(0, kMaxCheckedModalityBytes);
+    h.modalityBytes = uint32_t(modality.size());
+    const std::string modalityField = v.modalityField.substr(0, kMaxCheckedModalityBytes);
+    h.modalityFieldBytes = uint32_t(modalityField.size());
+    // O_NOFOLLOW and no O_CREAT: the caller made the file, and only that file is written.
+    const int fd = ::open(to.c_str(), O_WRONLY | O_TRUNC | O_NOFOLLOW | O_CLOEXEC);
+    if (fd < 0) throw std::runtime_error("cannot open the result file: " + std::string(std::strerror(errno)));
+    const auto put = [&](const void *data, size_t bytes) {
+        const char *at = static_cast<const char *>(data);
+        while (bytes > 0) {
+            const ssize_t n = ::write(fd, at, std::min<size_t>(bytes, size_t(1) << 30));
+            if (n < 0 && errno == EINTR) continue;
+            if (n <= 0) {
+                ::close(fd);
+                throw std::runtime_error("cannot write the result file: " + std::string(std::strerror(errno)));
+            }
+            at += n;
+            bytes -= size_t(n);
+        }
+    };
+    put(&h, sizeof h);
+    put(modality.data(), modality.size());
+    put(modalityField.data(), modalityField.size());
+    if (v.narrow.bytes == 4) put(v.voxels.data(), v.voxels.size() * sizeof(float));
+    else put(v.narrowVoxels.data(), v.voxelCount() * size_t(v.narrow.bytes));
+    ::close(fd);
+}
+
+void setLimit(int resource, uint64_t value) {
+    rlimit limit{};
+    limit.rlim_cur = limit.rlim_max = rlim_t(value);
+    if (::setrlimit(resource, &limit) != 0)
+        std::fprintf(stderr, "%s: cannot set resource limit %d: %s\n", kCheckerName, resource, std::strerror(errno));
+}
+
+} // namespace
+
+// `samples` false: the header only (its fields and the file's size checked), for a caller that
+// keeps the result to load later.
+Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options, bool samples) {
+    const auto damaged = [&](const std::string &what) -> Volume {
+        fail(path, "the parser in its separate process handed back a damaged result (" + what + "); it is not loaded");
+    };
+    std::ifstream in(from, std::ios::binary);
+    CheckedHeader h;
+    if (!in.read(reinterpret_cast<char *>(&h), sizeof h)) return damaged("short header");
+    if (std::memcmp(h.magic, CheckedHeader{}.magic, sizeof h.magic) != 0 || h.version != CheckedHeader{}.version)
+        return damaged("not a result of this version");
+    if (h.sourceType < 0 || h.sourceType > int32_t(VoxelType::Float64)) return damaged("voxel type");
+    if (h.narrowBytes != 1 && h.narrowBytes != 2 && h.narrowBytes != 4) return damaged("sample width");
+    if (h.modalityBytes > kMaxCheckedModalityBytes || h.modalityFieldBytes > kMaxCheckedModalityBytes ||
+        !std::isfinite(h.narrowOffset))
+        return damaged("modality");
+    Volume v;
+    for (int a = 0; a < 3; ++a) {
+        if (h.dims[a] < 1 || h.dims[a] > options.maxDimension) return damaged("dimensions");
+        v.dims[a] = h.dims[a];
+        v.spacing[a] = h.spacing[a];
+        v.origin[a] = h.origin[a];
+    }
+    checkShape(path, v.dims, options);
+    Mat3d direction;
+    for (int i = 0; i < 9; ++i) direction.m[size_t(i)] = h.direction[i];
+    v.direction = checkedGeometry(path, v.spacing, v.origin, direction);
+    v.sourceType = VoxelType(h.sourceType);
+    v.nonFiniteReplaced = size_t(h.nonFiniteReplaced);
+    v.orientationKnown = h.orientationKnown != 0;
+    v.modality.resize(h.modalityBytes);
+    if (!in.read(v.modality.data(), std::streamsize(h.modalityBytes))) return damaged("short modality");
+    v.modalityField.resize(h.modalityFieldBytes);
+    if (!in.read(v.modalityField.data(), std::streamsize(h.modalityFieldBytes))) return damaged("short modality");
+    const uint64_t sampleBytes = uint64_t(v.voxelCount()) * uint64_t(h.narrowBytes);
+    const uint64_t expected = sizeof h + h.modalityBytes + h.modalityFieldBytes + sampleBytes;
+    if (fileSize(from).value_or(0) != expected) return damaged("its size is not what its header says");
+    if (!samples) {
+        v.narrow = {h.narrowBytes, h.narrowOffset};
+        return v;
+    }
+    if (h.narrowBytes == 4) {
+        v.voxels.resize(v.voxelCount());
+        in.read(reinterpret_cast<char *>(v.voxels.data()), std::streamsize(sampleBytes));
+        replaceNonFinite(path, v.voxels);
+    } else {
+        v.narrow = {h.narrowBytes, h.narrowOffset};
+        v.narrowVoxels.resize(size_t(sampleBytes) + kNarrowSlack);
+        in.read(reinterpret_cast<char *>(v.narrowVoxels.data()), std::streamsize(sampleBytes));
+    }
+    if (!in) return damaged("short samples");
+    return v;
+}
+
+// Parses the file in the checker process, which writes what it loaded to `result` (a file the
+// caller made): true when it did, false when it refused the file (the caller then repeats the
+// load here for the refusal's own words); any other end of the child fails the load.
+bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
+                const fs::path &result) {
+    const auto checker = dicomCheckerPath();
+    if (!checker)
+        fail(path, fmt::format("{}, which is first parsed in a separate process, but the DICOM checker '{}' "
+                               "was not found (next to this program, in the build tree, or as $VOLCAST_DICOM_CHECK); "
+                               "it is not loaded",
+                               dicom ? "may be DICOM" : "comes from outside", kCheckerName));
+    const std::string parser = dicom ? "the DICOM parser (GDCM)" : "the parser";
+    int fds[2];
+    if (::pipe2(fds, O_CLOEXEC) != 0) fail(path, fmt::format("cannot start the DICOM checker: {}", std::strerror(errno)));
+    Child child;
+    child.output = fds[0];
+
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], 1);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], 2);
+    // Default dispositions and no blocked signals, whatever the calling thread had.
+    posix_spawnattr_t attr;
+    posix_spawnattr_init(&attr);
+    sigset_t none, all;
+    sigemptyset(&none);
+    sigfillset(&all);
+    posix_spawnattr_setsigmask(&attr, &none);
+    posix_spawnattr_setsigdefault(&attr, &all);
+    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+    std::vector<std::string> args = {checker->string(), path.string(), std::to_string(options.maxBytes),
+                                     std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds),
+                                     std::to_string(options.maxArchiveBytes), result.string()};
+    std::vector<char *> argv;
+    for (auto &a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    const int spawned = ::posix_spawn(&child.pid, argv[0], &actions, &attr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    posix_spawnattr_destroy(&attr);
+    ::close(fds[1]);
+    if (spawned != 0) {
+        child.pid = -1;
+        fail(path, fmt::format("cannot start the DICOM checker: {}", std::strerror(spawned)));
+    }
+
+    // Wait, reading what it writes (GDCM's assertion, say) for the log; the progress call is
+    // where the load's time limit and a stop request end the wait, and the child with it.
+    std::string said, line;
+    std::string task = dicom ? "checking DICOM in a separate process" : "checking the file in a separate process";
+    double fraction = 0;
+    int status = 0;
+    for (;;) {
+        progress(fraction, task);
+        if (child.output >= 0) {
+            pollfd p{child.output, POLLIN, 0};
+            if (::poll(&p, 1, 100) > 0) {
+                char buffer[4096];
+                const ssize_t n = ::read(child.output, buffer, sizeof buffer);
+                if (n > 0) {
+                    // Lines starting with kProgressMark are the child's progress (its own
+                    // steps, slice by slice), passed on; the rest is what it said, for the log.
+                    for (ssize_t i = 0; i < n; ++i) {
+                        line += buffer[i];
+                        if (buffer[i] != '\n' && line.size() < 512) continue;
+                        if (line.starts_with(kProgressMark)) {
+                            char *end = nullptr;
+                            const double f = std::strtod(line.c_str() + 1, &end);
+                            if (end && *end == ' ' && std::isfinite(f)) {
+                                fraction = std::clamp(f, 0.0, 0.8);   // reading its result is the rest
+                                task = quotableTask(std::string_view(end + 1, line.size() - size_t(end + 1 - line.c_str())));
+                                progress(fraction, task);   // each step, however many arrive at once
+                            }
+                        } else {
+                            said += line;
+                        }
+                        line.clear();
+                    }
+                    if (said.size() > 4096) said.erase(0, said.size() - 4096);
+                } else if (n == 0) {
+                    ::close(child.output);
+                    child.output = -1;
+                }
+            }
+        } else {
+            ::poll(nullptr, 0, 50);
+        }
+        const pid_t done = ::waitpid(child.pid, &status, WNOHANG);
+        if (done == child.pid) {
+            child.pid = -1;
+            break;
+        }
+        if (done < 0 && errno != EINTR) {
+            child.pid = -1;
+            fail(path, fmt::format("lost the DICOM checker: {}", std::strerror(errno)));
+        }
+    }
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckRefused) return false;
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckLoaded) return true;
+    while (!said.empty() && std::isspace(static_cast<unsigned char>(said.back()))) said.pop_back();
+    spdlog::warn("{}: the checker ({}) {}; it said: {}", path.string(), checker->string(),
+                 WIFSIGNALED(status) ? "ended with " + signalName(WTERMSIG(status))
+                                     : fmt::format("exited with status {}", WEXITSTATUS(status)),
+                 said.empty() ? "nothing" : said);
+    if (WIFSIGNALED(status))
+        fail(path, fmt::format("was rejected by {}: parsing it in a separate process ended with "
+                               "{}; the file is damaged{}, and it is not loaded",
+                               parser, signalName(WTERMSIG(status)), dicom ? " or not DICOM" : ""));
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckOutOfMemory)
+        fail(path, fmt::format("was rejected by {}: parsing it in a separate process needed more "
+                               "than its limit of {} MiB; it is not loaded",
+                               parser, checkerMemoryLimit(options) >> 20));
+    fail(path, fmt::format("was rejected by {}: parsing it in a separate process failed (exit "
+                           "status {}); it is not loaded",
+                           parser, WIFEXITED(status) ? WEXITSTATUS(status) : -1));
+}
+
+} // namespace volcast::io
+
+namespace volcast {
+
+int runDicomCheck(int argc, char **argv) {
+    using namespace io; // the checker's limits and statuses, and the load (dicom_child.hpp)
+    if (argc < 5 || argc > 7) {
+        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT]]\n"
+                             "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
+                             "files from outside away from the server), and writes what it loaded to the existing "
+                             "file RESULT; exit status 0 loaded, 1 refused, 3 out of memory.\n",
+                     kCheckerName);
+        return kCheckUsage;
+    }
+    LoadOptions options;
+    try {
+        options.maxBytes = std::stoull(argv[2]);
+        options.maxDimension = std::stoll(argv[3]);
+        options.timeLimitSeconds = std::stod(argv[4]);
+        if (argc >= 6) options.maxArchiveBytes = std::stoull(argv[5]);
+    } catch (const std::exception &) {
+        std::fprintf(stderr, "%s: bad limits '%s' '%s' '%s'\n", kCheckerName, argv[2], argv[3], argv[4]);
+        return kCheckUsage;
+    }
+    // Whatever the caller left open without close-on-exec (a server's sockets) is not the
+    // business of a process that parses hostile files.
+    ::close_range(3, ~0U, 0);
+    setLimit(RLIMIT_CORE, 0);  // an assertion in GDCM is expected here; no core file for it
+#ifndef VOLCAST_ADDRESS_SANITIZER
+    setLimit(RLIMIT_AS, checkerMemoryLimit(options));  // (AddressSanitizer reserves terabytes of it: not there)
+#endif
+    setLimit(RLIMIT_CPU, checkerCpuLimit(options));
+    // The load's own progress, for the caller to pass on (checkInChild).
+    options.progress = [](double fraction, std::string_view task) {
+        std::printf("%c%.4f %.*s\n", kProgressMark, fraction, int(std::min<size_t>(task.size(), 64)), task.data());
+        std::fflush(stdout);
+    };
+    try {
+        const Volume v = loadVolumeHere(argv[1], options, false);
+        if (argc == 7) writeCheckedVolume(v, argv[6]);
+        return kCheckLoaded;
+    } catch (const LoadOutOfMemory &e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return kCheckOutOfMemory;
+    } catch (const VolumeLoadError &e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return kCheckRefused;
+    } catch (const std::exception &e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return kCheckFailed;
+    }
+}
+
+} // namespace volcast

@@ -1,0 +1,52 @@
+#pragma once
+// The caller's side of the checker process (dicom_check.hpp): the file parsed whole in
+// `volcast-dicom-check`, under its own limits, which hands back the volume it loaded; the
+// hand-back read as untrusted. Internal to renderer/io/.
+
+#include "renderer/io/volume_checks.hpp"
+
+#include <fcntl.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+
+namespace volcast::io {
+
+// Whether ITK's factory would ask GDCM about this file (no other reader claims it).
+bool reachesGdcm(const fs::path &path);
+
+// The checker's hand-back in `from`, every field checked again; messages name `path`.
+// `samples` false: the header only (its fields and the file's size checked).
+Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options,
+                         bool samples = true);
+
+// A result file of the caller's, removed however the load ends.
+struct CheckedResultFile {
+    fs::path path;
+    CheckedResultFile() {
+        std::string pattern = (fs::temp_directory_path() / "volcast-checked-XXXXXX").string();
+        const int fd = ::mkostemp(pattern.data(), O_CLOEXEC);
+        if (fd < 0) throw std::runtime_error("cannot create a file for the parser's result: " + std::string(std::strerror(errno)));
+        ::close(fd);
+        path = pattern;
+    }
+    ~CheckedResultFile() {
+        std::error_code ec;
+        fs::remove(path, ec);
+    }
+    CheckedResultFile(const CheckedResultFile &) = delete;
+    CheckedResultFile &operator=(const CheckedResultFile &) = delete;
+};
+
+// Parses the file in the checker process: true when it loaded it (its volume is in `result`),
+// false when it refused it; any other end of the child fails the load.
+bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
+                const fs::path &result);
+
+// The load in this process (volume_io.cpp): the checker's own load, with dicomInChild false.
+Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dicomInChild);
+
+} // namespace volcast::io
