@@ -11,7 +11,7 @@
 namespace volcast {
 
 // The checker's main: loads argv[1] in this process with the limits argv gives and reports
-// by its exit status (volume_io.cpp). Not for other callers.
+// by its exit status (dicom_child.cpp). Not for other callers.
 int runDicomCheck(int argc, char **argv);
 
 } // namespace volcast
