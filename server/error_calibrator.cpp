@@ -140,8 +140,8 @@ void ErrorCalibrator::calibrateLevels(const CalibrationView &view, const Rgb8 &f
         const Level &level = view.ladder[l];
         try {
             const auto t = Clock::now();
-            const Image image = view.renderer->render(view.transferFunction, view.camera, view.width, view.height,
-                                                      level.quality, view.clipPlanes);
+            const Image image = view.renderer->render({view.transferFunction, view.camera, view.width, view.height,
+                                                      level.quality, view.clipPlanes});
             const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
             const double rmse = rmseRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), final);
             record(view.key, int(l), rmse, count);
@@ -172,7 +172,7 @@ void ErrorCalibrator::calibrateFinal(const CalibrationView &view, const std::ato
     const Level &last = view.ladder.back();
     const Quality &fq = last.quality;
     const Volume &volume = view.renderer->volume();
-    const Image fast = view.renderer->render(view.transferFunction, view.camera, w, h, fq, view.clipPlanes);
+    const Image fast = view.renderer->render({view.transferFunction, view.camera, w, h, fq, view.clipPlanes});
 
     // The exact integral, ray by ray, within the budget.
     std::optional<Image> reference;
@@ -206,7 +206,7 @@ void ErrorCalibrator::calibrateFinal(const CalibrationView &view, const std::ato
         fine.step = fq.step / 4;
         fine.jitter = false;
         fine.earlyTermination = std::max(fq.earlyTermination, 0.999);
-        reference = view.renderer->render(view.transferFunction, view.camera, w, h, fine, view.clipPlanes);
+        reference = view.renderer->render({view.transferFunction, view.camera, w, h, fine, view.clipPlanes});
         method = "rmse_rgb8_vs_quarter_step_" + std::to_string(kSide) + "px";
     }
     const double rmse = rmseRgb8(toRgb8(fast), toRgb8(*reference));

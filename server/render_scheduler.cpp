@@ -216,7 +216,7 @@ Quality RenderScheduler::renderable(SlotId id, Slot &s, const Quality &q, bool &
                     self.wake_.notify_all();
                 }
             } release{*this, r};
-            renderer->render(tf, camera, 1, 1, warm, clip);
+            renderer->render({tf, camera, 1, 1, warm, clip});
         },
         [this](const std::string &doneKey, bool) {
             std::vector<std::pair<Progress, protocol::ProgressMessage>> told;
@@ -337,8 +337,9 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
         const bool final = level == last && (job.stillOnly || !firstOfView || (last == 0 && still));
         bool substitute = false;
         const Quality q = renderable(id, s, l.quality, substitute);
-        s.refining = std::make_shared<TiledFrame>(q, substitute ? 1 : l.passes, job.width, job.height,
-                                                  job.renderer->bandRows());
+        s.refining = std::make_shared<TiledFrame>(FrameRequest{job.transferFunction, job.camera, job.width, job.height, q,
+                                                  job.clipPlanes},
+                                                  substitute ? 1 : l.passes, job.renderer->bandRows());
         s.refiningJob = s.job;
         s.refiningGeneration = s.generation;
         s.refiningInteractive = firstOfView && !final;
@@ -466,7 +467,7 @@ void RenderScheduler::workerLoop() {
 void RenderScheduler::runUnit(Work &work) {
     const ViewJob &job = *work.job;
     TiledFrame &frame = *work.frame;
-    const double ms = frame.renderUnit(*job.renderer, job.transferFunction, job.camera, job.clipPlanes, work.cells);
+    const double ms = frame.renderUnit(*job.renderer, work.cells);
     {
         std::lock_guard lock(mutex_);
         longestUnitMs_ = std::max(longestUnitMs_, ms);

@@ -174,7 +174,7 @@ void SharedState::warmUp(std::shared_ptr<VolumeEntry> entry) {
         Camera camera;
         camera.target = v.center();
         camera.eye = camera.target + Vec3d(0, 0, 3 * length(v.extent()));
-        renderer.render(presetTransferFunction("mr", v.range), camera, 8, 8, Quality{}, {});
+        renderer.render({presetTransferFunction("mr", v.range), camera, 8, 8, Quality{}, {}});
         ++warmUpFrames_;
         std::lock_guard lock(mutex_);
         kernelReady_ = true;

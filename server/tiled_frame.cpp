@@ -21,10 +21,11 @@ std::vector<int> middleOutOrder(int n) {
     return order;
 }
 
-TiledFrame::TiledFrame(const Quality &quality, int passes, int width, int height, int bandRows)
-    : quality_(quality), passes_(std::max(1, passes)), width_(width), height_(height),
-      gridWidth_(raysForScale(width, quality.imageScale)), gridHeight_(raysForScale(height, quality.imageScale)),
-      current_(gridWidth_, gridHeight_) {
+TiledFrame::TiledFrame(FrameRequest request, int passes, int bandRows)
+    : request_(std::move(request)), passes_(std::max(1, passes)),
+      gridWidth_(raysForScale(request_.width, request_.quality.imageScale)),
+      gridHeight_(raysForScale(request_.height, request_.quality.imageScale)), current_(gridWidth_, gridHeight_) {
+    request_.window.reset();
     const int rows = std::max(1, bandRows);
     const int bands = (gridHeight_ + rows - 1) / rows;
     const int columns = (gridWidth_ + kCellColumns - 1) / kCellColumns;
@@ -42,14 +43,13 @@ double TiledFrame::msPerRayEstimate() const {
     return std::max(lastUnitMsPerRay_, renderMs_ / double(raysDone_));
 }
 
-double TiledFrame::renderUnit(FrameRenderer &renderer, const TransferFunction &tf, const Camera &camera,
-                              const std::vector<ClipPlane> &clipPlanes, int cells) {
+double TiledFrame::renderUnit(FrameRenderer &renderer, int cells) {
     const auto t0 = std::chrono::steady_clock::now();
-    Quality q = quality_;
+    FrameRequest unit = request_;
     if (passes_ > 1) {
         // Each pass moves the sample positions, so the onion rings of one pass average out.
-        q.jitter = true;
-        q.seed = quality_.seed + uint64_t(pass_);
+        unit.quality.jitter = true;
+        unit.quality.seed = request_.quality.seed + uint64_t(pass_);
     }
     const int take = std::clamp(cells, 1, cellsLeftInPass());
     // The unit's cells as few windows as cover them: cells side by side in a band join, and
@@ -74,8 +74,8 @@ double TiledFrame::renderUnit(FrameRenderer &renderer, const TransferFunction &t
 
     uint64_t rays = 0;
     for (const Cell &c : windows) {
-        const Image part = renderer.renderWindow(tf, camera, width_, height_, q, clipPlanes,
-                                                 RayWindow{c.x, c.y, c.width, c.height});
+        unit.window = RayWindow{c.x, c.y, c.width, c.height};
+        const Image part = renderer.render(unit);
         for (int row = 0; row < c.height; ++row)
             std::copy_n(part.pixel(0, row), size_t(c.width) * 4, current_.pixel(c.x, c.y + row));
         rays += uint64_t(c.width) * uint64_t(c.height);
@@ -101,8 +101,8 @@ double TiledFrame::renderUnit(FrameRenderer &renderer, const TransferFunction &t
 Image TiledFrame::finish() {
     if (passes_ > 1)
         for (float &v : sum_.rgba) v /= float(passes_);
-    if (gridWidth_ == width_ && gridHeight_ == height_) return std::move(sum_);
-    return resizeBilinear(sum_, width_, height_);
+    if (gridWidth_ == request_.width && gridHeight_ == request_.height) return std::move(sum_);
+    return resizeBilinear(sum_, request_.width, request_.height);
 }
 
 int cellsForBudget(double budgetMs, double msPerRay, int cellRays, int previousUnitCells) {

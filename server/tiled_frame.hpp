@@ -24,18 +24,18 @@ class TiledFrame {
   public:
     static constexpr int kCellColumns = 64;   // a multiple of the CPU tile (16) and the OpenCL work-group (8)
 
-    // quality: what is rendered (the level's, or its substitute while its preparation runs).
-    TiledFrame(const Quality &quality, int passes, int width, int height, int bandRows);
+    // request: the whole frame, its quality what is rendered (the level's, or its substitute
+    // while its preparation runs); its window is ignored (the frame sets one per unit).
+    TiledFrame(FrameRequest request, int passes, int bandRows);
 
     // Renders the next `cells` cells of this pass (at least one, at most cellsLeftInPass());
     // returns the unit's ms.
-    double renderUnit(FrameRenderer &renderer, const TransferFunction &tf, const Camera &camera,
-                      const std::vector<ClipPlane> &clipPlanes, int cells);
+    double renderUnit(FrameRenderer &renderer, int cells);
     bool done() const { return pass_ >= passes_; }
     // The averaged passes, brought to the frame's size; only once done().
     Image finish();
 
-    const Quality &quality() const { return quality_; }
+    const Quality &quality() const { return request_.quality; }
     int gridWidth() const { return gridWidth_; }
     int gridHeight() const { return gridHeight_; }
     int passes() const { return passes_; }
@@ -54,9 +54,8 @@ class TiledFrame {
     struct Cell {
         int x, y, width, height;
     };
-    Quality quality_;
+    FrameRequest request_;
     int passes_;
-    int width_, height_;          // the frame
     int gridWidth_, gridHeight_;  // rays cast (image_scale < 1: fewer, upsampled at the end)
     int cellRays_;
     std::vector<Cell> order_;     // the cells of a pass, in the order they are rendered

@@ -161,13 +161,15 @@ int main(int argc, char **argv) {
             auto shared = std::make_shared<const volcast::Volume>(std::move(loaded.volume)); // no copy: not used below
             const auto renderer = volcast::makeFrameRenderer(choice, shared, kernelCache);
             const double uploadMs = msSince(t);
+            const volcast::FrameRequest request{tf, scene.camera, scene.width, scene.height, scene.quality,
+                                                scene.clipPlanes};
             volcast::RenderStats stats;
-            image = renderer->render(tf, scene.camera, scene.width, scene.height, scene.quality, scene.clipPlanes, &stats);
+            image = renderer->render(request, &stats);
             // Later frames reuse the program and every table: the time a server pays per frame.
             std::vector<double> repeatMs;
             for (int i = 1; i < repeat; ++i) {
                 volcast::RenderStats again;
-                renderer->render(tf, scene.camera, scene.width, scene.height, scene.quality, scene.clipPlanes, &again);
+                renderer->render(request, &again);
                 repeatMs.push_back(again.renderSeconds * 1e3);
             }
             const std::string description = renderer->description();

@@ -1,7 +1,8 @@
 #pragma once
 // What every back end that draws frames offers (the OpenCL ray caster, the native CPU one),
-// so that tools, tests and the server depend on this interface and not on a back end. Also
-// the checks and the step choice every back end must make the same way.
+// so that tools, tests and the server depend on this interface and not on a back end: a
+// FrameRequest in, an image out. Also the checks every back end makes the same way (the rest
+// of a frame's set-up is frame_setup.hpp's).
 
 #include "renderer/model/camera.hpp"
 #include "renderer/model/image.hpp"
@@ -10,7 +11,9 @@
 #include "renderer/model/volume.hpp"
 
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace volcast {
@@ -58,22 +61,35 @@ struct RayWindow {
     int x = 0, y = 0, width = 0, height = 0;
 };
 
+// One frame as asked for: the scene's pieces, the frame's size and quality, and, when only
+// part of it is wanted, the window of its ray grid to cast.
+struct FrameRequest {
+    FrameRequest() = default;
+    FrameRequest(TransferFunction transferFunction_, Camera camera_, int width_, int height_, Quality quality_,
+                 std::vector<ClipPlane> clipPlanes_, std::optional<RayWindow> window_ = std::nullopt)
+        : transferFunction(std::move(transferFunction_)), camera(camera_), width(width_), height(height_),
+          quality(std::move(quality_)), clipPlanes(std::move(clipPlanes_)), window(window_) {}
+
+    TransferFunction transferFunction;
+    Camera camera;
+    int width = 0, height = 0;              // pixels
+    Quality quality;
+    std::vector<ClipPlane> clipPlanes;
+    // The rays of this window exactly as the whole frame casts them, not upsampled (a window
+    // of a frame with image_scale < 1 is a window of its smaller grid). None: the whole frame.
+    std::optional<RayWindow> window;
+};
+
 class FrameRenderer {
   public:
     virtual ~FrameRenderer() = default;
-    // Thread-safe; frames are rendered one at a time. Throws std::invalid_argument for a
-    // request the scene contract forbids, and names a quality switch the back end lacks.
-    virtual Image render(const TransferFunction &tf, const Camera &camera, int width, int height,
-                         const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
-                         RenderStats *stats = nullptr) = 0;
-    // The rays of `window` exactly as render() casts them for this frame, not upsampled (a
-    // window of a frame with image_scale < 1 is a window of its smaller grid). Throws
-    // std::invalid_argument for a window outside the grid. This default casts the whole grid
-    // and crops it; a back end that can cast the window's rays alone overrides it and
-    // answers true to rendersWindowsCheaply().
-    virtual Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                               const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
-                               const RayWindow &window, RenderStats *stats = nullptr);
+    // The request's frame (width × height), or with request.window that window's rays
+    // (window.width × window.height). Thread-safe; frames are rendered one at a time. Throws
+    // std::invalid_argument for a request the scene contract forbids (validateFrameRequest).
+    virtual Image render(const FrameRequest &request, RenderStats *stats = nullptr) = 0;
+    // Whether a window costs only its own rays. Both back ends cast a window alone; a back
+    // end that answers false (one that casts the whole grid for any window) makes the
+    // server's scheduler render each pass whole.
     virtual bool rendersWindowsCheaply() const { return false; }
     // The rows a window's cost is rounded up to: a window of fewer rows costs about as much
     // (OpenCL work-groups, SIMD packets of rays several rows high). The server's scheduler
@@ -91,25 +107,9 @@ class FrameRenderer {
 };
 
 // The checks every back end makes before it allocates anything: camera, transfer function,
-// image size, clip planes, mip level (levels 0 … maxMipLevel), image scale, crop box.
-void validateFrameRequest(const Volume &volume, const TransferFunction &tf, const Camera &camera, int width,
-                          int height, const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
-                          int maxMipLevel);
-
-// The switches a frame really uses: an intensity projection (MIP, MinIP) takes no
-// pre-integration, shading, early termination or empty-space skipping (a projection has no
-// opacity to terminate on, and a brick the transfer function makes transparent can still hold
-// the ray's maximum), so they are turned off here, in one place for both back ends.
-Quality compositedQuality(const Quality &quality);
-
-// The crop box in level-0 index space: [−1/2 + min·n, −1/2 + max·n] per axis (scene.hpp).
-void cropBoxInIndexSpace(const Volume &volume, const CropBox &crop, double lo[3], double hi[3]);
-
-// The step in world units for quality.step (in smallest spacings): raised, with a warning,
-// when a ray across the whole volume would take more than kMaxSamplesPerRay segments, so
-// that rays are never cut off by the bound (which would drop the back of the volume) and a
-// frame costs at most rays × kMaxSamplesPerRay samples. Fills stats.stepUsed/stepRaised.
-double frameStep(const Volume &volume, const Quality &quality, RenderStats &stats);
+// image size, clip planes, mip level (levels 0 … maxMipLevel), image scale, crop box,
+// orientation correction, and the window when there is one.
+void validateFrameRequest(const Volume &volume, const FrameRequest &request, int maxMipLevel);
 
 // Rays cast across and down for image_scale < 1, on the full image's plane.
 int raysForScale(int pixels, double imageScale);

@@ -4,23 +4,17 @@
 // dispatched at run time to the best the machine has). One frame's data, in float: the same
 // numbers the OpenCL kernel reads from RayCastParams, so both back ends cast the same rays.
 
+#include "renderer/common/frame_setup.hpp"
+
 #include <atomic>
 #include <cstdint>
 #include <string>
 
 namespace volcast::cpu {
 
-struct Features {
-    bool jitter = false;
-    bool boundarySegment = true;
-    bool earlyTermination = false;
-    bool clipPlanes = false;
-    bool emptySpaceSkipping = false;
-    bool shading = false;
-    bool cubic = false; // prefiltered tricubic B-spline from padded coefficients
-    bool preintegrated = false;
-    int intensityProjection = 0; // +1 maximum (MIP), −1 minimum (MinIP), 0 emission–absorption
-};
+// The switches the march branches on, as the frame's set-up decided them (cubic: from the
+// padded coefficients).
+using Features = FrameFeatures;
 
 struct FrameParams {
     Features features;

@@ -1,17 +1,17 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 
 #include "renderer/common/bspline_prefilter.hpp"
-#include "renderer/cpu/cpu_march.hpp"
+#include "renderer/common/frame_setup.hpp"
+#include "renderer/common/parallel_for.hpp"
 #include "renderer/common/preintegration.hpp"
 #include "renderer/common/tf_table.hpp"
+#include "renderer/cpu/cpu_march.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
-#include <thread>
 
 namespace volcast {
 
@@ -60,19 +60,13 @@ std::vector<float> unpadMirror(const std::vector<float> &padded, Vec3i n) {
     return c;
 }
 
-void set3(float *out, const Vec3d &v) {
-    out[0] = float(v.x);
-    out[1] = float(v.y);
-    out[2] = float(v.z);
-}
-
 } // namespace
 
 CpuRenderer::CpuRenderer(std::shared_ptr<const Volume> volume, CpuRendererOptions options)
     : volume_(std::move(volume)), options_(options), pyramid_(*volume_) {
     if (options_.brickSize < 1) throw std::invalid_argument("brick size must be at least 1");
     if (options_.threads < 0) throw std::invalid_argument("threads must be 0 (one per core) or more");
-    threads_ = options_.threads > 0 ? options_.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    threads_ = resolveThreadCount(options_.threads);
     // Level 0 now (nothing to copy for trilinear frames, but a float level is checked to fit
     // int32 indices): every frame but a coarser level's needs it.
     RenderStats unused;
@@ -91,24 +85,9 @@ int CpuRenderer::bandRows() const {
 }
 
 std::string CpuRenderer::describe(const CpuRendererOptions &options) {
-    const int threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    const int threads = resolveThreadCount(options.threads);
     return "cpu: " + cpu::marchTarget() + ", " + std::to_string(cpu::raysPerPacket()) + " rays per packet, " +
            std::to_string(threads) + " threads";
-}
-
-std::string CpuRenderer::featureNames(const Quality &q, bool hasClipPlanes) {
-    std::string o;
-    if (q.jitter) o += " JITTER";
-    if (q.boundarySegment) o += " BOUNDARY_SEGMENT";
-    if (q.earlyTermination < 1) o += " EARLY_TERMINATION";
-    if (hasClipPlanes) o += " CLIP_PLANES";
-    if (q.interpolation == Interpolation::Cubic) o += " CUBIC";
-    if (q.preintegrated) o += " PREINTEGRATED";
-    if (q.emptySpaceSkipping) o += " EMPTY_SPACE_SKIPPING";
-    if (q.shading) o += " SHADING";
-    if (q.compositing == Compositing::Maximum) o += " COMPOSITING_MAX";
-    if (q.compositing == Compositing::Minimum) o += " COMPOSITING_MIN";
-    return o.empty() ? o : o.substr(1);
 }
 
 PreprocessCounts CpuRenderer::preprocessCounts() const {
@@ -190,109 +169,36 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
         std::lock_guard lock(countsMutex_);
         ++counts_.brickGrids;
     }
-    if (data.classifiedFor && *data.classifiedFor == tf) {
-        st.emptyBrickFraction = data.emptyFraction;
-        return;
-    }
-    const auto t = Clock::now();
-    const std::vector<uint8_t> visible = classifyBricks(*data.bricks, tf);
-    data.brickVisible.assign(visible.begin(), visible.end());
-    const size_t empty = size_t(std::count(visible.begin(), visible.end(), uint8_t(0)));
-    data.emptyFraction = visible.empty() ? 0 : double(empty) / double(visible.size());
-    data.classifiedFor = tf;
-    st.brickClassifySeconds = secondsSince(t);
-    st.emptyBrickFraction = data.emptyFraction;
+    if (!data.classification.update(*data.bricks, tf, st)) return;
+    // As int32, so that the march's lanes gather it.
+    data.brickVisible.assign(data.classification.visible.begin(), data.classification.visible.end());
     std::lock_guard lock(countsMutex_);
     ++counts_.brickClassifications;
 }
 
-Image CpuRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
-                          const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
-    return castRays(tf, camera, width, height, quality, clipPlanes, nullptr, stats);
-}
-
-Image CpuRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                                const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
-                                const RayWindow &window, RenderStats *stats) {
-    return castRays(tf, camera, width, height, quality, clipPlanes, &window, stats);
-}
-
-Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
-                            const Quality &requested, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
-                            RenderStats *stats) {
-    validateFrameRequest(*volume_, tf, camera, width, height, requested, clipPlanes, pyramid_.maxLevel());
-    if (window) validateRayWindow(*window, width, height, requested);
-    const Quality quality = compositedQuality(requested);
+Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
+    const FrameSetup setup = setUpFrame(*volume_, request, pyramid_.maxLevel(), options_.brickSize);
+    const Quality &quality = setup.quality;
+    const TransferFunction &tf = request.transferFunction;
+    RenderStats st = setup.stats;
+    st.buildOptions = setup.features;
 
     std::lock_guard frameLock(mutex_);
-    RenderStats st;
-    st.buildOptions = featureNames(quality, !clipPlanes.empty());
-    const bool cubic = quality.interpolation == Interpolation::Cubic;
-    DataSet &data = dataSet(quality.mipLevel, cubic, st);
+    DataSet &data = dataSet(quality.mipLevel, setup.cubic, st);
     if (quality.emptySpaceSkipping) classify(data, quality.mipLevel, tf, st);
-
-    const double smallest = minComponent(volume_->spacing);
-    const double step = frameStep(*volume_, quality, st);
-    const double opacityUnit = tf.opacityUnit ? *tf.opacityUnit : smallest;
-    if (!tfTableFor_ || !(*tfTableFor_ == tf)) {
-        const auto t = Clock::now();
-        TfTable table = buildTfTable(tf);
-        tfTable_ = std::move(table.rgba);
-        tfMin_ = table.minValue;
-        tfScale_ = table.scale;
-        tfEntries_ = int(tfTable_.size() / 4);
-        tfError_ = table.maxError;
-        tfTableFor_ = tf;
-        st.tfTableSeconds = secondsSince(t);
+    const FrameTables::Rebuilt rebuilt = tables_.update(tf, setup, st);
+    {
         std::lock_guard lock(countsMutex_);
-        ++counts_.tfTables;
-    }
-    if (!quality.preintegrated) {
-        st.tfTableEntries = tfEntries_;
-        st.tfTableError = tfError_;
-    }
-    if (quality.preintegrated) {
-        // Rebuilt when the transfer function or the step changes (the table holds whole steps).
-        if (!preintegration_ || !(preintegrationFor_ == tf) || preintegration_->step != step ||
-            preintegration_->opacityUnit != opacityUnit) {
-            const auto t = Clock::now();
-            // A constant volume has no range to tabulate; any range starting at its value
-            // serves, with that value exactly on the first node (as the OpenCL back end).
-            const double lo = volume_->range.min;
-            const double hi = volume_->range.max > lo ? double(volume_->range.max)
-                                                      : lo + std::max(1.0, std::fabs(lo)) * 1e-3;
-            preintegration_ = std::make_shared<PreintegrationTable>(
-                buildPreintegrationTable(tf, step, opacityUnit, lo, hi));
-            preintegrationFor_ = tf;
-            st.preintegrationSeconds = secondsSince(t);
-            std::lock_guard lock(countsMutex_);
-            ++counts_.preintegrationTables;
-        }
-        st.preintegrationNodes = int(preintegration_->nodes.size());
-        st.preintegrationError = preintegration_->maxError;
+        counts_.tfTables += rebuilt.tfTable;
+        counts_.preintegrationTables += rebuilt.preintegration;
     }
 
-    const int raysWide = raysForScale(width, quality.imageScale);
-    const int raysHigh = raysForScale(height, quality.imageScale);
-    st.raysWide = raysWide;
-    st.raysHigh = raysHigh;
-    // Camera frame exactly as RayGenerator builds it, as the OpenCL back end does.
-    const RayGenerator rays(camera, width, height);
-
+    // The set-up as the march reads it.
     cpu::FrameParams p{};
-    p.features.jitter = quality.jitter;
-    p.features.boundarySegment = quality.boundarySegment;
-    p.features.earlyTermination = quality.earlyTermination < 1;
-    p.features.clipPlanes = !clipPlanes.empty();
-    p.features.emptySpaceSkipping = quality.emptySpaceSkipping;
-    p.features.shading = quality.shading;
-    p.features.cubic = cubic;
-    p.features.preintegrated = quality.preintegrated;
-    p.features.intensityProjection = quality.compositing == Compositing::Maximum   ? 1
-                                     : quality.compositing == Compositing::Minimum ? -1
-                                                                                   : 0;
+    fillCommonParams(setup, p);
+    p.features = setup.use;
     if (quality.preintegrated) {
-        const PreintegrationTable &table = *preintegration_;
+        const PreintegrationTable &table = tables_.preintegration();
         p.preRgba = table.rgba.data();
         p.preNodes = table.nodes.data();
         p.preLocator = table.locator.data();
@@ -301,50 +207,10 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
         p.preLocatorMin = table.locatorMin;
         p.preLocatorScale = table.locatorScale;
     }
-    set3(p.eye, camera.eye);
-    set3(p.forward, rays.forward);
-    set3(p.right, rays.right * rays.halfWidth());
-    set3(p.up, rays.up * rays.halfHeight());
-    // The volume where this frame's orientation correction puts it (orientation_correction.hpp).
-    const VolumePlacement placed = correctedPlacement(*volume_, quality.orientationCorrection);
-    const Mat3d dt = placed.direction.transposed();
-    for (int r = 0; r < 3; ++r) {
-        const Vec3d row{dt(r, 0) / volume_->spacing[r], dt(r, 1) / volume_->spacing[r],
-                        dt(r, 2) / volume_->spacing[r]};
-        set3(p.indexFromWorld[r], row);
-        p.indexFromWorld[r][3] = float(-dot(row, placed.origin));
-    }
-    for (size_t c = 0; c < clipPlanes.size(); ++c) {
-        const Vec3d nrm = clipPlanes[c].normal;
-        set3(p.clipPlanes[c], nrm);
-        p.clipPlanes[c][3] = float(-dot(nrm, clipPlanes[c].point));
-    }
-    p.clipPlaneCount = int(clipPlanes.size());
-    double boxLo[3], boxHi[3];
-    cropBoxInIndexSpace(*volume_, quality.crop, boxLo, boxHi);
-    for (int a = 0; a < 3; ++a) {
-        p.boxLo[a] = float(boxLo[a]);
-        p.boxHi[a] = float(boxHi[a]);
-    }
-    for (int a = 0; a < 3; ++a) {
-        p.dims[a] = int(volume_->dims[a]);
-        p.levelDims[a] = int(data.dims[a]);
-        p.bricks[a] = data.bricks ? int(data.bricks->bricks[a]) : 0;
-    }
-    p.width = raysWide;
-    p.height = raysHigh;
-    p.orthographic = camera.projection == Projection::Orthographic;
-    p.levelScale = float(std::ldexp(1.0, -quality.mipLevel));
-    p.step = float(step);
-    p.opacityUnit = float(opacityUnit);
-    p.terminationDepth = quality.earlyTermination < 1 ? float(-std::log1p(-quality.earlyTermination))
-                                                      : std::numeric_limits<float>::infinity();
-    p.seed = uint32_t(quality.seed ^ (quality.seed >> 32));
-    p.maxSamples = kMaxSamplesPerRay;
     // Cubic: the padded coefficients; trilinear: the level where it lies. dataSet and
     // padMirror checked that the indices (byte offsets, narrow) fit int32.
-    p.voxels = cubic ? data.padded.data() : data.floats;
-    const int pad = cubic ? 3 : 0;
+    p.voxels = setup.cubic ? data.padded.data() : data.floats;
+    const int pad = setup.cubic ? 3 : 0;
     if (data.narrow) {
         p.narrowVoxels = data.narrow;
         p.narrowBytes = data.width.bytes;
@@ -352,17 +218,15 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
     }
     p.rowStride = int(data.dims.x + pad);
     p.sliceStride = int((data.dims.x + pad) * (data.dims.y + pad));
-    p.tf = tfTable_.data();
-    p.tfMin = float(tfMin_);
-    p.tfScale = float(tfScale_);
-    p.tfEntries = tfEntries_;
+    const TfTable &tfTable = tables_.tfTable();
+    p.tf = tfTable.rgba.data();
+    p.tfMin = float(tfTable.minValue);
+    p.tfScale = float(tfTable.scale);
+    p.tfEntries = tfTable.entries();
     p.brickVisible = quality.emptySpaceSkipping ? data.brickVisible.data() : nullptr;
-    p.brickSize = options_.brickSize;
-
     // A window casts only its own rays, tiled from its corner; each ray is cast as in the
     // whole grid (its lanes do not depend on the other rays of its packet).
-    const RayWindow all{0, 0, raysWide, raysHigh};
-    const RayWindow &win = window ? *window : all;
+    const RayWindow &win = setup.cast;
     p.outX = win.x;
     p.outY = win.y;
     p.outWidth = win.width;
@@ -371,28 +235,19 @@ Image CpuRenderer::castRays(const TransferFunction &tf, const Camera &camera, in
     Image cast(win.width, win.height);
     cpu::Counters counters;
     const int tilesWide = (win.width + kTileEdge - 1) / kTileEdge, tilesHigh = (win.height + kTileEdge - 1) / kTileEdge;
-    const int tiles = tilesWide * tilesHigh;
-    std::atomic<int> next{0};
-    auto work = [&] {
-        for (int i; (i = next.fetch_add(1)) < tiles;) {
-            const int x0 = win.x + (i % tilesWide) * kTileEdge, y0 = win.y + (i / tilesWide) * kTileEdge;
-            cpu::marchTile(p, x0, y0, std::min(x0 + kTileEdge, win.x + win.width),
-                           std::min(y0 + kTileEdge, win.y + win.height), cast.rgba.data(), counters);
-        }
-    };
-    {
-        std::vector<std::jthread> pool;
-        for (int i = 1; i < std::min(threads_, tiles); ++i) pool.emplace_back(work);
-        work();
-    }
+    // Tiles handed out one at a time: a tile's cost depends on how much of the volume it sees.
+    parallelFor(tilesWide * tilesHigh, threads_, [&](int i) {
+        const int x0 = win.x + (i % tilesWide) * kTileEdge, y0 = win.y + (i / tilesWide) * kTileEdge;
+        cpu::marchTile(p, x0, y0, std::min(x0 + kTileEdge, win.x + win.width),
+                       std::min(y0 + kTileEdge, win.y + win.height), cast.rgba.data(), counters);
+    });
     st.raysHit = counters.raysHit;
     const double hit = std::max<double>(double(counters.raysHit), 1);
     st.meanSamplesPerRay = double(counters.samples) / hit;
     st.skippedSegmentsPerRay = double(counters.segmentsSkipped) / hit;
     st.earlyTerminatedFraction = double(counters.terminatedEarly) / hit;
     st.raysTruncated = counters.truncated;
-    Image image = window || (raysWide == width && raysHigh == height) ? std::move(cast)
-                                                                       : resizeBilinear(cast, width, height);
+    Image image = setup.upsample ? resizeBilinear(cast, request.width, request.height) : std::move(cast);
     st.renderSeconds = secondsSince(t);
     if (stats) *stats = st;
     return image;

@@ -9,10 +9,10 @@
 // cubic B-spline, pre-integration: every switch of the scene contract.
 
 #include "renderer/common/frame_renderer.hpp"
+#include "renderer/common/frame_setup.hpp"
 #include "renderer/common/minmax_bricks.hpp"
 #include "renderer/common/mip_pyramid.hpp"
 #include "renderer/common/narrow_samples.hpp"
-#include "renderer/common/preintegration.hpp"
 
 #include <atomic>
 #include <map>
@@ -33,12 +33,8 @@ class CpuRenderer : public FrameRenderer {
     // Convenience for tools and tests: keeps a copy.
     explicit CpuRenderer(const Volume &volume, CpuRendererOptions options = {});
 
-    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
-    // Casts only the window's rays (the tiles over it), each exactly as render() casts it.
-    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
-                       RenderStats *stats = nullptr) override;
+    // A window casts only its own rays (the tiles over it), each exactly as the whole frame does.
+    Image render(const FrameRequest &request, RenderStats *stats = nullptr) override;
     bool rendersWindowsCheaply() const override { return true; }
     int bandRows() const override;   // the ray packet's height
     std::string description() const override;
@@ -61,9 +57,6 @@ class CpuRenderer : public FrameRenderer {
     // (the server's start-up log and hello).
     static std::string describe(const CpuRendererOptions &options = {});
 
-    // The switches a frame uses, as the OpenCL back end names them ("JITTER CLIP_PLANES …").
-    static std::string featureNames(const Quality &quality, bool hasClipPlanes);
-
   private:
     // The data a frame samples: a mip level's voxels, or its B-spline coefficients.
     struct DataSet {
@@ -77,14 +70,10 @@ class CpuRenderer : public FrameRenderer {
         std::vector<float> widened;
         std::vector<float> padded; // cubic: coefficients, mirrored 1 before and 2 after each axis
         std::optional<MinMaxBricks> bricks;
-        std::optional<TransferFunction> classifiedFor;
-        std::vector<int32_t> brickVisible;
-        double emptyFraction = 0;
+        BrickClassification classification;
+        std::vector<int32_t> brickVisible; // classification.visible as int32, for gathers
     };
 
-    // render() and renderWindow(): the whole grid (upsampled to the frame) or one window of it.
-    Image castRays(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                   const std::vector<ClipPlane> &clipPlanes, const RayWindow *window, RenderStats *stats);
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st);
 
@@ -94,12 +83,7 @@ class CpuRenderer : public FrameRenderer {
     MipPyramid pyramid_;
     std::mutex mutex_;
     std::map<std::pair<int, bool>, DataSet> dataSets_; // by (mip level, cubic)
-    std::optional<TransferFunction> tfTableFor_;
-    std::vector<float> tfTable_;
-    double tfMin_ = 0, tfScale_ = 0, tfError_ = 0;
-    int tfEntries_ = 0;
-    std::shared_ptr<const PreintegrationTable> preintegration_;
-    TransferFunction preintegrationFor_;
+    FrameTables tables_;
     PreprocessCounts counts_;
     mutable std::mutex countsMutex_;
     std::atomic<uint64_t> heldBytes_{0};

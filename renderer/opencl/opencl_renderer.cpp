@@ -1,6 +1,7 @@
 #include "renderer/opencl/opencl_renderer.hpp"
 
 #include "renderer/common/bspline_prefilter.hpp"
+#include "renderer/common/frame_setup.hpp"
 #include "renderer/opencl/bspline_prefilter_opencl.hpp"
 #include "renderer/model/camera.hpp"
 #include "renderer/opencl/embedded_kernels.hpp"
@@ -12,6 +13,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <sstream>
 
 namespace volcast {
 
@@ -22,8 +24,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-cl_float4 f4(const Vec3d &v, double w = 0) { return {{float(v.x), float(v.y), float(v.z), float(w)}}; }
 
 // Work-group edge: one fixed size, so PoCL compiles one launch configuration per program
 // (a new size costs it 0.25–2 s, docs/platform.md) and the global size is rounded up to it.
@@ -60,13 +60,6 @@ cl::Buffer upload(OpenClContext &cl, const std::vector<T> &data, const std::stri
 
 } // namespace
 
-struct OpenClRenderer::PreintegrationCache {
-    TransferFunction tf;
-    double step = 0, opacityUnit = 0;
-    PreintegrationTable table;
-    cl::Buffer rgba, nodes, locator;
-};
-
 OpenClRenderer::OpenClRenderer(std::shared_ptr<OpenClContext> cl, std::shared_ptr<const Volume> volume,
                                OpenClRendererOptions options)
     : cl_(std::move(cl)), volume_(std::move(volume)), options_(options), pyramid_(*volume_) {
@@ -89,18 +82,12 @@ bool OpenClRenderer::cubicFromImage() const {
 std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes, int voxelBytes) const {
     // No -cl-fast-relaxed-math: it would break the opacity correction's exactness for tiny
     // steps and opacities (expm1/log1p), which the stability cases rely on.
+    // Each switch in use is the kernel's macro of its name (featureNames); the cubic path
+    // reads a 3-D image where the device filters it (CUBIC_IMAGE).
     std::string o;
     if (voxelBytes == 1 || voxelBytes == 2) o += " -DVOXEL_BYTES=" + std::to_string(voxelBytes);
-    if (q.jitter) o += " -DJITTER";
-    if (q.boundarySegment) o += " -DBOUNDARY_SEGMENT";
-    if (q.earlyTermination < 1) o += " -DEARLY_TERMINATION";
-    if (hasClipPlanes) o += " -DCLIP_PLANES";
-    if (q.interpolation == Interpolation::Cubic) o += cubicFromImage() ? " -DCUBIC_IMAGE" : " -DCUBIC";
-    if (q.preintegrated) o += " -DPREINTEGRATED";
-    if (q.emptySpaceSkipping) o += " -DEMPTY_SPACE_SKIPPING";
-    if (q.shading) o += " -DSHADING";
-    if (q.compositing == Compositing::Maximum) o += " -DCOMPOSITING_MAX";
-    if (q.compositing == Compositing::Minimum) o += " -DCOMPOSITING_MIN";
+    std::istringstream names(featureNames(q, hasClipPlanes));
+    for (std::string name; names >> name;) o += " -D" + (name == "CUBIC" && cubicFromImage() ? "CUBIC_IMAGE" : name);
     return o.empty() ? o : o.substr(1);
 }
 
@@ -196,163 +183,58 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
         std::lock_guard lock(countsMutex_);
         ++counts_.brickGrids;
     }
-    if (data.classifiedFor && *data.classifiedFor == tf) {
-        st.emptyBrickFraction = data.emptyFraction;
-        return;
-    }
-    const auto t = Clock::now();
-    const std::vector<uint8_t> visible = classifyBricks(*data.bricks, tf);
-    size_t empty = 0;
-    for (uint8_t v : visible) empty += v == 0;
-    data.emptyFraction = visible.empty() ? 0 : double(empty) / double(visible.size());
-    try {
-        data.brickVisible = cl::Buffer(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, visible.size(),
-                                       const_cast<uint8_t *>(visible.data()));
-    } catch (const cl::Error &e) {
-        throw OpenClError("cannot upload the brick classification to " + cl_->deviceName() + ": " + describe(e));
-    }
-    data.classifiedFor = tf;
-    st.brickClassifySeconds = secondsSince(t);
-    st.emptyBrickFraction = data.emptyFraction;
+    if (!data.classification.update(*data.bricks, tf, st)) return;
+    data.brickVisible = upload(*cl_, data.classification.visible, "the brick classification");
     std::lock_guard lock(countsMutex_);
     ++counts_.brickClassifications;
 }
 
-Image OpenClRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
-                             const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
-    return castRays(tf, camera, width, height, quality, clipPlanes, nullptr, stats);
-}
-
-Image OpenClRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                                   const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
-                                   const RayWindow &window, RenderStats *stats) {
-    return castRays(tf, camera, width, height, quality, clipPlanes, &window, stats);
-}
-
-Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera, int width, int height,
-                           const Quality &requested, const std::vector<ClipPlane> &clipPlanes, const RayWindow *window,
-                           RenderStats *stats) {
-    validateFrameRequest(*volume_, tf, camera, width, height, requested, clipPlanes, pyramid_.maxLevel());
-    const Quality quality = compositedQuality(requested);
-    if (window) validateRayWindow(*window, width, height, quality);
+Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
+    const FrameSetup setup = setUpFrame(*volume_, request, pyramid_.maxLevel(), options_.brickSize);
+    const Quality &quality = setup.quality;
+    const TransferFunction &tf = request.transferFunction;
 
     std::lock_guard frameLock(mutex_);
-    RenderStats st;
-    const bool cubic = quality.interpolation == Interpolation::Cubic;
-    DataSet &data = dataSet(quality.mipLevel, cubic, st);
-    st.buildOptions = buildOptions(quality, !clipPlanes.empty(), data.width.bytes);
+    RenderStats st = setup.stats;
+    DataSet &data = dataSet(quality.mipLevel, setup.cubic, st);
+    st.buildOptions = buildOptions(quality, setup.clipPlaneCount > 0, data.width.bytes);
     const auto built = cl_->program(kRaycastKernelSource, st.buildOptions);
     st.kernelBuildSeconds = built.buildSeconds;
 
     if (quality.emptySpaceSkipping) classify(data, tf, st);
 
-    const double smallest = minComponent(volume_->spacing);
-    const double step = frameStep(*volume_, quality, st);
-    const double opacityUnit = tf.opacityUnit ? *tf.opacityUnit : smallest;
-    if (quality.preintegrated) {
-        if (!preintegration_ || !(preintegration_->tf == tf) || preintegration_->step != step ||
-            preintegration_->opacityUnit != opacityUnit) {
-            auto t = Clock::now();
-            auto cache = std::make_shared<PreintegrationCache>();
-            cache->tf = tf;
-            cache->step = step;
-            cache->opacityUnit = opacityUnit;
-            // A constant volume has no range to tabulate; any range starting at its value
-            // serves, with that value exactly on the first node.
-            const double lo = volume_->range.min;
-            const double hi = volume_->range.max > lo ? double(volume_->range.max)
-                                                      : lo + std::max(1.0, std::fabs(lo)) * 1e-3;
-            cache->table = buildPreintegrationTable(tf, step, opacityUnit, lo, hi);
-            cache->rgba = upload(*cl_, cache->table.rgba, "the pre-integration table");
-            cache->nodes = upload(*cl_, cache->table.nodes, "the pre-integration nodes");
-            try {
-                cache->locator = cl::Buffer(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
-                                            cache->table.locator.size() * sizeof(int),
-                                            const_cast<int *>(cache->table.locator.data()));
-            } catch (const cl::Error &e) {
-                throw OpenClError("cannot upload the pre-integration locator: " + describe(e));
-            }
-            preintegration_ = cache;
-            st.preintegrationSeconds = secondsSince(t);
-            std::lock_guard lock(countsMutex_);
-            ++counts_.preintegrationTables;
-        }
-        st.preintegrationNodes = int(preintegration_->table.nodes.size());
-        st.preintegrationError = preintegration_->table.maxError;
-    }
-    // The 1-D table: every segment without pre-integration, and with it the partial segments
-    // whose full step is too opaque for its alpha to hold its depth (raycast.cl).
-    if (!tfTableFor_ || !(*tfTableFor_ == tf)) {
+    // The tables, uploaded when rebuilt: the 1-D table for every frame (with pre-integration,
+    // its partial segments too opaque for the table's alpha read it: raycast.cl).
+    const FrameTables::Rebuilt rebuilt = tables_.update(tf, setup, st);
+    if (rebuilt.tfTable) {
         const auto t = Clock::now();
-        const TfTable table = buildTfTable(tf);
-        tfTable_ = upload(*cl_, table.rgba, "the transfer-function table");
-        tfMin_ = table.minValue;
-        tfScale_ = table.scale;
-        tfEntries_ = table.entries();
-        tfError_ = table.maxError;
-        tfTableFor_ = tf;
-        st.tfTableSeconds = secondsSince(t);
+        tfTable_ = upload(*cl_, tables_.tfTable().rgba, "the transfer-function table");
+        st.tfTableSeconds += secondsSince(t);
+    }
+    if (rebuilt.preintegration) {
+        const auto t = Clock::now();
+        const PreintegrationTable &table = tables_.preintegration();
+        preRgba_ = upload(*cl_, table.rgba, "the pre-integration table");
+        preNodes_ = upload(*cl_, table.nodes, "the pre-integration nodes");
+        preLocator_ = upload(*cl_, table.locator, "the pre-integration locator");
+        st.preintegrationSeconds += secondsSince(t);
+    }
+    {
         std::lock_guard lock(countsMutex_);
-        ++counts_.tfTables;
-    }
-    if (!quality.preintegrated) {
-        st.tfTableEntries = tfEntries_;
-        st.tfTableError = tfError_;
+        counts_.tfTables += rebuilt.tfTable;
+        counts_.preintegrationTables += rebuilt.preintegration;
     }
 
-    // Fewer rays for image_scale < 1, on the full image's plane, then upsampled.
-    const int raysWide = raysForScale(width, quality.imageScale);
-    const int raysHigh = raysForScale(height, quality.imageScale);
-    st.raysWide = raysWide;
-    st.raysHigh = raysHigh;
-    // Camera frame exactly as RayGenerator builds it, so both renderers cast the same rays.
-    const RayGenerator rays(camera, width, height);
-
+    // The set-up as the kernel reads it.
     RayCastParams p{};
-    p.eye = f4(camera.eye);
-    p.forward = f4(rays.forward);
-    p.right = f4(rays.right * rays.halfWidth());
-    p.up = f4(rays.up * rays.halfHeight());
-    // indexFromWorld(x) = Dᵀ(x − origin) / s, written as rows (linear part, translation).
-    // The volume where this frame's orientation correction puts it (orientation_correction.hpp).
-    const VolumePlacement placed = correctedPlacement(*volume_, quality.orientationCorrection);
-    const Mat3d dt = placed.direction.transposed();
-    for (int r = 0; r < 3; ++r) {
-        const Vec3d row{dt(r, 0) / volume_->spacing[r], dt(r, 1) / volume_->spacing[r],
-                        dt(r, 2) / volume_->spacing[r]};
-        p.indexFromWorld[r] = f4(row, -dot(row, placed.origin));
-    }
-    for (size_t c = 0; c < clipPlanes.size(); ++c) {
-        const Vec3d nrm = clipPlanes[c].normal;
-        p.clipPlanes[c] = f4(nrm, -dot(nrm, clipPlanes[c].point));
-    }
-    p.clipPlaneCount = int(clipPlanes.size());
-    double boxLo[3], boxHi[3];
-    cropBoxInIndexSpace(*volume_, quality.crop, boxLo, boxHi);
-    p.boxLo = {{float(boxLo[0]), float(boxLo[1]), float(boxLo[2]), 0.0f}};
-    p.boxHi = {{float(boxHi[0]), float(boxHi[1]), float(boxHi[2]), 0.0f}};
-    for (int a = 0; a < 3; ++a) {
-        p.dims[a] = int(volume_->dims[a]);
-        p.levelDims[a] = int(data.dims[a]);
-        p.bricks[a] = data.bricks ? int(data.bricks->bricks[a]) : 0;
-    }
-    p.levelScale = float(std::ldexp(1.0, -quality.mipLevel));
+    fillCommonParams(setup, p);
     p.narrowOffset = data.width.offset;
-    p.brickSize = options_.brickSize;
-    p.tfMin = float(tfMin_);
-    p.tfScale = float(tfScale_);
-    p.tfEntries = tfEntries_;
-    p.width = raysWide;
-    p.height = raysHigh;
-    p.orthographic = camera.projection == Projection::Orthographic;
-    p.maxSamples = kMaxSamplesPerRay;
-    p.step = float(step);
-    p.opacityUnit = float(opacityUnit);
-    // Early termination compares optical depths: no exp per sample.
-    p.terminationDepth = quality.earlyTermination < 1 ? float(-std::log1p(-quality.earlyTermination)) : INFINITY;
-    p.seed = uint32_t(quality.seed ^ (quality.seed >> 32));
+    const TfTable &tfTable = tables_.tfTable();
+    p.tfMin = float(tfTable.minValue);
+    p.tfScale = float(tfTable.scale);
+    p.tfEntries = tfTable.entries();
     if (quality.preintegrated) {
-        const PreintegrationTable &table = preintegration_->table;
+        const PreintegrationTable &table = tables_.preintegration();
         p.preNodes = int(table.nodes.size());
         p.preLocatorSize = table.locatorBuckets;
         p.preLocatorMin = float(table.locatorMin);
@@ -362,8 +244,8 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
     const auto t = Clock::now();
     // A window casts only its own rays (the launch offset places them on the full grid) and
     // reads back only its rows; the output buffer spans the grid so the kernel's indexing holds.
-    const RayWindow all{0, 0, raysWide, raysHigh};
-    const RayWindow &win = window ? *window : all;
+    const RayWindow &win = setup.cast;
+    const int raysWide = setup.raysWide, raysHigh = setup.raysHigh;
     Image cast(win.width, win.height);
     try {
         auto &queue = cl_->queue();
@@ -375,13 +257,13 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
         // Arguments in the order of the kernel's signature for this feature set.
         cl::Kernel kernel(built.program, "raycast");
         cl_uint arg = 0;
-        if (cubic && cubicFromImage()) kernel.setArg(arg++, data.image);
+        if (setup.cubic && cubicFromImage()) kernel.setArg(arg++, data.image);
         else kernel.setArg(arg++, data.buffer);
         kernel.setArg(arg++, tfTable_);
         if (quality.preintegrated) {
-            kernel.setArg(arg++, preintegration_->rgba);
-            kernel.setArg(arg++, preintegration_->nodes);
-            kernel.setArg(arg++, preintegration_->locator);
+            kernel.setArg(arg++, preRgba_);
+            kernel.setArg(arg++, preNodes_);
+            kernel.setArg(arg++, preLocator_);
         }
         if (quality.emptySpaceSkipping) kernel.setArg(arg++, data.brickVisible);
         kernel.setArg(arg++, params);
@@ -411,8 +293,7 @@ Image OpenClRenderer::castRays(const TransferFunction &tf, const Camera &camera,
     } catch (const cl::Error &e) {
         throw OpenClError("rendering on " + cl_->deviceName() + " failed: " + describe(e));
     }
-    Image image = window || (raysWide == width && raysHigh == height) ? std::move(cast)
-                                                                      : resizeBilinear(cast, width, height);
+    Image image = setup.upsample ? resizeBilinear(cast, request.width, request.height) : std::move(cast);
     st.renderSeconds = secondsSince(t);
     if (stats) *stats = st;
     return image;

@@ -7,6 +7,7 @@
 // step changes). Everything is cached for the renderer's life.
 
 #include "renderer/common/frame_renderer.hpp"
+#include "renderer/common/frame_setup.hpp"
 #include "renderer/model/image.hpp"
 #include "renderer/common/minmax_bricks.hpp"
 #include "renderer/common/mip_pyramid.hpp"
@@ -42,12 +43,8 @@ class OpenClRenderer : public FrameRenderer {
     // Convenience for tools and tests: keeps a copy of the volume.
     OpenClRenderer(std::shared_ptr<OpenClContext> cl, const Volume &volume, OpenClRendererOptions options = {});
 
-    // Thread-safe; frames are rendered one at a time.
-    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
-    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
-                       RenderStats *stats = nullptr) override;
+    // Thread-safe; frames are rendered one at a time. A window casts only its own rays.
+    Image render(const FrameRequest &request, RenderStats *stats = nullptr) override;
     bool rendersWindowsCheaply() const override { return true; }
     int bandRows() const override;   // the work-group's height
     std::string description() const override;
@@ -68,16 +65,11 @@ class OpenClRenderer : public FrameRenderer {
         NarrowWidth width;           // trilinear voxels of an 8- or 16-bit scan: narrow in `buffer`
         cl::Image3D image;           // padded coefficients for the 8-fetch path
         std::optional<MinMaxBricks> bricks;
-        std::optional<TransferFunction> classifiedFor;
-        cl::Buffer brickVisible;
-        double emptyFraction = 0;
+        BrickClassification classification;
+        cl::Buffer brickVisible;           // classification.visible on the device
     };
-    struct PreintegrationCache;
 
     bool cubicFromImage() const;
-    // render() and renderWindow(): the whole grid (upsampled to the frame) or one window.
-    Image castRays(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-               const std::vector<ClipPlane> &clipPlanes, const RayWindow *window, RenderStats *stats);
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
     std::vector<float> readBackCoefficients(const DataSet &data);
@@ -88,12 +80,9 @@ class OpenClRenderer : public FrameRenderer {
     MipPyramid pyramid_;
     std::mutex mutex_;
     std::map<std::pair<int, bool>, DataSet> dataSets_; // by (mip level, cubic)
-    std::optional<TransferFunction> tfTableFor_;
+    FrameTables tables_;              // on the host; uploaded into the buffers below when rebuilt
     cl::Buffer tfTable_;
-    double tfMin_ = 0, tfScale_ = 0;
-    int tfEntries_ = 0;
-    double tfError_ = 0;
-    std::shared_ptr<PreintegrationCache> preintegration_;
+    cl::Buffer preRgba_, preNodes_, preLocator_;
     PreprocessCounts counts_;
     mutable std::mutex countsMutex_;
 };

@@ -96,14 +96,14 @@ void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &o
                     // would hide every remedy's own error below it.
                     Quality q = configurationQuality(c, step, true);
                     q.earlyTermination = 1.0;
-                    Image image = renderer.render(tf, camera, viewport, viewport, q, {}); // warm-up, and the image
+                    Image image = renderer.render({tf, camera, viewport, viewport, q, {}}); // warm-up, and the image
                     Point p;
                     p.scan = name;
                     p.backEnd = b;
                     p.config = c.key;
                     p.label = c.label;
                     p.step = step;
-                    p.timing = bench::repeat(options.repeat, [&](int) { renderer.render(tf, camera, viewport, viewport, q, {}); });
+                    p.timing = bench::repeat(options.repeat, [&](int) { renderer.render({tf, camera, viewport, viewport, q, {}}); });
                     p.error = compareImages(image, reference(c.cubic, c.shading));
                     std::cerr << "error_vs_time: " << name << " " << b << " " << c.key << " step " << step << ": "
                               << fmt(p.timing.median) << " ms, RMSE " << p.error.rmse << "\n";

@@ -64,10 +64,10 @@ void figure5(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &optio
                     FrameRenderer &renderer = c.doubledVolume ? *renderers[b].second : *renderers[b].first;
                     const Quality q = configurationQuality(c, 1 / spv, accelerated);
                     // A small frame first builds the program and this step's tables.
-                    renderer.render(tf, camera, 32, 32, q, {});
+                    renderer.render({tf, camera, 32, 32, q, {}});
                     RenderStats stats;
                     const Timing t = bench::repeat(options.repeat, [&](int) {
-                        renderer.render(tf, camera, viewport, viewport, q, {}, &stats);
+                        renderer.render({tf, camera, viewport, viewport, q, {}}, &stats);
                     });
                     cells[b][c.key][spv] = t;
                     std::cerr << "figure5: " << variant << " " << b << " " << c.key << " spv " << spv << ": "

@@ -75,13 +75,13 @@ CellResult timeOrbit(FrameRenderer &renderer, const TransferFunction &tf, const 
                      int height, const RepeatOptions &repeat) {
     CellResult r;
     const auto t0 = std::chrono::steady_clock::now();
-    renderer.render(tf, peerCamera(renderer.volume(), 0), width, height, quality, {}, &r.stats);
+    renderer.render({tf, peerCamera(renderer.volume(), 0), width, height, quality, {}}, &r.stats);
     r.firstFrameMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     OtherLoad load;
     RepeatOptions timed = repeat;
     timed.warmup = 0;
     r.timing = bench::repeat(timed, [&](int k) {
-        r.last = renderer.render(tf, peerCamera(renderer.volume(), k + 1), width, height, quality, {}, &r.stats);
+        r.last = renderer.render({tf, peerCamera(renderer.volume(), k + 1), width, height, quality, {}}, &r.stats);
     });
     r.otherCpus = load.cpus();
     return r;

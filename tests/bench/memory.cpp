@@ -79,7 +79,7 @@ void memoryStudy(const std::filesystem::path &file, int size) {
     for (const int level : {0, 1}) {
         q.mipLevel = level;
         RenderStats st;
-        renderer.render(tf, peerCamera(*volume, 0), size, size, q, {}, &st);
+        renderer.render({tf, peerCamera(*volume, 0), size, size, q, {}}, &st);
         nlohmann::json frame = residentMemory();
         frame["renderer_mib"] = mib(renderer.memoryBytes());
         frame["held_mib"] = mib(volume->sampleBytes() + renderer.memoryBytes());

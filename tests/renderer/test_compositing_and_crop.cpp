@@ -99,7 +99,7 @@ TEST_P(CompositingAndCrop, CropBoxWithPartialSegmentsIsExactOnAConstantBox) {
     for (double step : {0.3, 1.7, 40.0}) {
         Quality q = plainQuality(step);
         q.crop = kCrop;
-        const Image img = r->render(test::constantTf(0.9, 0.5, 0.2, 0.07, 1.0), cam, 32, 24, q, {});
+        const Image img = r->render({test::constantTf(0.9, 0.5, 0.2, 0.07, 1.0), cam, 32, 24, q, {}});
         int hits = 0;
         // As for the whole box (test_frame_renderer_accuracy.cpp): float ray parameters ~100
         // world units from the eye move A by ~1e-6, the depth sum by ~1e-6.
@@ -115,7 +115,7 @@ TEST_P(CompositingAndCrop, CropBoxWithoutPartialSegmentsHasJerkyEdges) {
     Quality q = plainQuality(2.7);
     q.crop = kCrop;
     q.boundarySegment = false;
-    const Image img = r->render(test::constantTf(0.9, 0.5, 0.2, 0.07, 1.0), cam, 32, 24, q, {});
+    const Image img = r->render({test::constantTf(0.9, 0.5, 0.2, 0.07, 1.0), cam, 32, 24, q, {}});
     int hits = 0;
     // Dropping up to one 2.7-voxel segment per ray loses up to 1 − 0.93^2.7 ≈ 0.18 of opacity.
     EXPECT_GT(croppedBoxAlphaError(img, box.volume, cam, kCrop, 0.07, &hits), 0.05);
@@ -129,7 +129,7 @@ TEST_P(CompositingAndCrop, CropBoxAndClipPlaneTogether) {
     Quality q = plainQuality(1.3);
     q.crop = kCrop;
     const TransferFunction tf = test::constantTf(0.9, 0.5, 0.2, 0.1, 1.0);
-    const Image img = r->render(tf, cam, 32, 32, q, clip);
+    const Image img = r->render({tf, cam, 32, 32, q, clip});
     ReferenceRenderer ref(box.volume, tf, Reconstruction::Linear);
     ref.setCrop(kCrop);
     const RayGenerator rays(cam, 32, 32);
@@ -261,7 +261,7 @@ TEST_P(CompositingAndCrop, MipMissesAThinSheetAtACoarseStepAndConvergesAsItShrin
     for (double step : {4.0, 2.0, 1.0, 0.5, 0.25, 0.125, 0.0625}) {
         Quality q = plainQuality(step);
         q.compositing = Compositing::Maximum;
-        const Image img = r->render(rampTf(), cam, 48, 48, q, {});
+        const Image img = r->render({rampTf(), cam, 48, 48, q, {}});
         const ImageError e = compareImages(img, exact);
         errors.push_back(e.rmse);
         std::printf("MIP of a one-voxel sheet, step %g voxels: RMSE %.3e, worst pixel %.3e\n", step, e.rmse, e.maxAbs);
@@ -283,7 +283,7 @@ TEST_P(CompositingAndCrop, MipOfABlobMatchesTheReferenceAndMinipOfARamp) {
         Quality q = plainQuality(0.25);
         q.interpolation = interp;
         q.compositing = Compositing::Maximum;
-        const Image img = r->render(rampTf(), cam, 32, 32, q, {});
+        const Image img = r->render({rampTf(), cam, 32, 32, q, {}});
         // A smooth maximum missed by at most a quarter step: ~½·|v''|·(step/2)² = ½·56·0.016 ≈ 0.5
         // of 1000 in value, 5e-4 in alpha; the transfer-function table adds ≤ 1e-4.
         const ImageError c = compareImages(img, exact);
@@ -298,7 +298,7 @@ TEST_P(CompositingAndCrop, MipOfABlobMatchesTheReferenceAndMinipOfARamp) {
     const Image exact = ref.render(rampCam, 24, 24, {}, {});
     Quality q = plainQuality(0.1);
     q.compositing = Compositing::Minimum;
-    const Image img = renderer(ramp.volume)->render(tf, rampCam, 24, 24, q, {});
+    const Image img = renderer(ramp.volume)->render({tf, rampCam, 24, 24, q, {}});
     // The minimum is at an end of the chord; the nearest sample is half a step (0.05 voxel)
     // inside it: 10 values per voxel · 0.05 = 0.5 of the 100-unit ramp, 5e-3 in alpha.
     EXPECT_LT(compareImages(img, exact).maxAbs, 6e-3);
@@ -321,8 +321,8 @@ TEST_P(CompositingAndCrop, SkippingTerminationAndPreintegrationDoNotChangeAProje
         everything.preintegrated = true;
         everything.shading = true;
         RenderStats st;
-        const Image a = r->render(tf, cam, 32, 32, plain, {});
-        const Image c = r->render(tf, cam, 32, 32, everything, {}, &st);
+        const Image a = r->render({tf, cam, 32, 32, plain, {}});
+        const Image c = r->render({tf, cam, 32, 32, everything, {}}, &st);
         EXPECT_EQ(compareImages(a, c).maxAbs, 0.0);
         EXPECT_EQ(st.buildOptions.find("EMPTY_SPACE_SKIPPING"), std::string::npos) << st.buildOptions;
         EXPECT_EQ(st.buildOptions.find("EARLY_TERMINATION"), std::string::npos) << st.buildOptions;
@@ -331,7 +331,7 @@ TEST_P(CompositingAndCrop, SkippingTerminationAndPreintegrationDoNotChangeAProje
             << st.buildOptions;
     }
     RenderStats st;
-    r->render(tf, cam, 8, 8, plainQuality(1), {}, &st);
+    r->render({tf, cam, 8, 8, plainQuality(1), {}}, &st);
     EXPECT_EQ(st.buildOptions.find("COMPOSITING"), std::string::npos) << "emission–absorption builds no projection";
 }
 
@@ -342,14 +342,14 @@ TEST_P(CompositingAndCrop, MipInsideACropBoxSeesOnlyTheBox) {
     Quality q = plainQuality(0.25);
     q.compositing = Compositing::Maximum;
     q.crop = CropBox{{0, 0, 0}, {0.4, 1, 1}};
-    const Image img = r->render(rampTf(), sheetCamera(), 24, 24, q, {});
+    const Image img = r->render({rampTf(), sheetCamera(), 24, 24, q, {}});
     // The tent reaches x = 15 at most, so everything left of 12.7 is exactly 0.
     double worst = 0;
     for (int y = 0; y < 24; ++y)
         for (int x = 0; x < 24; ++x) worst = std::max(worst, double(img.pixel(x, y)[3]));
     EXPECT_EQ(worst, 0.0);
     q.crop = CropBox{{0.45, 0, 0}, {0.55, 1, 1}}; // x in [14.35, 17.65]: the sheet and its tent
-    const Image inside = r->render(rampTf(), sheetCamera(), 24, 24, q, {});
+    const Image inside = r->render({rampTf(), sheetCamera(), 24, 24, q, {}});
     ReferenceRenderer ref(v.volume, rampTf(), Reconstruction::Linear);
     ref.setCompositing(Compositing::Maximum);
     ref.setCrop(q.crop);
@@ -378,7 +378,7 @@ TEST_P(CompositingAndCrop, WindowedProjectionIsOpaqueGreyOnAConstantBox) {
         ReferenceRenderer ref(box.volume, tf, Reconstruction::Linear);
         ref.setQuality(scene.quality);
         const Image exact = ref.render(cam, 24, 20, {}, {});
-        const Image img = renderer(box.volume)->render(tf, cam, 24, 20, scene.quality, {});
+        const Image img = renderer(box.volume)->render({tf, cam, 24, 20, scene.quality, {}});
         const RayGenerator rays(cam, 24, 20);
         int hits = 0;
         for (int y = 0; y < 20; ++y)
@@ -423,7 +423,7 @@ TEST_P(CompositingAndCrop, WindowedMipOfABlobMatchesTheReference) {
     ReferenceRenderer ref(b.volume, tf, Reconstruction::Linear);
     ref.setQuality(scene.quality);
     const Image exact = ref.render(cam, 32, 32, {}, {});
-    const Image img = renderer(b.volume)->render(tf, cam, 32, 32, scene.quality, {});
+    const Image img = renderer(b.volume)->render({tf, cam, 32, 32, scene.quality, {}});
     EXPECT_LT(compareImages(img, exact).maxAbs, 5e-3);
     // Grey, and saturated at the blob's centre (900 > 600 + 200).
     const float *centre = exact.pixel(16, 16);

@@ -5,6 +5,7 @@
 // (OpenCL build options and its two cubic fetch paths) stay in test_opencl_renderer.cpp and
 // test_opencl_remedies.cpp.
 
+#include "renderer/common/frame_setup.hpp"
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/reference/error_metrics.hpp"
 #include "renderer/common/minmax_bricks.hpp"
@@ -97,7 +98,7 @@ TEST_P(FrameRendererAccuracy, DescribesItsBackEnd) {
     EXPECT_EQ(r->description().rfind(GetParam() == Backend::Cpu ? "cpu: " : "opencl: ", 0), 0u) << r->description();
 }
 
-// The scheduler renders refinements cell by cell (renderWindow): a window must be exactly
+// The scheduler renders refinements cell by cell (FrameRequest::window): a window must be exactly
 // the same rays as the whole grid, with jitter, skipping, clip planes, shading, cubic and
 // pre-integration on, and in MIP and MinIP, for windows that do not start on a tile or packet
 // boundary. (The CPU renderer's MIP wrote a window's rays at their place in the whole grid,
@@ -134,15 +135,15 @@ TEST_P(FrameRendererAccuracy, AWindowIsExactlyThoseRaysOfTheWholeGrid) {
                                          (preintegrated ? " pre-integrated" : "") + mode;
                 const int gw = raysForScale(kW, scale), gh = raysForScale(kH, scale);
                 // At scale 1 the whole grid is render()'s own image; below, its un-upsampled rays.
-                const Image whole = scale == 1 ? r->render(tf, cam, kW, kH, q, clip)
-                                               : r->renderWindow(tf, cam, kW, kH, q, clip, RayWindow{0, 0, gw, gh});
+                const Image whole = scale == 1 ? r->render({tf, cam, kW, kH, q, clip})
+                                               : r->render({tf, cam, kW, kH, q, clip, RayWindow{0, 0, gw, gh}});
                 ASSERT_EQ(whole.width, gw) << what;
                 ASSERT_EQ(whole.height, gh) << what;
                 for (const RayWindow w : {RayWindow{0, 0, gw, gh}, RayWindow{0, 7, gw, 3}, RayWindow{3, 5, 17, 9},
                                           RayWindow{gw - 5, gh - 4, 5, 4}, RayWindow{11, 0, 1, gh},
                                           RayWindow{gw / 2 - 7, gh / 2 - 5, 13, 11}}) {   // the last on the sphere
                     RenderStats st;
-                    const Image part = r->renderWindow(tf, cam, kW, kH, q, clip, w, &st);
+                    const Image part = r->render({tf, cam, kW, kH, q, clip, w}, &st);
                     ASSERT_EQ(part.width, w.width);
                     ASSERT_EQ(part.height, w.height);
                     int differ = 0;
@@ -168,7 +169,7 @@ TEST_P(FrameRendererAccuracy, AWindowIsExactlyThoseRaysOfTheWholeGrid) {
                    {{40, 0, 1, 1}, half, "window 1x1+40+0"}};
     for (const auto &bad : refused) {
         try {
-            r->renderWindow(tf, cam, kW, kH, bad.quality, {}, bad.window);
+            r->render({tf, cam, kW, kH, bad.quality, {}, bad.window});
             ADD_FAILURE() << r->description() << ": " << bad.named << " was rendered, not refused";
         } catch (const std::invalid_argument &e) {
             EXPECT_NE(std::string(e.what()).find(bad.named), std::string::npos)
@@ -182,7 +183,7 @@ TEST_P(FrameRendererAccuracy, ConstantBoxIsExactWithPartialSegmentsAtAnyStep) {
     const auto r = renderer(box.volume);
     const Camera cam = obliqueCamera(box.volume);
     for (double step : {0.3, 1.0, 2.7, 40.0}) { // 40: one segment longer than the volume
-        const Image img = r->render(constantTf(0.07), cam, 32, 24, plain(step), {});
+        const Image img = r->render({constantTf(0.07), cam, 32, 24, plain(step), {}});
         int hits = 0;
         // Float32 ray parameters ~100 world units from the eye carry ~1e-5 absolute error,
         // which moves A by at most τ·1e-5 ≈ 1e-6; summing ≤ 60 segment depths adds ~1e-6.
@@ -197,7 +198,7 @@ TEST_P(FrameRendererAccuracy, ConstantBoxIsMeasurablyWrongWithoutPartialSegments
     const Camera cam = obliqueCamera(box.volume);
     Quality q = plain(2.7);
     q.boundarySegment = false;
-    const Image img = r->render(constantTf(0.07), cam, 32, 24, q, {});
+    const Image img = r->render({constantTf(0.07), cam, 32, 24, q, {}});
     // Dropping up to one 2.7-voxel segment per ray loses up to 1 − 0.93^2.7 ≈ 0.18 of
     // opacity: the jerky edges of the paper's Figure 4.
     EXPECT_GT(constantBoxAlphaError(img, box.volume, cam, 0.07), 0.05);
@@ -208,7 +209,7 @@ TEST_P(FrameRendererAccuracy, ClipPlaneWithPartialSegmentsIsExactOnAConstantBox)
     const auto r = renderer(box.volume);
     const Camera cam = obliqueCamera(box.volume);
     const std::vector<ClipPlane> clip{{{7.5, 7.5, 7.5}, normalize(Vec3d{0.3, -1, 0.5})}};
-    const Image img = r->render(constantTf(0.1), cam, 32, 32, plain(1.7), clip);
+    const Image img = r->render({constantTf(0.1), cam, 32, 32, plain(1.7), clip});
     EXPECT_LT(constantBoxAlphaError(img, box.volume, cam, 0.1, clip), 1e-5); // as for the box without planes
 }
 
@@ -221,7 +222,7 @@ TEST_P(FrameRendererAccuracy, ConvergesToTheReferenceAsTheStepShrinks) {
     const auto r = renderer(b.volume);
     double previous = 1;
     for (double step : {2.0, 0.5, 0.125}) {
-        const double rmse = compareImages(r->render(tf, cam, 40, 40, plain(step), {}), exact).rmse;
+        const double rmse = compareImages(r->render({tf, cam, 40, 40, plain(step), {}}), exact).rmse;
         // Midpoint sampling is second order: a 4× smaller step cuts the error ≥ 4× until
         // float rounding (~1e-6) is reached.
         EXPECT_LT(rmse, std::max(previous / 4, 2e-6)) << "step " << step;
@@ -239,9 +240,9 @@ TEST_P(FrameRendererAccuracy, JitterIsReproducibleFromTheSeed) {
     q.jitter = true;
     q.seed = 42;
     const Camera cam = obliqueCamera(b.volume);
-    const Image a = r->render(tf, cam, 24, 24, q, {}), again = r->render(tf, cam, 24, 24, q, {});
+    const Image a = r->render({tf, cam, 24, 24, q, {}}), again = r->render({tf, cam, 24, 24, q, {}});
     q.seed = 43;
-    const Image c = r->render(tf, cam, 24, 24, q, {});
+    const Image c = r->render({tf, cam, 24, 24, q, {}});
     EXPECT_EQ(compareImages(a, again).maxAbs, 0);
     EXPECT_GT(compareImages(a, c).maxAbs, 1e-4);
 }
@@ -253,10 +254,10 @@ TEST_P(FrameRendererAccuracy, EarlyTerminationChangesPixelsByLessThanTheRemainin
     const auto r = renderer(b.volume);
     const Camera cam = obliqueCamera(b.volume);
     Quality q = plain(0.5);
-    const Image full = r->render(tf, cam, 24, 24, q, {});
+    const Image full = r->render({tf, cam, 24, 24, q, {}});
     q.earlyTermination = 0.99;
     RenderStats st;
-    const Image early = r->render(tf, cam, 24, 24, q, {}, &st);
+    const Image early = r->render({tf, cam, 24, 24, q, {}}, &st);
     // A ray stops once T ≤ 0.01; what lies behind adds at most T·1 to any channel.
     EXPECT_LE(compareImages(early, full).maxAbs, 0.01 + 1e-6);
     EXPECT_GT(st.earlyTerminatedFraction, 0.1); // the switch really did something
@@ -274,9 +275,9 @@ TEST_P(FrameRendererAccuracy, EmptySpaceSkippingChangesTheWorkNotTheImage) {
             q.interpolation = interpolation;
             q.preintegrated = preintegrated;
             RenderStats without, with;
-            const Image full = r->render(tf, cam, 32, 32, q, {}, &without);
+            const Image full = r->render({tf, cam, 32, 32, q, {}}, &without);
             q.emptySpaceSkipping = true;
-            const Image skipped = r->render(tf, cam, 32, 32, q, {}, &with);
+            const Image skipped = r->render({tf, cam, 32, 32, q, {}}, &with);
             const std::string what = std::string(interpolation == Interpolation::Cubic ? "cubic" : "linear") +
                                      (preintegrated ? " pre-integrated" : "");
             // Only segments wholly inside bricks where the transfer function is 0 are skipped;
@@ -296,7 +297,7 @@ TEST_P(FrameRendererAccuracy, ShadingMatchesTheReferenceLighting) {
     const auto r = renderer(blob().volume);
     Quality q = plain(0.125);
     q.shading = true;
-    const Image lit = r->render(blobTf(), cam, 24, 24, q, {});
+    const Image lit = r->render({blobTf(), cam, 24, 24, q, {}});
     expectValidImage(lit, "shaded");
     // The same lighting on the same field: the step's midpoint error (< 1e-3 at 0.125, as
     // unlit) and the reference's 1e-5 tolerance, with a margin for the |n·l| kinks.
@@ -309,10 +310,10 @@ TEST_P(FrameRendererAccuracy, CubicBSplineMatchesTheReferenceSpline) {
     const Image exactCubic = reference(blob().volume, blobTf(), Reconstruction::Cubic, cam, 32, 32);
     const auto r = renderer(blob().volume);
     Quality q = plain(0.125);
-    const double linearError = compareImages(r->render(blobTf(), cam, 32, 32, q, {}), exactCubic).rmse;
+    const double linearError = compareImages(r->render({blobTf(), cam, 32, 32, q, {}}), exactCubic).rmse;
     q.interpolation = Interpolation::Cubic;
     RenderStats st;
-    const double cubicError = compareImages(r->render(blobTf(), cam, 32, 32, q, {}, &st), exactCubic).rmse;
+    const double cubicError = compareImages(r->render({blobTf(), cam, 32, 32, q, {}}, &st), exactCubic).rmse;
     // Step 0.125 leaves a midpoint-rule error below 1e-3 (the trilinear convergence test);
     // the same spline on both sides leaves nothing else but float rounding.
     EXPECT_LT(cubicError, 1e-3);
@@ -332,10 +333,10 @@ TEST_P(FrameRendererAccuracy, PreintegrationCatchesASpikeThatSamplingMisses) {
     const Image exact = reference(ramp.volume, tf, Reconstruction::Linear, cam, 32, 32, false, 1e-7);
     const auto r = renderer(ramp.volume);
     Quality q = plain(2);
-    const double sampledError = compareImages(r->render(tf, cam, 32, 32, q, {}), exact).rmse;
+    const double sampledError = compareImages(r->render({tf, cam, 32, 32, q, {}}), exact).rmse;
     q.preintegrated = true;
     RenderStats st;
-    const double preError = compareImages(r->render(tf, cam, 32, 32, q, {}, &st), exact).rmse;
+    const double preError = compareImages(r->render({tf, cam, 32, 32, q, {}}, &st), exact).rmse;
     // Each ray crosses the slab once: one or two table lookups at ≤ 1e-3 each, plus float.
     EXPECT_LT(preError, 2e-3);
     EXPECT_LE(st.preintegrationError, 1e-3);
@@ -348,10 +349,10 @@ TEST_P(FrameRendererAccuracy, PreintegrationConvergesOnASmoothVolume) {
     const auto r = renderer(blob().volume);
     Quality q = plain(2);
     q.preintegrated = true;
-    const double coarse = compareImages(r->render(blobTf(), cam, 32, 32, q, {}), exact).rmse;
+    const double coarse = compareImages(r->render({blobTf(), cam, 32, 32, q, {}}), exact).rmse;
     q.step = 0.5;
     RenderStats st;
-    const double fine = compareImages(r->render(blobTf(), cam, 32, 32, q, {}, &st), exact).rmse;
+    const double fine = compareImages(r->render({blobTf(), cam, 32, 32, q, {}}, &st), exact).rmse;
     // The value is not linear along a segment here: that error is second order in the step
     // (measured 3.5e-3 at step 2, 1.5e-4 at 0.5). Below that the table's own error (≤ 1e-3
     // per segment, absolute) adds up over more, fainter segments and sets the floor.
@@ -368,7 +369,7 @@ TEST_P(FrameRendererAccuracy, MipLevelsKeepAConstantBoxExact) {
     for (int level : {1, 2, 4}) {
         Quality q = plain(0.8);
         q.mipLevel = level;
-        const Image img = r->render(tf, cam, 24, 24, q, {});
+        const Image img = r->render({tf, cam, 24, 24, q, {}});
         // Rays are clipped to the level-0 box at every level, so a constant box keeps its
         // exact chord lengths: the tolerance of the level-0 constant-box test.
         EXPECT_LT(constantBoxAlphaError(img, box.volume, cam, 0.08), 1e-5) << "mip level " << level;
@@ -376,7 +377,7 @@ TEST_P(FrameRendererAccuracy, MipLevelsKeepAConstantBoxExact) {
     Quality q = plain(1);
     q.mipLevel = 6; // 20 → 10 → 5 → 3 → 2 → 1: level 5 is the last
     try {
-        r->render(tf, cam, 8, 8, q, {});
+        r->render({tf, cam, 8, 8, q, {}});
         FAIL() << "mip level 6 of a 20×13×9 volume was accepted";
     } catch (const std::invalid_argument &e) {
         EXPECT_NE(std::string(e.what()).find("mip_level"), std::string::npos) << e.what();
@@ -391,7 +392,7 @@ TEST_P(FrameRendererAccuracy, MipLevelErrorGrowsWithTheLevel) {
     for (int level : {0, 1, 2}) {
         Quality q = plain(0.25);
         q.mipLevel = level;
-        const double e = compareImages(r->render(blobTf(), cam, 24, 24, q, {}), exact).rmse;
+        const double e = compareImages(r->render({blobTf(), cam, 24, 24, q, {}}), exact).rmse;
         EXPECT_GT(e, previous) << "level " << level; // coarser data, further from the exact picture
         previous = e;
     }
@@ -401,10 +402,10 @@ TEST_P(FrameRendererAccuracy, ImageScaleCastsFewerRaysAndUpsamplesThem) {
     const auto r = renderer(blob().volume);
     const Camera cam = test::obliqueCamera(blob().volume, 30);
     Quality q = plain(0.5);
-    const Image small = r->render(blobTf(), cam, 15, 10, q, {});
+    const Image small = r->render({blobTf(), cam, 15, 10, q, {}});
     q.imageScale = 0.5;
     RenderStats st;
-    const Image scaled = r->render(blobTf(), cam, 30, 20, q, {}, &st);
+    const Image scaled = r->render({blobTf(), cam, 30, 20, q, {}}, &st);
     EXPECT_EQ(st.raysWide, 15);
     EXPECT_EQ(st.raysHigh, 10);
     ASSERT_EQ(scaled.width, 30);
@@ -422,13 +423,13 @@ TEST_P(FrameRendererAccuracy, JitteredPassesAveragedBeatOnionRings) {
     const Image exact = reference(ramp.volume, tf, Reconstruction::Linear, cam, 32, 32);
     const auto r = renderer(ramp.volume);
     Quality q = plain(3);
-    const double rings = compareImages(r->render(tf, cam, 32, 32, q, {}), exact).rmse;
+    const double rings = compareImages(r->render({tf, cam, 32, 32, q, {}}), exact).rmse;
     q.jitter = true;
     Image mean(32, 32);
     const int passes = 16;
     for (int pass = 0; pass < passes; ++pass) {
         q.seed = uint64_t(pass);
-        const Image img = r->render(tf, cam, 32, 32, q, {});
+        const Image img = r->render({tf, cam, 32, 32, q, {}});
         for (size_t i = 0; i < mean.rgba.size(); ++i) mean.rgba[i] += img.rgba[i] / passes;
     }
     // Jitter turns the rings' structured error into noise that averaging shrinks by √16
@@ -464,8 +465,8 @@ TEST_P(FrameRendererAccuracy, EveryPairOfSwitchesWorksTogether) {
         q.mipLevel = on[8] ? 1 : 0;
         q.imageScale = on[9] ? 0.5 : 1;
         const std::vector<ClipPlane> planes = on[7] ? clip : std::vector<ClipPlane>{};
-        const std::string what = "row " + std::to_string(row) + ": " + CpuRenderer::featureNames(q, !planes.empty());
-        const Image img = r->render(blobTf(), cam, 24, 24, q, planes);
+        const std::string what = "row " + std::to_string(row) + ": " + featureNames(q, !planes.empty());
+        const Image img = r->render({blobTf(), cam, 24, 24, q, planes});
         expectValidImage(img, what);
         const Image exact = reference(blob().volume, blobTf(), on[2] ? Reconstruction::Cubic : Reconstruction::Linear,
                                       cam, 24, 24, q.shading, 1e-5, planes);
@@ -513,8 +514,8 @@ TEST(CpuRenderer, DrawsTheOpenClImageToFloatRounding) {
     cases.push_back({"pre-integrated at step 1.3, partial segments", q, clip});
     for (const Case &c : cases) {
         RenderStats sc, so;
-        const Image a = cpu.render(blobTf(), cam, 40, 40, c.q, c.planes, &sc);
-        const Image b = ocl.render(blobTf(), cam, 40, 40, c.q, c.planes, &so);
+        const Image a = cpu.render({blobTf(), cam, 40, 40, c.q, c.planes}, &sc);
+        const Image b = ocl.render({blobTf(), cam, 40, 40, c.q, c.planes}, &so);
         // Float rounding only: PoCL may contract a·b + c into fma where the CPU path does not
         // (or the reverse), and computes normalize() its own way. Measured on PoCL 3.1 against
         // AVX-512: 1.5e-6, 3.7e-6, 1.5e-6, 1.1e-6, 3.5e-6 and 3.6e-6 for the six cases; 2e-5
@@ -569,10 +570,10 @@ TEST(CpuRenderer, SkipsBySamplePositionOnBothBackEnds) {
             q.preintegrated = preintegrated;
             q.jitter = jitter;
             RenderStats none, sc, so;
-            const Image full = cpu.render(tf, cam, kSize, kSize, q, {}, &none);
+            const Image full = cpu.render({tf, cam, kSize, kSize, q, {}}, &none);
             q.emptySpaceSkipping = true;
-            const Image a = cpu.render(tf, cam, kSize, kSize, q, {}, &sc);
-            const Image b = ocl.render(tf, cam, kSize, kSize, q, {}, &so);
+            const Image a = cpu.render({tf, cam, kSize, kSize, q, {}}, &sc);
+            const Image b = ocl.render({tf, cam, kSize, kSize, q, {}}, &so);
             const std::string what = std::string(preintegrated ? "pre-integrated" : "sampled") + (jitter ? ", jitter" : "");
             // Float rounding, as in DrawsTheOpenClImageToFloatRounding (2e-5); a segment
             // wrongly skipped at the sphere's edge (opacity ≥ 0.05 there) would be ≥ 1e-3.
@@ -596,36 +597,36 @@ TEST(CpuRenderer, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
     CpuRenderer r(blob().volume);
     const Camera cam = test::obliqueCamera(blob().volume, 30);
     TransferFunction tf = blobTf();
-    r.render(tf, cam, 8, 8, plain(1), {});
-    r.render(tf, cam, 8, 8, plain(0.5), {});
+    r.render({tf, cam, 8, 8, plain(1), {}});
+    r.render({tf, cam, 8, 8, plain(0.5), {}});
     EXPECT_EQ(r.preprocessCounts().tfTables, 1);
     EXPECT_EQ(r.preprocessCounts().brickGrids, 0);
     Quality q = plain(1);
     q.emptySpaceSkipping = true;
-    r.render(tf, cam, 8, 8, q, {});
+    r.render({tf, cam, 8, 8, q, {}});
     tf.points[2].a = 0.3; // a new transfer function re-classifies the same grid
-    r.render(tf, cam, 8, 8, q, {});
+    r.render({tf, cam, 8, 8, q, {}});
     EXPECT_EQ(r.preprocessCounts().brickGrids, 1);
     EXPECT_EQ(r.preprocessCounts().brickClassifications, 2);
     EXPECT_EQ(r.preprocessCounts().mipLevels, 0);
     q.mipLevel = 2;
-    r.render(tf, cam, 8, 8, q, {});
+    r.render({tf, cam, 8, 8, q, {}});
     q.mipLevel = 1;
-    r.render(tf, cam, 8, 8, q, {});
+    r.render({tf, cam, 8, 8, q, {}});
     EXPECT_EQ(r.preprocessCounts().mipLevels, 2); // levels 1 and 2, once
     EXPECT_EQ(r.preprocessCounts().coefficientVolumes, 0); // no cubic asked for yet
     q.interpolation = Interpolation::Cubic;
-    r.render(tf, cam, 8, 8, q, {});
-    r.render(tf, cam, 8, 8, q, {});
+    r.render({tf, cam, 8, 8, q, {}});
+    r.render({tf, cam, 8, 8, q, {}});
     EXPECT_EQ(r.preprocessCounts().coefficientVolumes, 1);
     EXPECT_EQ(r.preprocessCounts().brickGrids, 4); // levels 0, 2 and 1, and level 1's spline
     EXPECT_EQ(r.preprocessCounts().preintegrationTables, 0);
     q.preintegrated = true;
-    r.render(tf, cam, 8, 8, q, {});
-    r.render(tf, cam, 8, 8, q, {});
+    r.render({tf, cam, 8, 8, q, {}});
+    r.render({tf, cam, 8, 8, q, {}});
     EXPECT_EQ(r.preprocessCounts().preintegrationTables, 1); // same transfer function and step: reused
     q.step = 0.7;
-    r.render(tf, cam, 8, 8, q, {});
+    r.render({tf, cam, 8, 8, q, {}});
     EXPECT_EQ(r.preprocessCounts().preintegrationTables, 2); // the table depends on the step
 }
 
@@ -696,8 +697,8 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
             const std::string label = std::string(scan.what) + ", " + what;
             for (const auto &planes : {std::vector<ClipPlane>{}, clip}) {
                 RenderStats sn, sw;
-                const Image a = narrow.render(tf, cam, 40, 40, quality, planes, &sn);
-                const Image b = wide.render(tf, cam, 40, 40, quality, planes, &sw);
+                const Image a = narrow.render({tf, cam, 40, 40, quality, planes}, &sn);
+                const Image b = wide.render({tf, cam, 40, 40, quality, planes}, &sw);
                 EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label;
                 EXPECT_EQ(sn.meanSamplesPerRay, sw.meanSamplesPerRay) << label;
                 EXPECT_GT(compareImages(a, Image(40, 40)).maxAbs, 0.05) << label << ": nothing drawn";
@@ -741,10 +742,10 @@ TEST(CpuRenderer, LevelsSampledInPlaceDrawTheOpenClImageAtEveryFace) {
                 const std::string label = std::to_string(dims.x) + "×" + std::to_string(dims.y) + "×" +
                                           std::to_string(dims.z) + (held.narrow.bytes == 1 ? " 8-bit" : " 16-bit") +
                                           side + ", mip " + std::to_string(mip);
-                const Image a = narrow.render(tf, cam, 48, 48, q, {});
-                const Image b = wide.render(tf, cam, 48, 48, q, {});
+                const Image a = narrow.render({tf, cam, 48, 48, q, {}});
+                const Image b = wide.render({tf, cam, 48, 48, q, {}});
                 EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label;
-                EXPECT_LT(compareImages(b, judge.render(tf, cam, 48, 48, q, {})).maxAbs, 2e-5) << label;
+                EXPECT_LT(compareImages(b, judge.render({tf, cam, 48, 48, q, {}})).maxAbs, 2e-5) << label;
                 EXPECT_GT(compareImages(a, Image(48, 48)).maxAbs, 0.05) << label << ": nothing drawn";
             }
     }
@@ -773,8 +774,8 @@ TEST(OpenClRenderer, EightAndSixteenBitSamplesDrawTheFloatBuffersImageBitForBit)
         q.emptySpaceSkipping = true;
         q.shading = true;
         RenderStats sn, sw, sc;
-        const Image a = narrow.render(tf, cam, 40, 40, q, clip, &sn);
-        const Image b = wide.render(tf, cam, 40, 40, q, clip, &sw);
+        const Image a = narrow.render({tf, cam, 40, 40, q, clip}, &sn);
+        const Image b = wide.render({tf, cam, 40, 40, q, clip}, &sw);
         EXPECT_NE(sn.buildOptions.find("-DVOXEL_BYTES=" + std::to_string(bytes)), std::string::npos)
             << what << ": " << sn.buildOptions;
         EXPECT_EQ(sw.buildOptions.find("VOXEL_BYTES"), std::string::npos) << what << ": " << sw.buildOptions;
@@ -782,7 +783,7 @@ TEST(OpenClRenderer, EightAndSixteenBitSamplesDrawTheFloatBuffersImageBitForBit)
         EXPECT_EQ(sn.meanSamplesPerRay, sw.meanSamplesPerRay) << what;
         EXPECT_GT(compareImages(a, Image(40, 40)).maxAbs, 0.05) << what << ": nothing drawn";
         // As DrawsTheOpenClImageToFloatRounding: 2e-5.
-        EXPECT_LT(compareImages(a, cpu.render(tf, cam, 40, 40, q, clip, &sc)).maxAbs, 2e-5) << what;
+        EXPECT_LT(compareImages(a, cpu.render({tf, cam, 40, 40, q, clip}, &sc)).maxAbs, 2e-5) << what;
     }
 }
 
@@ -797,7 +798,7 @@ TEST(CpuRenderer, ThreadCountDoesNotChangeTheImage) {
     q.emptySpaceSkipping = true;
     const Camera cam = test::obliqueCamera(blob().volume, 30);
     // Each ray is one lane of one packet whatever thread runs its tile: bit-identical.
-    EXPECT_EQ(compareImages(a.render(blobTf(), cam, 37, 29, q, {}), b.render(blobTf(), cam, 37, 29, q, {})).maxAbs, 0);
+    EXPECT_EQ(compareImages(a.render({blobTf(), cam, 37, 29, q, {}}), b.render({blobTf(), cam, 37, 29, q, {}})).maxAbs, 0);
 }
 
 } // namespace

@@ -54,10 +54,10 @@ TEST(MakeFrameRenderer, OpenClCastsAWindowAloneAndReportsItsBandRows) {
     const Camera camera = test::obliqueCamera(*box, 10); // the box fills the view: every ray hits
     const Quality q = test::plainQuality(1);
     RenderStats whole, part;
-    const Image frame = r->render(tf, camera, 32, 32, q, {}, &whole);
+    const Image frame = r->render({tf, camera, 32, 32, q, {}}, &whole);
     ASSERT_EQ(whole.raysHit, 32u * 32u) << "the box must fill the view for the window's count to tell";
     const RayWindow window{8, 16, 8, 8};
-    const Image cast = r->renderWindow(tf, camera, 32, 32, q, {}, window, &part);
+    const Image cast = r->render({tf, camera, 32, 32, q, {}, window}, &part);
     EXPECT_LE(part.raysHit, uint64_t(window.width * window.height)) << "the whole grid was cast for one window";
     // Each ray of the window exactly as the whole frame casts it.
     for (int y = 0; y < window.height; ++y)

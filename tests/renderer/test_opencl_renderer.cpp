@@ -44,9 +44,9 @@ TEST(OpenClRenderer, ProgramsHoldOnlyTheFeaturesInUseAndAreBuiltOnce) {
                                             " -DPREINTEGRATED -DEMPTY_SPACE_SKIPPING -DSHADING");
 
     RenderStats first, second;
-    r.render(constantTf(0.5), obliqueCamera(box.volume), 8, 8, plain(0.5), {}, &first);
+    r.render({constantTf(0.5), obliqueCamera(box.volume), 8, 8, plain(0.5), {}}, &first);
     const size_t built = sharedContext()->programsBuilt();
-    r.render(constantTf(0.2), obliqueCamera(box.volume), 8, 8, plain(0.25), {}, &second);
+    r.render({constantTf(0.2), obliqueCamera(box.volume), 8, 8, plain(0.25), {}}, &second);
     // The box is built as float32 and not held narrow (only loaders and holdNarrow do that).
     EXPECT_EQ(first.buildOptions, "-DBOUNDARY_SEGMENT");
     EXPECT_EQ(sharedContext()->programsBuilt(), built); // same feature set: no new program

@@ -96,11 +96,11 @@ TEST_P(OrientationCorrectionFrames, FlipsMirrorAndTurnsRotateTheFrame) {
     const auto r = renderer(v);
     const Camera cam = frontCamera(v);
     const Quality q = test::plainQuality(0.4);
-    const Image plain = r->render(rampTf(), cam, kSide, kSide, q, {});
+    const Image plain = r->render({rampTf(), cam, kSide, kSide, q, {}});
     for (const auto &[name, c] : {std::pair{"flip L/R", kFlipX}, {"flip S/I", kFlipZ}, {"turn about A/P", kTurnY}}) {
         Quality corrected = q;
         corrected.orientationCorrection = c;
-        const Image img = r->render(rampTf(), cam, kSide, kSide, corrected, {});
+        const Image img = r->render({rampTf(), cam, kSide, kSide, corrected, {}});
         const Image expected = expectedCorrected(plain, c);
         // The volume must not look like its own mirror, or the test could not fail.
         EXPECT_GT(maxDifference(plain, expected), 0.1) << name << ": the test volume is symmetric under it";
@@ -118,7 +118,7 @@ TEST_P(OrientationCorrectionFrames, RefusesAMatrixThatIsNotASignedPermutation) {
     Quality q = test::plainQuality(0.5);
     q.orientationCorrection = OrientationCorrection{{1, 1, 0, 0, 1, 0, 0, 0, 1}};
     try {
-        r->render(rampTf(), frontCamera(v), 8, 8, q, {});
+        r->render({rampTf(), frontCamera(v), 8, 8, q, {}});
         FAIL() << "a shear was drawn";
     } catch (const std::invalid_argument &e) {
         EXPECT_NE(std::string(e.what()).find("quality.orientation_correction"), std::string::npos) << e.what();

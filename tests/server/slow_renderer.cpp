@@ -16,17 +16,11 @@ PreprocessCounts SlowRenderer::preprocessCounts() const {
     return c;
 }
 
-Image SlowRenderer::render(const TransferFunction &tf, const Camera &camera, int width, int height,
-                           const Quality &quality, const std::vector<ClipPlane> &clipPlanes, RenderStats *stats) {
-    const int w = raysForScale(width, quality.imageScale), h = raysForScale(height, quality.imageScale);
-    Image cast = renderWindow(tf, camera, width, height, quality, clipPlanes, RayWindow{0, 0, w, h}, stats);
-    return w == width && h == height ? cast : resizeBilinear(cast, width, height);
-}
-
-Image SlowRenderer::renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                                 const Quality &quality, const std::vector<ClipPlane> &clipPlanes,
-                                 const RayWindow &window, RenderStats *stats) {
-    validateFrameRequest(*volume_, tf, camera, width, height, quality, clipPlanes, 8);
+Image SlowRenderer::render(const FrameRequest &request, RenderStats *stats) {
+    validateFrameRequest(*volume_, request, 8);
+    const Quality &quality = request.quality;
+    const int gw = raysForScale(request.width, quality.imageScale), gh = raysForScale(request.height, quality.imageScale);
+    const RayWindow window = request.window ? *request.window : RayWindow{0, 0, gw, gh};
     std::lock_guard lock(mutex_);
     if (++active_ > 1) ++overlaps_;
     const auto t0 = std::chrono::steady_clock::now();
@@ -39,13 +33,12 @@ Image SlowRenderer::renderWindow(const TransferFunction &tf, const Camera &camer
         std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(prepareMs_));
     }
     const auto t1 = std::chrono::steady_clock::now();
-    const int gw = raysForScale(width, quality.imageScale), gh = raysForScale(height, quality.imageScale);
-    const RayGenerator rays(camera, gw, gh);
-    const ReferenceRenderer exact(*volume_, tf, Reconstruction::Linear);
+    const RayGenerator rays(request.camera, gw, gh);
+    const ReferenceRenderer exact(*volume_, request.transferFunction, Reconstruction::Linear);
     Image out(window.width, window.height);
     for (int y = 0; y < window.height; ++y)
         for (int x = 0; x < window.width; ++x) {
-            const RayIntegral r = exact.integrate(rays.pixelRay(window.x + x, window.y + y), clipPlanes, 1e-2);
+            const RayIntegral r = exact.integrate(rays.pixelRay(window.x + x, window.y + y), request.clipPlanes, 1e-2);
             float *p = out.pixel(x, y);
             p[0] = float(r.color.r);
             p[1] = float(r.color.g);
@@ -61,7 +54,9 @@ Image SlowRenderer::renderWindow(const TransferFunction &tf, const Camera &camer
         stats->renderSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
     --active_;
-    return out;
+    // A whole frame of fewer rays than pixels is upsampled; a window is returned as cast.
+    if (request.window || (gw == request.width && gh == request.height)) return out;
+    return resizeBilinear(out, request.width, request.height);
 }
 
 } // namespace volcast::server::slow

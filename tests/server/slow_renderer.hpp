@@ -20,11 +20,7 @@ class SlowRenderer : public FrameRenderer {
   public:
     SlowRenderer(std::shared_ptr<const Volume> volume, double msPerRay, double prepareMs = 0);
 
-    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override;
-    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
-                       RenderStats *stats = nullptr) override;
+    Image render(const FrameRequest &request, RenderStats *stats = nullptr) override;
     bool rendersWindowsCheaply() const override { return true; }
     std::string description() const override { return "slow test renderer"; }
     PreprocessCounts preprocessCounts() const override;

@@ -43,16 +43,9 @@ class FailingRenderer : public FrameRenderer {
     explicit FailingRenderer(std::function<void()> thrower)
         : inner_(blob(), 0.02), thrower_(std::move(thrower)) {}
 
-    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override {
+    Image render(const FrameRequest &request, RenderStats *stats = nullptr) override {
         maybeThrow();
-        return inner_.render(tf, camera, width, height, quality, clipPlanes, stats);
-    }
-    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
-                       RenderStats *stats = nullptr) override {
-        maybeThrow();
-        return inner_.renderWindow(tf, camera, width, height, quality, clipPlanes, window, stats);
+        return inner_.render(request, stats);
     }
     bool rendersWindowsCheaply() const override { return true; }
     std::string description() const override { return "failing test renderer"; }

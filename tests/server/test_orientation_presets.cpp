@@ -116,7 +116,7 @@ Centroid markerInImage(const Volume &v, const Camera &camera) {
     TransferFunction tf;
     tf.points = {{0, 0, 0, 0, 0}, {800, 1, 1, 1, 0}, {1200, 1, 1, 1, 1}};
     constexpr int kSide = 64;
-    const Image image = renderer->render(tf, camera, kSide, kSide, Quality{}, {});
+    const Image image = renderer->render({tf, camera, kSide, kSide, Quality{}, {}});
     Centroid c;
     for (int y = 0; y < kSide; ++y)
         for (int x = 0; x < kSide; ++x) {

@@ -398,16 +398,12 @@ class WorkGroupRenderer : public FrameRenderer {
   public:
     WorkGroupRenderer(std::shared_ptr<const Volume> volume, double msPerRay)
         : slow_(std::move(volume), msPerRay), msPerRay_(msPerRay) {}
-    Image render(const TransferFunction &tf, const Camera &camera, int width, int height, const Quality &quality,
-                 const std::vector<ClipPlane> &clipPlanes, RenderStats *stats = nullptr) override {
-        return slow_.render(tf, camera, width, height, quality, clipPlanes, stats);
-    }
-    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
-                       RenderStats *stats = nullptr) override {
-        Image band = slow_.renderWindow(tf, camera, width, height, quality, clipPlanes, window, stats);
-        const int idleRows = (8 - window.height % 8) % 8;
-        std::this_thread::sleep_for(Ms(msPerRay_ * window.width * idleRows));
+    Image render(const FrameRequest &request, RenderStats *stats = nullptr) override {
+        Image band = slow_.render(request, stats);
+        if (request.window) {
+            const int idleRows = (8 - request.window->height % 8) % 8;
+            std::this_thread::sleep_for(Ms(msPerRay_ * request.window->width * idleRows));
+        }
         return band;
     }
     bool rendersWindowsCheaply() const override { return true; }
@@ -482,12 +478,13 @@ class UnevenRenderer : public SlowRenderer {
   public:
     UnevenRenderer(std::shared_ptr<const Volume> volume, double denseMsPerRay)
         : SlowRenderer(std::move(volume), 0), denseMsPerRay_(denseMsPerRay) {}
-    Image renderWindow(const TransferFunction &tf, const Camera &camera, int width, int height,
-                       const Quality &quality, const std::vector<ClipPlane> &clipPlanes, const RayWindow &window,
-                       RenderStats *stats = nullptr) override {
+    Image render(const FrameRequest &request, RenderStats *stats = nullptr) override {
         const auto t0 = Clock::now();
-        Image part = SlowRenderer::renderWindow(tf, camera, width, height, quality, clipPlanes, window, stats);
-        const int gridHeight = raysForScale(height, quality.imageScale);
+        Image part = SlowRenderer::render(request, stats);
+        const Quality &quality = request.quality;
+        const int gridHeight = raysForScale(request.height, quality.imageScale);
+        const RayWindow window =
+            request.window.value_or(RayWindow{0, 0, raysForScale(request.width, quality.imageScale), gridHeight});
         const int denseRows = std::max(0, window.y + window.height - std::max(window.y, gridHeight / 2));
         const double perRay = denseMsPerRay_ * (quality.interpolation == Interpolation::Cubic ? 20 : 1);
         const double ms = perRay * window.width * (denseRows + 0.01 * (window.height - denseRows));
@@ -552,11 +549,11 @@ TEST(TiledFrameCells, UnitsOfAnySizeAssembleTheWholeFrame) {
     Quality q;
     q.step = 0.5;
     constexpr int kW = 150, kH = 97;   // neither a multiple of a cell's 64 rays nor of its band
-    const Image whole = renderer.render(tf, camera, kW, kH, q, {});
+    const Image whole = renderer.render({tf, camera, kW, kH, q, {}});
     for (int unitCells : {1, 3, 7, 1000}) {
-        TiledFrame frame(q, 1, kW, kH, 4);
+        TiledFrame frame({tf, camera, kW, kH, q, {}}, 1, 4);
         EXPECT_EQ(frame.cellsPerPass(), 3 * 25);   // 3 columns of cells by 25 bands
-        while (!frame.done()) frame.renderUnit(renderer, tf, camera, {}, unitCells);
+        while (!frame.done()) frame.renderUnit(renderer, unitCells);
         const Image assembled = frame.finish();
         ASSERT_EQ(assembled.rgba.size(), whole.rgba.size());
         EXPECT_TRUE(assembled.rgba == whole.rgba) << "units of " << unitCells << " cells";

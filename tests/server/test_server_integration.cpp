@@ -219,9 +219,9 @@ void expectFinalFrameMatchesTheRenderer(Client &client, const json &state, const
     const auto renderer = volcast::makeFrameRenderer(volcast::DeviceChoice::parse(shared.config().device),
                                                      std::make_shared<const volcast::Volume>(loaded.volume));
     ASSERT_EQ(renderer->description(), shared.backEnd());
-    const volcast::Image image = renderer->render(volcast::resolvedTransferFunction(scene, loaded.volume.range),
+    const volcast::Image image = renderer->render({volcast::resolvedTransferFunction(scene, loaded.volume.range),
                                                  scene.camera, scene.width, scene.height, scene.quality,
-                                                 scene.clipPlanes);
+                                                 scene.clipPlanes});
     const std::vector<uint8_t> expected = volcast::server::toStraightRgba8(image);
     int w = 0, h = 0, channels = 0;
     const std::vector<uint8_t> got = decodePng(final.image, w, h, channels);

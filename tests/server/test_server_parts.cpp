@@ -185,7 +185,7 @@ TEST(QualityLadder, PredictedSamplesFollowWhatTheRendererTakesAtEveryMipLevel) {
         q.step = 1;
         q.mipLevel = mip;
         RenderStats st;
-        renderer.render(tf, cam, 48, 48, q, {}, &st);
+        renderer.render({tf, cam, 48, 48, q, {}}, &st);
         return st.meanSamplesPerRay * double(st.raysHit);
     };
     const auto predicted = [&](int mip) {
@@ -292,7 +292,7 @@ TEST(ErrorCalibrator, MeasuresEveryLevelAsDeliveredAgainstTheFinalFrame) {
     final.step = 0.5;
     view->ladder = automaticLadder(final, 1);
     const size_t count = view->ladder.size();
-    const Rgb8 finalRgb = toRgb8(renderer->render(view->transferFunction, view->camera, 64, 64, final, {}));
+    const Rgb8 finalRgb = toRgb8(renderer->render({view->transferFunction, view->camera, 64, 64, final, {}}));
 
     PreprocessWorker worker;
     ErrorCalibrator calibrator(worker, true);
@@ -308,7 +308,7 @@ TEST(ErrorCalibrator, MeasuresEveryLevelAsDeliveredAgainstTheFinalFrame) {
         ASSERT_TRUE(measured.errors[l].has_value()) << "level " << l << " not measured";
         EXPECT_GT(measured.backgroundMsPerSample[l], 0) << "level " << l;
         const Level &level = view->ladder[l];
-        const Image image = renderer->render(view->transferFunction, view->camera, 64, 64, level.quality, {});
+        const Image image = renderer->render({view->transferFunction, view->camera, 64, 64, level.quality, {}});
         // The renderer and the JPEG coder are deterministic: the same measurement, to the bit.
         EXPECT_DOUBLE_EQ(*measured.errors[l], rmseRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), finalRgb))
             << "level " << l;

@@ -132,7 +132,7 @@ TEST_F(VolumeRegistryTest, ASixteenBitVolumeCountsEveryByteItsRendererBuilds) {
             q.mipLevel = level;
             q.interpolation = interpolation;
             q.emptySpaceSkipping = true;
-            entry->renderer->render(tf, camera, 16, 16, q, {});
+            entry->renderer->render({tf, camera, 16, 16, q, {}});
         }
     const uint64_t held = voxelBytes + cpu->memoryBytes();
     EXPECT_GE(entry->bytes, held) << "the budget counted " << entry->bytes << " bytes; the volume and its renderer hold "

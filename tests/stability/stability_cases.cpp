@@ -340,7 +340,7 @@ std::vector<Row> opacityCorrection(const Backend &be) {
             ocl.attempt("a = " + formatOpacity(a) + ", d/u = " + format(r), [&] {
                 // One segment of d/u = r (the step is longer than the box), then eight of r/8.
                 for (double step : {100.0, 1.0})
-                    compareWithMedium(ocl, renderer.render(m.tf(), cam, 2, 2, plain(step), {}), box, cam, {}, m,
+                    compareWithMedium(ocl, renderer.render({m.tf(), cam, 2, 2, plain(step), {}}), box, cam, {}, m,
                                       Measure::Relative, 1e-6, true);
             });
             ref.attempt("a = " + formatOpacity(a) + ", d/u = " + format(r), [&] {
@@ -378,11 +378,11 @@ std::vector<Row> faintMedia(const Backend &be) {
         const bool exact = cam == &along;
         const std::string view = cam == &along ? "along z" : "narrow perspective";
         ocl.attempt(view, [&] {
-            compareWithMedium(ocl, renderer.render(m.tf(), *cam, w, h, plain(0.01), {}), box, *cam, {}, m,
+            compareWithMedium(ocl, renderer.render({m.tf(), *cam, w, h, plain(0.01), {}}), box, *cam, {}, m,
                               Measure::Relative, 1e-9, exact);
         });
         pre.attempt(view, [&] {
-            compareWithMedium(pre, renderer.render(m.tf(), *cam, w, h, with(plain(0.01), false, true), {}), box,
+            compareWithMedium(pre, renderer.render({m.tf(), *cam, w, h, with(plain(0.01), false, true), {}}), box,
                               *cam, {}, m, Measure::Relative, 1e-9, exact);
         });
         ref.attempt(view, [&] {
@@ -420,7 +420,7 @@ std::vector<Row> opaqueMedia(const Backend &be) {
                 for (const Camera *cam : {&obliqueView, &along})
                     ocl.attempt(label + " at step " + format(step) + (cam == &along ? ", along z" : ", oblique"), [&] {
                         RenderStats st;
-                        compareWithMedium(ocl, renderer.render(m.tf(), *cam, 12, 12, q, {}, &st), box, *cam, {}, m,
+                        compareWithMedium(ocl, renderer.render({m.tf(), *cam, 12, 12, q, {}}, &st), box, *cam, {}, m,
                                           Measure::Absolute, 0, cam == &along);
                         // Opaque beyond the first segment: early termination stops every ray
                         // after one sample when that sample is already opaque.
@@ -580,7 +580,7 @@ std::vector<Row> preintegration(const Backend &be) {
                 m.a = a;
                 m.unit = a < 1 ? -std::log1p(-a) / tauD : 1.0; // step 1 voxel: τ·d = tauD
                 ocl.attempt("box, a = " + formatOpacity(a) + ", τ·d = " + format(tauD), [&] {
-                    compareWithMedium(ocl, renderer.render(m.tf(), cam, 2, 2, with(plain(1), false, true), {}), box,
+                    compareWithMedium(ocl, renderer.render({m.tf(), cam, 2, 2, with(plain(1), false, true), {}}), box,
                                       cam, {}, m, Measure::Absolute, 0, true);
                 });
             }
@@ -616,7 +616,7 @@ std::vector<Row> preintegration(const Backend &be) {
             const std::string label =
                 std::string(direction > 0 ? "+x" : "−x") + ", step " + format(step) + ", u " + format(unit);
             ocl.attempt(label, [&] {
-                compare(ocl, rampRenderer.render(tf, cam, 2, 2, with(plain(step), false, true), {}));
+                compare(ocl, rampRenderer.render({tf, cam, 2, 2, with(plain(step), false, true), {}}));
             });
             ref.attempt(label, [&] { compare(ref, referenceImage(ramp.volume, tf, cam, 2, 2)); });
         }
@@ -667,14 +667,14 @@ void compareWithReference(Check &plainCheck, Check &preCheck, Check &refCheck, F
         Quality q = plain(kAgainstReferenceStep);
         q.interpolation = rec == Reconstruction::Cubic ? Interpolation::Cubic : Interpolation::Linear;
         plainCheck.attempt(name + (rec == Reconstruction::Cubic ? ", cubic" : ", trilinear"), [&] {
-            const Image img = renderer.render(tf, cam, kSize, kSize, q, {});
+            const Image img = renderer.render({tf, cam, kSize, kSize, q, {}});
             plainCheck.image(img);
             plainCheck.error(maxDifference(img, exact));
         });
         if (rec == Reconstruction::Linear && preintegrated)
             preCheck.attempt(name, [&] {
                 const Image img =
-                    renderer.render(tf, cam, kSize, kSize, with(plain(kPreintegratedAgainstReferenceStep), false, true), {});
+                    renderer.render({tf, cam, kSize, kSize, with(plain(kPreintegratedAgainstReferenceStep), false, true), {}});
                 preCheck.image(img);
                 preCheck.error(maxDifference(img, exact));
             });
@@ -782,7 +782,7 @@ std::vector<Row> degenerateVolumes(const Backend &be) {
         cubic.interpolation = Interpolation::Cubic;
         qualities.emplace_back("cubic", cubic);
         for (const auto &[label, q] : qualities)
-            ocl.attempt(label, [&] { compareWithMedium(ocl, renderer.render(tf, cam, 12, 12, q, {}), one, cam, {}, m); });
+            ocl.attempt(label, [&] { compareWithMedium(ocl, renderer.render({tf, cam, 12, 12, q, {}}), one, cam, {}, m); });
         for (Reconstruction rec : {Reconstruction::Linear, Reconstruction::Cubic})
             ref.attempt(rec == Reconstruction::Linear ? "linear" : "cubic", [&] {
                 compareWithMedium(ref, referenceImage(one, tf, cam, 12, 12, {}, rec), one, cam, {}, m);
@@ -830,7 +830,7 @@ std::vector<Row> degenerateVolumes(const Backend &be) {
             Quality cubic = plain(0.5);
             cubic.interpolation = Interpolation::Cubic;
             for (const Quality &q : {plain(0.5), cubic, with(plain(0.5), false, true)}) {
-                const Image a = big.render(d.tf, d.camera, 8, 8, q, {}), b = little.render(tf, d.camera, 8, 8, q, {});
+                const Image a = big.render({d.tf, d.camera, 8, 8, q, {}}), b = little.render({tf, d.camera, 8, 8, q, {}});
                 scaled.image(a);
                 scaled.image(b);
                 scaled.error(maxDifference(a, b));
@@ -914,7 +914,7 @@ std::vector<Row> camerasAndRays(const Backend &be) {
             FrameRenderer &r = v.volume == &box ? renderer : renderer7;
             for (const auto &[label, q] : qualities)
                 ocl.attempt(v.name + ", " + label, [&] {
-                    compareWithMedium(ocl, r.render(m.tf(), v.camera, v.size, v.size, q, v.planes), *v.volume, v.camera,
+                    compareWithMedium(ocl, r.render({m.tf(), v.camera, v.size, v.size, q, v.planes}), *v.volume, v.camera,
                                       v.planes, m, Measure::Absolute, 0, v.exact);
                 });
             ref.attempt(v.name, [&] {
@@ -931,14 +931,14 @@ std::vector<Row> camerasAndRays(const Backend &be) {
     Camera nowhere = perspective({1, 2, 3}, {1, 2, 3}, {0, 1, 0}, 30);
     Check errors("up parallel to the view direction; eye = target", be.name + ", reference, scene file",
                  "a clear error naming the key", 0);
-    expectClearError(errors, be.name + ", up ∥ view", "camera.up", [&] { renderer.render(m.tf(), parallel, 4, 4, plain(1), {}); });
+    expectClearError(errors, be.name + ", up ∥ view", "camera.up", [&] { renderer.render({m.tf(), parallel, 4, 4, plain(1), {}}); });
     expectClearError(errors, "reference, up ∥ view", "camera.up", [&] { referenceImage(box, m.tf(), parallel, 4, 4); });
     expectClearError(errors, "scene file, up ∥ view", "camera.up", [&] {
         parseScene(R"({"volume": "builtin:demo", "transfer_function": {"points": [[0, 0, 0, 0, 0], [255, 1, 1, 1, 1]]},
                       "camera": {"eye": [0, 0, 20], "target": [0, 0, 0], "up": [0, 0, 3], "projection": "perspective",
                                  "fov_y_deg": 30}, "image": {"width": 8, "height": 8}})");
     });
-    expectClearError(errors, be.name + ", eye = target", "camera.target", [&] { renderer.render(m.tf(), nowhere, 4, 4, plain(1), {}); });
+    expectClearError(errors, be.name + ", eye = target", "camera.target", [&] { renderer.render({m.tf(), nowhere, 4, 4, plain(1), {}}); });
     expectClearError(errors, "reference, eye = target", "camera.target", [&] { referenceImage(box, m.tf(), nowhere, 4, 4); });
     rows.push_back(errors.row());
     return rows;
@@ -963,7 +963,7 @@ std::vector<Row> steps(const Backend &be) {
         for (double step : {50.0, 1e3, 1e6, 1e30})
             for (const auto &[label, q] : variants(step))
                 ocl.attempt(label + " at step " + format(step), [&] {
-                    compareWithMedium(ocl, renderer.render(m.tf(), cam, 12, 12, q, {}), box, cam, {}, m);
+                    compareWithMedium(ocl, renderer.render({m.tf(), cam, 12, 12, q, {}}), box, cam, {}, m);
                 });
         rows.push_back(ocl.row());
     }
@@ -992,7 +992,7 @@ std::vector<Row> steps(const Backend &be) {
             ocl.attempt(label, [&] {
                 RenderStats st;
                 const auto start = Clock::now();
-                const Image img = renderer.render(m.tf(), cam, 2, 1, q, {}, &st);
+                const Image img = renderer.render({m.tf(), cam, 2, 1, q, {}}, &st);
                 time.error(std::chrono::duration<double>(Clock::now() - start).count());
                 time.value(st.renderSeconds);
                 compareWithMedium(ocl, img, box, cam, {}, m, Measure::Absolute, 0, true);
@@ -1027,7 +1027,7 @@ std::vector<Row> images(const Backend &be) {
     for (const auto &[w, h] : {std::pair{1, 1}, std::pair{1, 64}, std::pair{64, 1}}) {
         const std::string size = std::to_string(w) + "×" + std::to_string(h);
         for (const auto &[label, q] : variants(0.5))
-            ocl.attempt(size + ", " + label, [&] { compareWithMedium(ocl, renderer.render(m.tf(), cam, w, h, q, {}), box, cam, {}, m); });
+            ocl.attempt(size + ", " + label, [&] { compareWithMedium(ocl, renderer.render({m.tf(), cam, w, h, q, {}}), box, cam, {}, m); });
         ref.attempt(size, [&] { compareWithMedium(ref, referenceImage(box, m.tf(), cam, w, h), box, cam, {}, m); });
     }
     rows.push_back(ocl.row());
@@ -1040,7 +1040,7 @@ std::vector<Row> images(const Backend &be) {
     for (const auto &[w, h] : {std::pair{16385, 1}, std::pair{1, 16385}, std::pair{16384, 16384}, std::pair{0, 1},
                                std::pair{-1, 5}, std::pair{INT_MAX, INT_MAX}}) {
         const std::string size = std::to_string(w) + "×" + std::to_string(h);
-        expectClearError(big, be.name + " " + size, "image", [&] { renderer.render(m.tf(), cam, w, h, plain(1), {}); });
+        expectClearError(big, be.name + " " + size, "image", [&] { renderer.render({m.tf(), cam, w, h, plain(1), {}}); });
         expectClearError(big, "reference " + size, "image", [&] { referenceImage(box, m.tf(), cam, w, h); });
     }
     expectClearError(big, "scene file 16384×16384", "image", [&] {
@@ -1104,7 +1104,7 @@ std::vector<Row> nonFiniteData(const Backend &be) {
         // Skipping, early termination and a coarser level: outputs only (no reference for these).
         Quality fast = with(plain(0.5), false, false, true);
         fast.mipLevel = 1;
-        ocl.image(renderer.render(tf, cam, 12, 12, fast, {}));
+        ocl.image(renderer.render({tf, cam, 12, 12, fast, {}}));
     });
     rows.push_back(policy.row());
     rows.push_back(ocl.row());
