@@ -31,20 +31,28 @@ std::string DeviceChoice::text() const {
     return "auto";
 }
 
-std::shared_ptr<OpenClContext> openContextFor(const DeviceChoice &choice, const std::string &kernelCacheDir) {
-    switch (choice.kind) {
-    case DeviceChoice::Kind::Cpu: return nullptr;
-    case DeviceChoice::Kind::OpenCl:
-        // Plain "opencl" is OpenCL's own choice, not $VOLCAST_DEVICE: the server reads that
-        // variable as its --device, so it holds "opencl" itself there.
-        return std::make_shared<OpenClContext>(
-            DeviceOptions{choice.openClDevice.empty() ? "auto" : choice.openClDevice, kernelCacheDir});
-    case DeviceChoice::Kind::Auto: break;
+DeviceChoice resolveDeviceChoice(const DeviceChoice &choice) {
+    if (choice.kind != DeviceChoice::Kind::Auto) return choice;
+    // No OpenCL, or no GPU among its devices: the native path is faster than PoCL.
+    DeviceChoice resolved;
+    if (openClGpuPresent()) {
+        resolved.kind = DeviceChoice::Kind::OpenCl;
+        resolved.openClDevice = "gpu";
+    } else {
+        resolved.kind = DeviceChoice::Kind::Cpu;
     }
-    // No OpenCL, or no GPU among its devices: the native path is faster than PoCL. With a GPU,
-    // a failure to open it (its kernel cache, say) is an error, not a silent fall-back.
-    if (!openClGpuPresent()) return nullptr;
-    return std::make_shared<OpenClContext>(DeviceOptions{"gpu", kernelCacheDir});
+    return resolved;
+}
+
+std::shared_ptr<OpenClContext> openContextFor(const DeviceChoice &choice, const std::string &kernelCacheDir) {
+    // With a GPU, a failure to open it (its kernel cache, say) is an error, not a silent
+    // fall-back to the native path.
+    const DeviceChoice resolved = resolveDeviceChoice(choice);
+    if (resolved.kind == DeviceChoice::Kind::Cpu) return nullptr;
+    // Plain "opencl" is OpenCL's own choice, not $VOLCAST_DEVICE: the server reads that
+    // variable as its --device, so it holds "opencl" itself there.
+    return std::make_shared<OpenClContext>(
+        DeviceOptions{resolved.openClDevice.empty() ? "auto" : resolved.openClDevice, kernelCacheDir});
 }
 
 bool openClGpuPresent() {

@@ -26,6 +26,10 @@ struct DeviceChoice {
     std::string text() const;
 };
 
+// What a choice stands for on this machine: auto becomes opencl:gpu where some OpenCL
+// platform offers a GPU, else cpu; the other choices are themselves.
+DeviceChoice resolveDeviceChoice(const DeviceChoice &choice);
+
 // Opens the OpenCL context a choice needs: nullptr for cpu, and for auto when no OpenCL GPU
 // exists. Throws OpenClError when an explicit opencl choice finds no such device, and when
 // the chosen device's kernel cache folder is unusable (only then is the cache checked).

@@ -3,9 +3,8 @@
 // (kernel, read-back to the host, and any upsampling: what a server pays before encoding).
 
 #include "renderer/model/image.hpp"
-#include "renderer/cpu/cpu_renderer.hpp"
-#include "renderer/opencl/opencl_renderer.hpp"
 #include "renderer/io/volume_io.hpp"
+#include "renderer/make_frame_renderer.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"
 #include "tests/bench/svg_plot.hpp"
@@ -91,9 +90,15 @@ CellResult timeOrbit(FrameRenderer &renderer, const TransferFunction &tf, const 
 
 std::unique_ptr<FrameRenderer> makeStudyRenderer(const std::shared_ptr<OpenClContext> &cl, const std::string &backEnd,
                                                  std::shared_ptr<const Volume> volume) {
-    if (backEnd == "cpu") return std::make_unique<CpuRenderer>(std::move(volume));
-    if (backEnd == "opencl") return std::make_unique<OpenClRenderer>(cl, std::move(volume));
+    // The back ends as the server makes them: no OpenCL context is the native path.
+    if (backEnd == "cpu") return makeFrameRenderer(nullptr, std::move(volume));
+    if (backEnd == "opencl") return makeFrameRenderer(cl, std::move(volume));
     throw std::invalid_argument("back end '" + backEnd + "': expected opencl or cpu");
+}
+
+std::string resolveBackEnd(const std::string &backEnd) {
+    const DeviceChoice resolved = resolveDeviceChoice(DeviceChoice::parse(backEnd));
+    return resolved.kind == DeviceChoice::Kind::Cpu ? "cpu" : "opencl";
 }
 
 std::vector<std::pair<int, int>> parseSizes(const std::string &text) {

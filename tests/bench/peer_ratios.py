@@ -7,7 +7,7 @@ command as an --extra peer named "ours", and prints a Markdown table per volume:
 median ms and, beside it, ours divided by theirs (below 1: we are faster).
 
   /usr/bin/python3 $PEERS/run_table.py --peers vtk91-fixed,vtk91-gpu,volpack \\
-      --extra 'ours=build/tests/bench/volcast-bench peers --volume {volume} --size {sizes} \\
+      --extra 'ours=build/tests/bench/volcast-bench peers --backend opencl --volume {volume} --size {sizes} \\
                --frames {frames} --sample-distance {sample_distance}' --out-dir out/peers
   python3 tests/bench/peer_ratios.py out/peers/results_merged.jsonl > out/peers/RATIOS.md
 

@@ -21,9 +21,11 @@ struct StudyOptions {
     bool quick = false;                // tiny sizes: checks the command works, times nothing
     std::vector<std::string> volumes = {"small", "tooth", "large"}; // Table 1's volumes
     std::string sizes = "512x512,800x600,1024x768,1280x1024,1920x1080";
-    std::string backEnd = "opencl";    // Table 1's ray caster: opencl (the context's device) or cpu (native)
+    // Table 1's ray caster: opencl (the context's device) or cpu (native); auto is resolved
+    // to one of them before a study runs (resolveBackEnd).
+    std::string backEnd = "auto";
     // Figure 5's and the error study's ray casters, timed in turn cell by cell (interleaved).
-    std::vector<std::string> backEnds = {"opencl"};
+    std::vector<std::string> backEnds = {"auto"};
 };
 
 void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options);
@@ -39,11 +41,15 @@ struct PeerModeOptions {
     double sampleDistance = 1;
     double maxSeconds = 30;
     std::filesystem::path png; // if set: each size's last frame, as PATH_WxH.png
-    std::string backEnd = "opencl"; // opencl or cpu
+    std::string backEnd = "auto"; // opencl or cpu; auto resolved as StudyOptions::backEnd
 };
 
+// "auto" as the server and volcast-render resolve it (resolveDeviceChoice: opencl where an
+// OpenCL GPU exists, else cpu); "opencl" and "cpu" as they are.
+std::string resolveBackEnd(const std::string &backEnd);
+
 // The ray caster a study times: "opencl" on `cl`, or "cpu" (the native path). Throws
-// std::invalid_argument for anything else.
+// std::invalid_argument for anything else (auto is resolved before).
 std::unique_ptr<FrameRenderer> makeStudyRenderer(const std::shared_ptr<OpenClContext> &cl, const std::string &backEnd,
                                                  std::shared_ptr<const Volume> volume);
 void peerMode(const std::shared_ptr<OpenClContext> &cl, const PeerModeOptions &options);

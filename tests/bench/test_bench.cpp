@@ -1,5 +1,7 @@
 // The benchmark helpers' invariants: what the studies' numbers rest on.
 
+#include "renderer/make_frame_renderer.hpp"
+#include "renderer/model/synthetic.hpp"
 #include "tests/bench/bench.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"
@@ -12,6 +14,18 @@
 
 namespace volcast::bench {
 namespace {
+
+// The benchmarks' default ray caster is the one the server and volcast-render pick: auto
+// names the same back end here as makeFrameRenderer's auto does.
+TEST(Bench, AutoIsTheBackEndTheServerPicks) {
+    EXPECT_EQ(resolveBackEnd("cpu"), "cpu");
+    EXPECT_EQ(resolveBackEnd("opencl"), "opencl");
+    EXPECT_EQ(StudyOptions{}.backEnd, "auto");
+    EXPECT_EQ(PeerModeOptions{}.backEnd, "auto");
+    const auto box = std::make_shared<const Volume>(makeConstantBox({4, 4, 4}, {1, 1, 1}, 1).volume);
+    const std::string served = makeFrameRenderer(DeviceChoice::parse("auto"), box)->description();
+    EXPECT_EQ(served.rfind(resolveBackEnd("auto") + ": ", 0), 0u) << served;
+}
 
 TEST(Bench, MedianIsTheMiddleOrTheMeanOfTheMiddleTwo) {
     EXPECT_EQ(summarize({5, 1, 3}).median, 3);

@@ -5,6 +5,7 @@
 //   volcast-bench peers --volume phantom.nrrd --size 512x512,800x600 --frames 5
 //   volcast-bench byos --out out/bench      # needs Debian's orthanc and orthanc-dicomweb
 
+#include "renderer/make_frame_renderer.hpp"
 #include "tests/bench/byos.hpp"
 #include "tests/bench/studies.hpp"
 
@@ -49,17 +50,18 @@ int main(int argc, char **argv) {
             ->delimiter(',')
             ->capture_default_str();
         sub->add_option("--sizes", options.sizes, "Table 1's output sizes, WxH,...")->capture_default_str();
-        sub->add_option("--backend", options.backEnd, "Table 1's ray caster: opencl (on --device) or cpu (native)")
-            ->check(CLI::IsMember({"opencl", "cpu"}))
+        sub->add_option("--backend", options.backEnd,
+                        "Table 1's ray caster: auto (an OpenCL GPU, else cpu), opencl (on --device) or cpu (native)")
+            ->check(CLI::IsMember({"auto", "opencl", "cpu"}))
             ->capture_default_str();
     }
     for (auto *sub : {f5, all})
         sub->add_option("--viewport", viewportFigure5, "Figure 5's square viewport")->capture_default_str();
     for (auto *sub : {f5, ev, all})
         sub->add_option("--backends", options.backEnds,
-                        "Figure 5's and the error study's ray casters, timed in turn cell by cell: opencl, cpu")
+                        "Figure 5's and the error study's ray casters, timed in turn cell by cell: auto, opencl, cpu")
             ->delimiter(',')
-            ->check(CLI::IsMember({"opencl", "cpu"}))
+            ->check(CLI::IsMember({"auto", "opencl", "cpu"}))
             ->capture_default_str();
     for (auto *sub : {ev, all}) {
         sub->add_option("--error-viewport", viewportError, "The error study's square viewport")->capture_default_str();
@@ -78,8 +80,8 @@ int main(int argc, char **argv) {
     peers->add_option("--png", peer.png, "Write each size's last frame to PNG_WxH.png");
     peers->add_option("--device", device.device, "OpenCL device: auto, gpu, cpu or part of its name");
     peers->add_option("--kernel-cache", device.kernelCacheDir, "PoCL's compiled-kernel cache folder");
-    peers->add_option("--backend", peer.backEnd, "Ray caster: opencl (on --device) or cpu (native)")
-        ->check(CLI::IsMember({"opencl", "cpu"}))
+    peers->add_option("--backend", peer.backEnd, "Ray caster: auto (an OpenCL GPU, else cpu), opencl (on --device) or cpu (native)")
+        ->check(CLI::IsMember({"auto", "opencl", "cpu"}))
         ->capture_default_str();
 
     std::filesystem::path memoryVolume;
@@ -136,13 +138,25 @@ int main(int argc, char **argv) {
     // stdout carries the tables (and the peers' JSON lines); progress and warnings go to stderr.
     spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
     try {
+        // The prefilter study and the machine record use the OpenCL device whatever ray caster runs.
         const auto cl = std::make_shared<volcast::OpenClContext>(device);
         std::cerr << "volcast-bench: OpenCL device " << cl->deviceName() << "\n";
+        const auto announce = [&](const std::string &backEnd) {
+            std::cerr << "volcast-bench: ray caster " << backEnd << " ("
+                      << volcast::backEndDescription(backEnd == "cpu" ? nullptr : cl) << ")\n";
+        };
         if (peers->parsed()) {
+            peer.backEnd = resolveBackEnd(peer.backEnd);
+            announce(peer.backEnd);
             peer.sizes = parseSizes(sizes);
             peerMode(cl, peer);
             return 0;
         }
+        options.backEnd = resolveBackEnd(options.backEnd);
+        for (std::string &b : options.backEnds) b = resolveBackEnd(b);
+        if (t1->parsed() || all->parsed()) announce(options.backEnd);
+        if (f5->parsed() || ev->parsed() || all->parsed())
+            for (const std::string &b : options.backEnds) announce(b);
         if (t1->parsed() || all->parsed()) table1(cl, options);
         if (t2->parsed() || all->parsed()) prefilter(*cl, options);
         if (f5->parsed() || all->parsed()) figure5(cl, options, viewportFigure5);
