@@ -87,7 +87,11 @@ test("another modality's presets are reachable and the note follows the choice",
 });
 
 test("a 3840×2160 window gets a final frame; the stats say what was lowered to fit", { skip }, async () => {
+  const sent = await page.evaluate(() => window.sentLog.length);
   await page.setViewportSize({ width: 3840, height: 2160 });
+  // The page tells the server its new size once the size has held for 150 ms (view.js's
+  // RESIZE_SETTLE_MS): the final frame to check answers that message, not an earlier one.
+  await page.waitForFunction((n) => window.sentLog.slice(n).some((m) => m.type === "viewport"), sent, { timeout: 30000 });
   const final = await settle();
   assert.equal(final.final, true);
   // The canvas's device pixels at that size predict far over the default 2^32 samples per
