@@ -118,7 +118,7 @@ TEST_F(VolumeIoTest, ZeroOrNegativeSpacing) {
 }
 
 // ---------------------------------------------------------------------------------------
-// 3e. Time limit and stop request, checked at every progress step
+// Time limit and stop request, checked at every progress step
 
 TEST_F(VolumeIoTest, LoadPastItsTimeLimitFailsNamingTheLimit) {
     Volume src;
@@ -147,7 +147,7 @@ TEST_F(VolumeIoTest, StopRequestEndsTheLoad) {
 }
 
 // ---------------------------------------------------------------------------------------
-// 4. NaN / Inf policy
+// NaN / Inf policy
 
 TEST_F(VolumeIoTest, NonFiniteVoxelsAreReplaced) {
     const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();

@@ -37,7 +37,7 @@ namespace {
 using namespace volume_io_test;
 
 // ---------------------------------------------------------------------------------------
-// 3d. Detached data files stay in the header's folder and are regular files
+// Detached data files stay in the header's folder and are regular files
 
 class VolumeIoDataFiles : public VolumeIoTest {
   protected:

@@ -108,7 +108,7 @@ TEST_F(VolumeIoTest, FolderWithoutDicom) {
 }
 
 // ---------------------------------------------------------------------------------------
-// 3c. Damaged DICOM series
+// Damaged DICOM series
 
 // A slice cut short: GDCM would read the missing pixels as zeros.
 TEST_F(VolumeIoTest, DicomSeriesWithATruncatedSlice) {

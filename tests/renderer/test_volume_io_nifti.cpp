@@ -120,7 +120,7 @@ TEST_F(VolumeIoTest, NiftiZeroSize) {
 }
 
 // ---------------------------------------------------------------------------------------
-// 3b. Damaged NIfTI headers: each breaks one rule of the NIfTI-1 specification, which ITK
+// Damaged NIfTI headers: each breaks one rule of the NIfTI-1 specification, which ITK
 // would read into a zero-filled or shifted volume. The refusal names the field.
 
 template <typename T>

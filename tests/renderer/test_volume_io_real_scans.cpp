@@ -41,7 +41,7 @@ namespace {
 using namespace volume_io_test;
 
 // ---------------------------------------------------------------------------------------
-// 1. The real scans of MANIFEST.md
+// The real scans of MANIFEST.md
 
 // SHA-256 through coreutils' sha256sum (no home-made hash).
 std::string sha256(const std::string &bytes) {
