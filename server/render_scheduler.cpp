@@ -40,6 +40,132 @@ std::string preparationTask(const Quality &q) {
 }
 } // namespace
 
+// ---- A slot's life ------------------------------------------------------------------------
+
+namespace {
+using S = SlotState;
+using E = SlotEvent;
+// The same rows as server/README.md's table "A slot's life" (the test walks both).
+constexpr SlotTransition kSlotTransitions[] = {
+    {S::NoView, E::NewView, S::ViewWaiting, "keep the view"},
+    {S::NoView, E::NewStill, S::ViewWaiting, "keep the view"},
+    {S::ViewWaiting, E::NewView, S::ViewWaiting, "the newer view replaces the waiting one"},
+    {S::ViewWaiting, E::NewStill, S::ViewWaiting, "the newer view replaces the waiting one"},
+    {S::ViewWaiting, E::StartInteractive, S::InteractiveUnderWay, "plan the interactive level's frame"},
+    {S::ViewWaiting, E::StartLevel, S::LevelUnderWay, "plan the final frame (a still, or a one-level ladder at rest)"},
+    {S::ViewWaiting, E::FrameRendered, S::WithSession,
+     "deliver a first frame whose last unit ran while a newer view dropped it: the newest picture there is"},
+    {S::InteractiveUnderWay, E::NewView, S::InteractiveUnderWay,
+     "keep rendering the frame (of the older view): input faster than a frame must not starve the drag"},
+    {S::InteractiveUnderWay, E::NewStill, S::ViewWaiting, "drop the frame"},
+    {S::InteractiveUnderWay, E::FrameRendered, S::WithSession, "deliver it (stale or not), count an interactive frame"},
+    {S::InteractiveUnderWay, E::RenderFailed, S::Failed, "tell the session (render_failed)"},
+    {S::InteractiveUnderWay, E::RenderFailed, S::ViewWaiting,
+     "the failed frame was an older view's: the new view's frame comes next, nothing told"},
+    {S::LevelUnderWay, E::NewView, S::ViewWaiting, "drop the frame at the end of its unit (cancellation)"},
+    {S::LevelUnderWay, E::NewStill, S::ViewWaiting, "drop the frame at the end of its unit (cancellation)"},
+    {S::LevelUnderWay, E::FrameRendered, S::WithSession, "deliver it"},
+    {S::LevelUnderWay, E::RenderFailed, S::Failed, "tell the session (render_failed)"},
+    {S::WithSession, E::NewView, S::WithSession, "keep the view; its frame waits for the write"},
+    {S::WithSession, E::NewStill, S::WithSession, "keep the view; its frame waits for the write"},
+    {S::WithSession, E::FrameWritten, S::ViewWaiting, "a newer view came meanwhile: its first frame next"},
+    {S::WithSession, E::FrameWritten, S::LevelShown, "a level below the final was written: refine after the idle time"},
+    {S::WithSession, E::FrameWritten, S::FinalShown, "the final frame was written: calibrate, rest"},
+    {S::WithSession, E::RenderFailed, S::Failed, "the frame never reached the session: tell it (render_failed)"},
+    {S::WithSession, E::RenderFailed, S::ViewWaiting,
+     "the frame never reached the session, but a newer view came: its first frame next"},
+    {S::LevelShown, E::NewView, S::ViewWaiting, "keep the view"},
+    {S::LevelShown, E::NewStill, S::ViewWaiting, "keep the view"},
+    {S::LevelShown, E::StartLevel, S::LevelUnderWay, "plan the next refinement level's frame"},
+    {S::FinalShown, E::NewView, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
+    {S::FinalShown, E::NewStill, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
+    {S::Failed, E::NewView, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
+    {S::Failed, E::NewStill, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
+};
+
+bool underWayState(SlotState s) { return s == S::InteractiveUnderWay || s == S::LevelUnderWay; }
+} // namespace
+
+std::span<const SlotTransition> slotTransitions() { return kSlotTransitions; }
+
+int slotTransitionRow(SlotState from, SlotEvent event, SlotState to) {
+    for (size_t i = 0; i < std::size(kSlotTransitions); ++i) {
+        const SlotTransition &t = kSlotTransitions[i];
+        if (t.from == from && t.event == event && t.to == to) return int(i);
+    }
+    return -1;
+}
+
+const char *toString(SlotState state) {
+    switch (state) {
+    case S::NoView: return "NoView";
+    case S::ViewWaiting: return "ViewWaiting";
+    case S::InteractiveUnderWay: return "InteractiveUnderWay";
+    case S::LevelUnderWay: return "LevelUnderWay";
+    case S::WithSession: return "WithSession";
+    case S::LevelShown: return "LevelShown";
+    case S::FinalShown: return "FinalShown";
+    case S::Failed: return "Failed";
+    }
+    return "?";
+}
+
+const char *toString(SlotEvent event) {
+    switch (event) {
+    case E::NewView: return "NewView";
+    case E::NewStill: return "NewStill";
+    case E::StartInteractive: return "StartInteractive";
+    case E::StartLevel: return "StartLevel";
+    case E::FrameRendered: return "FrameRendered";
+    case E::RenderFailed: return "RenderFailed";
+    case E::FrameWritten: return "FrameWritten";
+    }
+    return "?";
+}
+
+bool RenderScheduler::moveTo(Slot &s, SlotEvent event, SlotState to) {
+    const int row = slotTransitionRow(s.state, event, to);
+    if (row < 0) {
+        // A bug: the slot would reach a state nobody designed. Keep the one it has.
+        spdlog::error("render scheduler: refused slot transition {} --{}--> {}", toString(s.state), toString(event),
+                      toString(to));
+        ++refusedTransitions_;   // the tests check that it stays 0
+        return false;
+    }
+    ++transitionCounts_[size_t(row)];
+    if (!underWayState(to)) s.underWay.reset();
+    s.state = to;
+    return true;
+}
+
+bool RenderScheduler::viewDone(const Slot &s) {
+    return s.state == S::FinalShown || s.state == S::Failed ||
+           (s.state == S::WithSession && s.delivery.final && s.delivery.generation == s.generation);
+}
+
+SlotState RenderScheduler::slotState(SlotId slot) const {
+    std::lock_guard lock(mutex_);
+    const auto it = slots_.find(slot);
+    return it == slots_.end() ? S::NoView : it->second.state;
+}
+
+std::vector<uint64_t> RenderScheduler::transitionCounts() const {
+    std::lock_guard lock(mutex_);
+    return transitionCounts_;
+}
+
+uint64_t RenderScheduler::refusedTransitions() const {
+    std::lock_guard lock(mutex_);
+    return refusedTransitions_;
+}
+
+void RenderScheduler::setUnitObserver(std::function<void(double)> observer) {
+    std::lock_guard lock(mutex_);
+    unitObserver_ = std::move(observer);
+}
+
+// ---- Preparation keys -----------------------------------------------------------------------
+
 std::string preparationKey(uint64_t volumeId, const TransferFunction &tf, const Quality &q) {
     if (q.interpolation != Interpolation::Cubic && !q.preintegrated && !q.shading) return "";
     std::ostringstream key;
@@ -71,7 +197,8 @@ RenderScheduler::RenderScheduler(Metrics &metrics, SchedulerOptions options)
       calibrator_(preprocess_, options.errorCalibration, [this] {
           std::lock_guard lock(mutex_);
           return draggingCount() > 0;
-      }) {
+      }),
+      transitionCounts_(std::size(kSlotTransitions), 0) {
     worker_ = std::thread([this] { workerLoop(); });
 }
 
@@ -128,27 +255,26 @@ void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
         if (it == slots_.end()) return;
         Slot &s = it->second;
         // Time without work is not credit to spend later at the others' expense.
-        if (!s.job || s.finalSent || s.failed_) {
+        if (!s.job || viewDone(s)) {
             s.serviceMs = std::max(s.serviceMs, leastServiceMs());
             s.interactiveFrames = std::max(s.interactiveFrames, leastInteractiveFrames());
         }
         // An interactive frame under way is finished and delivered, stale or not: dropping
         // it would leave a client whose input comes faster than one frame renders (a loaded
         // server, a slow level) with no frame at all for as long as it drags. A refinement
-        // or a final frame is dropped: the new view's interactive frame comes next.
-        const bool keepInteractive = s.refining && s.refiningInteractive && !job->stillOnly;
+        // or a final frame is dropped, and for a still the interactive frame too: the new
+        // view's first frame comes next. A frame with the session waits for its write.
+        const bool still = job->stillOnly;
+        SlotState next = SlotState::ViewWaiting;
+        if (s.state == SlotState::InteractiveUnderWay && !still) next = SlotState::InteractiveUnderWay;
+        if (s.state == SlotState::WithSession) next = SlotState::WithSession;
+        moveTo(s, still ? SlotEvent::NewStill : SlotEvent::NewView, next);
         s.job = std::move(job);
         s.calibration = std::move(calibration);
         ++s.generation;
         s.sentLevel = -1;
         s.levelsShown.clear();
         s.substituteSent = -1;
-        s.finalSent = false;
-        s.failed_ = false;
-        if (!keepInteractive) {
-            s.dropRefining();
-            s.refiningLevel = -1;
-        }
         s.levelImages.clear();
         s.lastInput = Clock::now();
     }
@@ -178,7 +304,11 @@ void RenderScheduler::frameDone(SlotId slot) {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(slot);
         if (it == slots_.end()) return;
-        it->second.inFlight = false;
+        Slot &s = it->second;
+        // Rest after the final frame, refine after a lower level, or start a view that came meanwhile.
+        SlotState next = SlotState::ViewWaiting;
+        if (s.delivery.generation == s.generation) next = s.delivery.final ? SlotState::FinalShown : SlotState::LevelShown;
+        moveTo(s, SlotEvent::FrameWritten, next);
     }
     wake_.notify_all();
 }
@@ -256,10 +386,12 @@ Quality RenderScheduler::renderable(SlotId id, Slot &s, const Quality &q, bool &
 
 bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work,
                                Clock::time_point &wakeAt) {
-    if (s.inFlight || !s.job || s.finalSent || s.failed_) return false;
+    // Only a slot waiting for its view's first frame, resting between levels or with a frame
+    // under way has work; a frame with the session, a final frame shown or a failure has none.
+    if (s.state != SlotState::ViewWaiting && s.state != SlotState::LevelShown && !underWayState(s.state)) return false;
     const ViewJob &job = *s.job;
     // The renderer of the frame under way: an older view's while its interactive frame finishes.
-    const ViewJob &underWay = s.refining ? *s.refiningJob : job;
+    const ViewJob &underWay = s.underWay ? *s.underWay->job : job;
     if (preparing_.count(underWay.renderer.get())) return false;   // its preparation's end wakes us
     const int last = int(job.ladder.size()) - 1;
     const bool firstOfView = !job.stillOnly && s.sentLevel < 0 && s.substituteSent < 0;
@@ -283,7 +415,7 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
         }
     const auto samplesOf = [&](const Quality &q) { return predictedSamples(job.renderer->volume(), q, job.width, job.height); };
 
-    if (!s.refining) {
+    if (!s.underWay) {
         // The view's error-against-time front: each level's measured error and predicted time
         // (the timer also plans this frame's cells from the background costs, below).
         ErrorCalibrator::LevelsMeasured measured;
@@ -337,24 +469,30 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
         const bool final = level == last && (job.stillOnly || !firstOfView || (last == 0 && still));
         bool substitute = false;
         const Quality q = renderable(id, s, l.quality, substitute);
-        s.refining = std::make_shared<TiledFrame>(FrameRequest{job.transferFunction, job.camera, job.width, job.height, q,
-                                                  job.clipPlanes},
-                                                  substitute ? 1 : l.passes, job.renderer->bandRows());
-        s.refiningJob = s.job;
-        s.refiningGeneration = s.generation;
-        s.refiningInteractive = firstOfView && !final;
-        s.refiningLevel = level;
-        s.refiningFinal = final;
-        s.refiningSubstitute = substitute;
+        FrameUnderWay f;
+        f.frame = std::make_shared<TiledFrame>(FrameRequest{job.transferFunction, job.camera, job.width, job.height, q,
+                                               job.clipPlanes},
+                                               substitute ? 1 : l.passes, job.renderer->bandRows());
+        f.job = s.job;
+        f.generation = s.generation;
+        f.level = level;
+        f.final = final;
+        f.substitute = substitute;
+        const bool interactive = firstOfView && !final;
+        if (!moveTo(s, interactive ? SlotEvent::StartInteractive : SlotEvent::StartLevel,
+                    interactive ? SlotState::InteractiveUnderWay : SlotState::LevelUnderWay))
+            return false;
+        s.underWay = std::move(f);
     }
-    work.job = s.refiningJob;
-    work.generation = s.refiningGeneration;
-    const TiledFrame &frame = *s.refining;
-    work.level = s.refiningLevel;
-    work.final = s.refiningFinal && !s.refiningSubstitute;
-    work.substitute = s.refiningSubstitute;
+    const FrameUnderWay &u = *s.underWay;
+    work.job = u.job;
+    work.generation = u.generation;
+    const TiledFrame &frame = *u.frame;
+    work.level = u.level;
+    work.final = u.final && !u.substitute;
+    work.substitute = u.substitute;
     work.quality = frame.quality();
-    work.frame = s.refining;
+    work.frame = u.frame;
     // As many cells as fit the unit at the cost measured by this frame's own units, else by
     // this level's earlier frames or its background calibration render; a level never
     // measured starts with one cell (a guess of the cost could be off a hundredfold, and a
@@ -385,7 +523,7 @@ size_t RenderScheduler::draggingCount() const {
     size_t n = 0;
     for (const auto &[id, s] : slots_) {
         const bool awaitingInteractive = s.job && !s.job->stillOnly && s.sentLevel < 0 && s.substituteSent < 0 &&
-                                         !s.finalSent && !s.failed_;
+                                         !viewDone(s);
         if (s.interacting || awaitingInteractive) ++n;
     }
     return n;
@@ -468,11 +606,14 @@ void RenderScheduler::runUnit(Work &work) {
     const ViewJob &job = *work.job;
     TiledFrame &frame = *work.frame;
     const double ms = frame.renderUnit(*job.renderer, work.cells);
+    std::function<void(double)> observer;
     {
         std::lock_guard lock(mutex_);
         longestUnitMs_ = std::max(longestUnitMs_, ms);
         if (auto it = slots_.find(work.slot); it != slots_.end()) it->second.serviceMs += ms;
+        observer = unitObserver_;
     }
+    if (observer) observer(ms);
     if (!frame.done()) return;
 
     const Level &level = job.ladder[size_t(work.level)];
@@ -483,9 +624,9 @@ void RenderScheduler::runUnit(Work &work) {
         auto it = slots_.find(work.slot);
         if (it == slots_.end()) return;
         Slot &s = it->second;
-        if (s.refining == work.frame) s.dropRefining();
         // The first (interactive) frame of a view is delivered even if newer input came: it
-        // is the newest picture the client can have. A refined one is dropped.
+        // is the newest picture the client can have. A refined one is dropped (a newer view
+        // took the slot out of its under-way state already).
         if (s.generation != work.generation && work.kind != Kind::Interactive) {
             metrics_.frameDroppedStale();
             return;
@@ -494,7 +635,6 @@ void RenderScheduler::runUnit(Work &work) {
         if (!work.substitute && size_t(work.level) < s.timerLadder.size() &&
             s.timerLadder[size_t(work.level)] == frame.quality())
             s.timer.record(size_t(work.level), frame.renderMs(), samples * double(frame.passes()));
-        s.inFlight = true;
         if (work.kind == Kind::Interactive) ++s.interactiveFrames;
     }
     if (!work.substitute) {
@@ -534,6 +674,10 @@ void RenderScheduler::runUnit(Work &work) {
         auto it = slots_.find(work.slot);
         if (it == slots_.end()) return;
         Slot &s = it->second;
+        // The frame goes to the session: from its under-way state, or from ViewWaiting when a
+        // newer view dropped it after its last unit began.
+        if (!moveTo(s, SlotEvent::FrameRendered, SlotState::WithSession)) return;
+        s.delivery = {work.frame.get(), work.generation, work.final};
         if (!work.substitute && s.calibration) h.error = calibrator_.estimate(s.calibration->key, work.level, work.final);
         if (!work.final) s.encodeMs = s.encodeMs == 0 ? h.encodeMs : 0.7 * s.encodeMs + 0.3 * h.encodeMs;
         if (s.generation == work.generation) {
@@ -546,7 +690,6 @@ void RenderScheduler::runUnit(Work &work) {
                 if (s.levelsShown.size() <= size_t(work.level)) s.levelsShown.resize(size_t(work.level) + 1);
                 s.levelsShown[size_t(work.level)] = true;
             }
-            s.finalSent = work.final;
             if (options_.errorCalibration && !work.substitute) {
                 if (work.final) {
                     calibration = s.calibration;
@@ -571,10 +714,16 @@ void RenderScheduler::fail(const Work &work, const std::string &message) {
         auto it = slots_.find(work.slot);
         if (it == slots_.end()) return;
         Slot &s = it->second;
-        if (s.refining == work.frame) s.dropRefining();
-        if (s.generation != work.generation) return;   // a newer view replaced it: no use telling
-        s.inFlight = false;
-        s.failed_ = true;   // do not retry the same view in a loop
+        // Only the slot's own frame, under way or with the session, fails the slot; one a newer
+        // view dropped is forgotten.
+        const bool underWay = s.underWay && s.underWay->frame == work.frame;
+        const bool withSession = s.state == SlotState::WithSession && s.delivery.frame == work.frame.get();
+        if (!underWay && !withSession) return;
+        // A newer view replaced it: no use telling, its first frame comes next. Else do not
+        // retry the same view in a loop.
+        const bool current = s.generation == work.generation;
+        if (!moveTo(s, SlotEvent::RenderFailed, current ? SlotState::Failed : SlotState::ViewWaiting) || !current)
+            return;
         failed = s.failed;
     }
     wake_.notify_all();

@@ -15,7 +15,9 @@
 // is finished first, or input faster than a frame would starve the drag), at most one frame in flight
 // (from its delivery until the session has written it), and a position on the view's
 // ladder: one interactive frame, then after idleMs without input (or at interaction_end)
-// refinement level by level to the final one.
+// refinement level by level to the final one. A slot's life is an explicit state machine
+// (SlotState, below; the table in server/README.md, "A slot's life"): every change of state
+// goes through one function that refuses a transition not in slotTransitions().
 //
 // Long preparation (B-spline coefficients, pre-integration tables, a new kernel variant)
 // runs on the PreprocessWorker; until it is ready, the level is rendered without it
@@ -43,7 +45,9 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -81,6 +85,41 @@ struct SchedulerOptions {
     double unitMs = 40;              // the longest a refinement unit is planned to take
 };
 
+// Where a session's slot is in the life of its views. One frame at most is under way or with
+// the session at a time, so these are exclusive.
+enum class SlotState {
+    NoView,               // no view submitted yet
+    ViewWaiting,          // a view none of which is shown or under way: its first frame comes next
+    InteractiveUnderWay,  // the view's interactive frame, unit by unit (possibly of an older view)
+    LevelUnderWay,        // a refinement level, a still's or a one-level ladder's final, unit by unit
+    WithSession,          // a frame delivered, until the session has written it (frameDone)
+    LevelShown,           // a level below the final shown: refinement waits for the idle time
+    FinalShown,           // the view's final frame shown: nothing to do until a new view
+    Failed,               // rendering the view failed (told once): nothing until a new view
+};
+// What happens to a slot.
+enum class SlotEvent {
+    NewView,           // submit(), not a still
+    NewStill,          // submit() of a still (`still`: the final level only)
+    StartInteractive,  // the worker starts the view's interactive frame
+    StartLevel,        // the worker starts a level that is not interactive
+    FrameRendered,     // a frame's last unit is done and encoded: it goes to the session
+    RenderFailed,      // rendering, encoding or delivering a frame threw
+    FrameWritten,      // frameDone(): the session has written the frame
+};
+struct SlotTransition {
+    SlotState from;
+    SlotEvent event;
+    SlotState to;
+    const char *action;   // what goes with it, as server/README.md says
+};
+// Every transition a slot may take, in the order of server/README.md's table; any other is refused.
+std::span<const SlotTransition> slotTransitions();
+// The row of (from, event, to) in slotTransitions(), or -1 where it is not there.
+int slotTransitionRow(SlotState from, SlotEvent event, SlotState to);
+const char *toString(SlotState state);
+const char *toString(SlotEvent event);
+
 class RenderScheduler {
   public:
     using SlotId = uint64_t;
@@ -105,44 +144,57 @@ class RenderScheduler {
 
     // For tests and metrics: the longest unit rendered so far, in ms.
     double longestUnitMs() const;
+    // For tests: a slot's state (NoView for one not there); how often each row of
+    // slotTransitions() was taken; transitions refused (each a bug, logged).
+    SlotState slotState(SlotId slot) const;
+    std::vector<uint64_t> transitionCounts() const;
+    uint64_t refusedTransitions() const;
+    // For tests: called on the render worker after each unit, with its time in ms.
+    void setUnitObserver(std::function<void(double unitMs)> observer);
     bool preparing() const { return preprocess_.busy(); }
 
   private:
     using Clock = std::chrono::steady_clock;
+    // The frame a slot has under way, owned by the states InteractiveUnderWay and
+    // LevelUnderWay: it may belong to an older view than the slot's (an interactive frame is
+    // finished when newer input comes). Let go with its state: its view may hold a volume
+    // the registry has evicted.
+    struct FrameUnderWay {
+        std::shared_ptr<TiledFrame> frame;
+        std::shared_ptr<const ViewJob> job;   // the view it belongs to
+        uint64_t generation = 0;              // of that view
+        int level = -1;
+        bool final = false;
+        bool substitute = false;              // rendered without its pending preparation
+    };
+    // The frame with the session (WithSession).
+    struct Delivery {
+        const TiledFrame *frame = nullptr;    // which one (identity only)
+        uint64_t generation = 0;              // of the view it belongs to
+        bool final = false;                   // that view's final frame
+    };
     struct Slot {
         Deliver deliver;
         Failed failed;
         Progress progress;
+        SlotState state = SlotState::NoView;
+        std::optional<FrameUnderWay> underWay;   // in InteractiveUnderWay and LevelUnderWay only
+        Delivery delivery;                       // meaningful in WithSession only
         std::shared_ptr<const ViewJob> job;
         std::shared_ptr<const CalibrationView> calibration;   // the job's, with its key
         uint64_t generation = 0;      // bumps with every submit
         bool interacting = false;
         Clock::time_point lastInput;
-        bool inFlight = false;
-        int sentLevel = -1;           // level delivered last for this generation
-        std::vector<bool> levelsShown;  // of this generation's ladder: delivered (not as a substitute)
+        // What of this generation's view has been delivered (its progress on the ladder).
+        int sentLevel = -1;           // level delivered last
+        std::vector<bool> levelsShown;  // of its ladder: delivered (not as a substitute)
         int substituteSent = -1;      // highest level delivered with its preparation pending
-        bool finalSent = false;
-        bool failed_ = false;
         double serviceMs = 0;         // render time received: the least served refines next
         double interactiveFrames = 0; // interactive frames received: the fewest goes next
         LevelTimer timer;
         double encodeMs = 0;          // JPEG coding of this session's frames (EMA; 0: none yet)
         std::vector<Quality> timerLadder;   // the qualities the timer's levels were measured at
         uint64_t timerVolumeId = 0;
-        std::shared_ptr<TiledFrame> refining;   // the frame under way, unit by unit
-        std::shared_ptr<const ViewJob> refiningJob;   // the view it belongs to: an interactive
-        uint64_t refiningGeneration = 0;              // frame outlives newer input (submit)
-        bool refiningInteractive = false;
-        int refiningLevel = -1;
-        bool refiningFinal = false;
-        bool refiningSubstitute = false;       // rendered without its pending preparation
-        // The frame under way is done with: its view is let go too (it may hold a volume
-        // the registry has evicted).
-        void dropRefining() {
-            refining.reset();
-            refiningJob.reset();
-        }
         std::vector<std::pair<int, std::vector<uint8_t>>> levelImages;   // this generation's JPEGs, for calibration
         std::map<std::string, std::string> announced;   // preparations this slot was told of: key, task
     };
@@ -174,6 +226,12 @@ class RenderScheduler {
     // Renders one unit; when it completes its frame, encodes and delivers it.
     void runUnit(Work &work);
     void fail(const Work &work, const std::string &message);
+    // The one way a slot changes state: refused (logged, counted, the state kept) unless
+    // (s.state, event, to) is a row of slotTransitions(). Leaving the under-way states lets
+    // the frame under way go. Under the lock.
+    bool moveTo(Slot &s, SlotEvent event, SlotState to);
+    // The slot's view is done with: its final frame is out or it failed. Under the lock.
+    static bool viewDone(const Slot &s);
 
     Metrics &metrics_;
     SchedulerOptions options_;
@@ -187,6 +245,9 @@ class RenderScheduler {
     uint64_t viewSerial_ = 0;
     bool stopping_ = false;
     double longestUnitMs_ = 0;
+    std::vector<uint64_t> transitionCounts_;
+    std::function<void(double)> unitObserver_;
+    uint64_t refusedTransitions_ = 0;
     // A renderer is used by one thread at a time without the render worker ever waiting:
     // the worker skips sessions whose renderer is being prepared, and a preparation waits
     // for the worker's current unit on its renderer.
