@@ -40,6 +40,10 @@ export function checkPrerequisites() {
   return missing;
 }
 
+// The suite running (its test file's name, "rough_edges" for rough_edges.test.mjs): the logs of
+// the servers it starts carry it, so that the next suite's do not overwrite them.
+export const SUITE = path.basename(process.argv[1] ?? "suite", ".test.mjs");
+
 export function artifact(name) {
   mkdirSync(ARTIFACTS, { recursive: true });
   return path.join(ARTIFACTS, name);
@@ -76,7 +80,7 @@ export async function startServer(port = 0, { extraArgs = [] } = {}) {
   const args = ["--port", String(port), "--port-file", portFile, "--web-root", path.join(REPO, "web"), "--log-level", process.env.VOLCAST_LOG_LEVEL || "info"];
   if (DATA_DIR && existsSync(DATA_DIR)) args.push("--data", DATA_DIR);
   args.push(...extraArgs);
-  const log = createWriteStream(artifact(`server-${++serverRuns}.log`));
+  const log = createWriteStream(artifact(`${SUITE}-server-${++serverRuns}.log`));
   const proc = spawn(SERVER_EXE, args, { stdio: ["ignore", "pipe", "pipe"] });
   proc.stdout.pipe(log);
   proc.stderr.pipe(log);

@@ -9,7 +9,7 @@ import { createWriteStream, existsSync, mkdtempSync, rmSync, writeFileSync } fro
 import os from "node:os";
 import path from "node:path";
 
-import { artifact, freePort } from "../browser/harness.mjs";
+import { SUITE, artifact, freePort } from "../browser/harness.mjs";
 
 export const ORTHANC = process.env.ORTHANC || "/usr/sbin/Orthanc";
 export const ORTHANC_DICOMWEB = process.env.ORTHANC_DICOMWEB || "/usr/share/orthanc/plugins/libOrthancDicomWeb.so";
@@ -39,7 +39,7 @@ export async function startOrthanc() {
   };
   const configPath = path.join(dir, "orthanc.json");
   writeFileSync(configPath, JSON.stringify(config, null, 2));
-  const log = createWriteStream(artifact(`orthanc-${++runs}.log`));
+  const log = createWriteStream(artifact(`${SUITE}-orthanc-${++runs}.log`));
   const proc = spawn(ORTHANC, [configPath], { stdio: ["ignore", "pipe", "pipe"] });
   proc.stdout.pipe(log);
   proc.stderr.pipe(log);
