@@ -14,6 +14,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -118,6 +119,23 @@ struct BrickClassification {
     // converts or uploads `visible`). Fills st.emptyBrickFraction and, when it classifies,
     // st.brickClassifySeconds.
     bool update(const MinMaxBricks &bricks, const TransferFunction &tf, RenderStats &st);
+};
+
+// PreprocessCounts that a frame adds to while another thread may read them (preprocessCounts()).
+class PreprocessCounter {
+  public:
+    PreprocessCounts get() const {
+        std::lock_guard lock(mutex_);
+        return counts_;
+    }
+    void add(int PreprocessCounts::*kind, int n = 1) {
+        std::lock_guard lock(mutex_);
+        counts_.*kind += n;
+    }
+
+  private:
+    mutable std::mutex mutex_;
+    PreprocessCounts counts_;
 };
 
 // The switches a frame really uses: an intensity projection (MIP, MinIP) takes no

@@ -90,10 +90,7 @@ std::string CpuRenderer::describe(const CpuRendererOptions &options) {
            std::to_string(threads) + " threads";
 }
 
-PreprocessCounts CpuRenderer::preprocessCounts() const {
-    std::lock_guard lock(countsMutex_);
-    return counts_;
-}
+PreprocessCounts CpuRenderer::preprocessCounts() const { return counts_.get(); }
 
 CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &st) {
     const auto key = std::make_pair(level, cubic);
@@ -105,8 +102,7 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
         for (int l = levelsBefore + 1; l <= pyramid_.levelsBuilt(); ++l)
             heldBytes_ += uint64_t(pyramid_.level(l).count()) * sizeof(float);
         st.mipSeconds = secondsSince(t);
-        std::lock_guard lock(countsMutex_);
-        counts_.mipLevels += pyramid_.levelsBuilt() - levelsBefore;
+        counts_.add(&PreprocessCounts::mipLevels, pyramid_.levelsBuilt() - levelsBefore);
     }
     DataSet data;
     data.dims = pyramid_.dims(level);
@@ -129,8 +125,7 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
         bsplinePrefilterMultithreaded(coefficients.data(), data.dims, threads_);
         data.padded = padMirror(coefficients, data.dims);
         st.coefficientSeconds = secondsSince(tc);
-        std::lock_guard lock(countsMutex_);
-        ++counts_.coefficientVolumes;
+        counts_.add(&PreprocessCounts::coefficientVolumes);
     }
     heldBytes_ += uint64_t(data.padded.size() + data.widened.size()) * sizeof(float);
     return dataSets_.emplace(key, std::move(data)).first->second;
@@ -166,14 +161,12 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
         heldBytes_ += uint64_t(data.bricks->minmax.size()) * sizeof(float) +
                       uint64_t(data.bricks->brickCount()) * sizeof(int32_t); // and the visible flags below
         st.brickGridSeconds = secondsSince(t);
-        std::lock_guard lock(countsMutex_);
-        ++counts_.brickGrids;
+        counts_.add(&PreprocessCounts::brickGrids);
     }
     if (!data.classification.update(*data.bricks, tf, st)) return;
     // As int32, so that the march's lanes gather it.
     data.brickVisible.assign(data.classification.visible.begin(), data.classification.visible.end());
-    std::lock_guard lock(countsMutex_);
-    ++counts_.brickClassifications;
+    counts_.add(&PreprocessCounts::brickClassifications);
 }
 
 Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
@@ -187,11 +180,8 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     DataSet &data = dataSet(quality.mipLevel, setup.cubic, st);
     if (quality.emptySpaceSkipping) classify(data, quality.mipLevel, tf, st);
     const FrameTables::Rebuilt rebuilt = tables_.update(tf, setup, st);
-    {
-        std::lock_guard lock(countsMutex_);
-        counts_.tfTables += rebuilt.tfTable;
-        counts_.preintegrationTables += rebuilt.preintegration;
-    }
+    counts_.add(&PreprocessCounts::tfTables, rebuilt.tfTable);
+    counts_.add(&PreprocessCounts::preintegrationTables, rebuilt.preintegration);
 
     // The set-up as the march reads it.
     cpu::FrameParams p{};

@@ -84,8 +84,7 @@ class CpuRenderer : public FrameRenderer {
     std::mutex mutex_;
     std::map<std::pair<int, bool>, DataSet> dataSets_; // by (mip level, cubic)
     FrameTables tables_;
-    PreprocessCounts counts_;
-    mutable std::mutex countsMutex_;
+    PreprocessCounter counts_;
     std::atomic<uint64_t> heldBytes_{0};
 };
 

@@ -95,10 +95,7 @@ std::string OpenClRenderer::description() const { return "opencl: " + cl_->devic
 
 int OpenClRenderer::bandRows() const { return int(kGroupEdge); }
 
-PreprocessCounts OpenClRenderer::preprocessCounts() const {
-    std::lock_guard lock(countsMutex_);
-    return counts_;
-}
+PreprocessCounts OpenClRenderer::preprocessCounts() const { return counts_.get(); }
 
 OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderStats &st) {
     const auto key = std::make_pair(level, cubic);
@@ -110,8 +107,7 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
     const Vec3i dims = pyramid_.dims(level);
     if (pyramid_.levelsBuilt() != levelsBefore) {
         st.mipSeconds = secondsSince(t);
-        std::lock_guard lock(countsMutex_);
-        counts_.mipLevels += pyramid_.levelsBuilt() - levelsBefore;
+        counts_.add(&PreprocessCounts::mipLevels, pyramid_.levelsBuilt() - levelsBefore);
     }
 
     DataSet data;
@@ -142,8 +138,7 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
             data.buffer = upload(*cl_, padded, "B-spline coefficients of " + volume_->name);
         }
         st.coefficientSeconds = secondsSince(t);
-        std::lock_guard lock(countsMutex_);
-        ++counts_.coefficientVolumes;
+        counts_.add(&PreprocessCounts::coefficientVolumes);
     }
     return dataSets_.emplace(key, std::move(data)).first->second;
 }
@@ -180,13 +175,11 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
         else
             data.bricks = buildMinMaxBricks(pyramid_.level(data.level), options_.brickSize, 1);
         st.brickGridSeconds = secondsSince(t);
-        std::lock_guard lock(countsMutex_);
-        ++counts_.brickGrids;
+        counts_.add(&PreprocessCounts::brickGrids);
     }
     if (!data.classification.update(*data.bricks, tf, st)) return;
     data.brickVisible = upload(*cl_, data.classification.visible, "the brick classification");
-    std::lock_guard lock(countsMutex_);
-    ++counts_.brickClassifications;
+    counts_.add(&PreprocessCounts::brickClassifications);
 }
 
 Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
@@ -219,11 +212,8 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
         preLocator_ = upload(*cl_, table.locator, "the pre-integration locator");
         st.preintegrationSeconds += secondsSince(t);
     }
-    {
-        std::lock_guard lock(countsMutex_);
-        counts_.tfTables += rebuilt.tfTable;
-        counts_.preintegrationTables += rebuilt.preintegration;
-    }
+    counts_.add(&PreprocessCounts::tfTables, rebuilt.tfTable);
+    counts_.add(&PreprocessCounts::preintegrationTables, rebuilt.preintegration);
 
     // The set-up as the kernel reads it.
     RayCastParams p{};

@@ -83,8 +83,7 @@ class OpenClRenderer : public FrameRenderer {
     FrameTables tables_;              // on the host; uploaded into the buffers below when rebuilt
     cl::Buffer tfTable_;
     cl::Buffer preRgba_, preNodes_, preLocator_;
-    PreprocessCounts counts_;
-    mutable std::mutex countsMutex_;
+    PreprocessCounter counts_;
 };
 
 } // namespace volcast
