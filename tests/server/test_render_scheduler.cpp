@@ -5,6 +5,7 @@
 // frame, preparation in the background, a fair share between dragging sessions, and the
 // slot's state table (every transition reachable, none other taken).
 
+#include "renderer/make_frame_renderer.hpp"
 #include "renderer/model/synthetic.hpp"
 #include "server/render_scheduler.hpp"
 #include "slow_renderer.hpp"
@@ -554,6 +555,76 @@ TEST(RenderScheduler, UnitsStayNearTheirBudgetWhenTheQualityChangesAndTheTopRows
     // planned at the linear cost, then one unit took the dense half: ~400 ms.
     EXPECT_LE(longest, 2 * unitMs) << unitsModelledMs.size() << " units; longest on the clock "
                                    << scheduler.longestUnitMs() << " ms";
+}
+
+// Draws with another renderer and records the window of every request it is given; what
+// the scheduler reads of the renderer (windows cheap or not, the band's rows) is the other's.
+class WindowRecorder : public FrameRenderer {
+  public:
+    explicit WindowRecorder(std::unique_ptr<FrameRenderer> inner) : inner_(std::move(inner)) {}
+    Image render(const FrameRequest &request, RenderStats *stats = nullptr) override {
+        {
+            std::lock_guard lock(mutex_);
+            const int gridWidth = raysForScale(request.width, request.quality.imageScale);
+            const int gridHeight = raysForScale(request.height, request.quality.imageScale);
+            windows_.push_back({request.window ? *request.window : RayWindow{0, 0, gridWidth, gridHeight}, gridWidth,
+                                gridHeight});
+        }
+        return inner_->render(request, stats);
+    }
+    bool rendersWindowsCheaply() const override { return inner_->rendersWindowsCheaply(); }
+    int bandRows() const override { return inner_->bandRows(); }
+    std::string description() const override { return inner_->description(); }
+    PreprocessCounts preprocessCounts() const override { return inner_->preprocessCounts(); }
+    const Volume &volume() const override { return inner_->volume(); }
+    struct Cast {
+        RayWindow window;
+        int gridWidth, gridHeight;   // the frame's whole ray grid
+    };
+    std::vector<Cast> casts() const {
+        std::lock_guard lock(mutex_);
+        return windows_;
+    }
+
+  private:
+    std::unique_ptr<FrameRenderer> inner_;
+    mutable std::mutex mutex_;
+    std::vector<Cast> windows_;
+};
+
+// The promise behind "interactive frames wait at most one unit": on --device opencl as on the
+// native path, a unit casts the rays of its own cells, in bands of the renderer's bandRows(),
+// and never a whole pass. The renderer is the one the server makes (makeFrameRenderer on the
+// OpenCL device, PoCL here); a wrapper around it once hid its windows and bands, and every
+// unit then cast the whole frame.
+TEST(RenderScheduler, OnOpenClAUnitCastsItsOwnBandsNotTheWholePass) {
+    Metrics metrics;
+    const auto volume = smallVolume();
+    auto recorder = std::make_shared<WindowRecorder>(makeFrameRenderer(DeviceChoice::parse("opencl"), volume));
+    ASSERT_TRUE(recorder->rendersWindowsCheaply()) << recorder->description();
+    const int bandRows = recorder->bandRows();
+    ASSERT_GT(bandRows, 1) << "the OpenCL renderer's work-groups are several rows high";
+    // A 1 ms budget: no 96² level of the ladder fits one unit on PoCL, so each is cut into
+    // units of a few bands (at most twice the previous unit's cells, cellsForBudget).
+    RenderScheduler scheduler(metrics, options(1));
+    Session s(scheduler, recorder, 1);
+    const int size = 96;
+    scheduler.submit(s.slot, s.view(1, 0.3, size, ladderFor(0.5)));
+    ASSERT_TRUE(s.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 60000)) << "no final frame";
+    scheduler.stop();
+    const auto casts = recorder->casts();
+    size_t partial = 0;
+    for (const auto &[w, gridWidth, gridHeight] : casts) {
+        // Every window is whole bands of its frame's grid: it starts on a band and ends on
+        // one, or at the grid's bottom edge.
+        EXPECT_EQ(w.y % bandRows, 0) << "a window starting at row " << w.y;
+        if (w.y + w.height != gridHeight) {
+            EXPECT_EQ(w.height % bandRows, 0) << "a window of " << w.height << " rows";
+        }
+        if (int64_t(w.width) * w.height * 2 < int64_t(gridWidth) * gridHeight) ++partial;
+    }
+    // Most requests are a small part of their frame; behind the wrapper, none was.
+    EXPECT_GT(partial, casts.size() / 2) << partial << " of " << casts.size() << " requests were under half their frame";
 }
 
 // ---- The slot's life ------------------------------------------------------------------------
