@@ -435,13 +435,11 @@ RayPick ReferenceRenderer::pick(const Ray &ray, std::span<const ClipPlane> clipP
     return out;
 }
 
-RayIntegral ReferenceRenderer::emission(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats,
-                                        std::optional<double> markDepth, std::optional<double> *markT) const {
-    const Vec3d p0 = placement_.indexFromWorld(ray.origin);
-    const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
-
-    // Split points: the knot planes of the grid (integer index coordinates), or for an
-    // analytic field pieces of a quarter voxel, short enough for a degree-9 fit.
+// Where a ray from index-space point p0 along dq is cut between t0 and t1, sorted: the knot
+// planes of the grid (integer index coordinates), or for an analytic field pieces of a
+// quarter voxel, short enough for a degree-9 fit. Between two cuts the reconstruction is one
+// polynomial.
+std::vector<double> ReferenceRenderer::splitPoints(const Vec3d &p0, const Vec3d &dq, double t0, double t1) const {
     std::vector<double> splits{t0, t1};
     if (reconstruction_ == Reconstruction::Analytic) {
         const double maxRate = std::max({std::fabs(dq.x), std::fabs(dq.y), std::fabs(dq.z)});
@@ -458,6 +456,15 @@ RayIntegral ReferenceRenderer::emission(const Ray &ray, double t0, double t1, do
         }
     }
     std::sort(splits.begin(), splits.end());
+    return splits;
+}
+
+RayIntegral ReferenceRenderer::emission(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats,
+                                        std::optional<double> markDepth, std::optional<double> *markT) const {
+    const Vec3d p0 = placement_.indexFromWorld(ray.origin);
+    const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
+
+    const std::vector<double> splits = splitPoints(p0, dq, t0, t1);
 
     RayIntegrator integrator(tf_, opacityUnit_, tolerance);
     integrator.setRayLength(t1 - t0);
@@ -548,22 +555,7 @@ RayIntegral ReferenceRenderer::project(const Ray &ray, double t0, double t1, dou
                                        ReferenceStats *stats, double *where) const {
     const Vec3d p0 = placement_.indexFromWorld(ray.origin);
     const Vec3d dq = placement_.indexFromWorldDir(ray.dir);
-    std::vector<double> splits{t0, t1};
-    if (reconstruction_ == Reconstruction::Analytic) {
-        const double maxRate = std::max({std::fabs(dq.x), std::fabs(dq.y), std::fabs(dq.z)});
-        const double dt = 0.25 / maxRate;
-        for (double t = t0 + dt; t < t1; t += dt) splits.push_back(t);
-    } else {
-        for (int a = 0; a < 3; ++a) {
-            if (dq[a] == 0) continue;
-            const double pa = p0[a] + t0 * dq[a], pb = p0[a] + t1 * dq[a];
-            for (double k = std::ceil(std::min(pa, pb)); k <= std::floor(std::max(pa, pb)); k += 1) {
-                const double t = (k - p0[a]) / dq[a];
-                if (t > t0 && t < t1) splits.push_back(t);
-            }
-        }
-    }
-    std::sort(splits.begin(), splits.end());
+    const std::vector<double> splits = splitPoints(p0, dq, t0, t1);
 
     // Work on s·v so that the minimum is the maximum of −v.
     const double sign = compositing_ == Compositing::Maximum ? 1.0 : -1.0;

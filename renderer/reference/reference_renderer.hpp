@@ -22,6 +22,7 @@
 #include <memory>
 #include <optional>
 #include <span>
+#include <vector>
 
 namespace volcast {
 
@@ -98,6 +99,7 @@ class ReferenceRenderer {
 
   private:
     double valueAtIndex(const Vec3d &indexPos) const;
+    std::vector<double> splitPoints(const Vec3d &p0, const Vec3d &dq, double t0, double t1) const;
     RayIntegral project(const Ray &ray, double t0, double t1, double tolerance, ReferenceStats *stats,
                         double *where = nullptr) const;
     // Emission–absorption on [t0, t1]; with markDepth, *markT gets where the optical depth
