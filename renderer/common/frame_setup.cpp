@@ -76,7 +76,6 @@ FrameSetup setUpFrame(const Volume &volume, const FrameRequest &request, int max
     s.quality = compositedQuality(request.quality);
     const Quality &q = s.quality;
     s.use = frameFeatures(q, !request.clipPlanes.empty());
-    s.cubic = s.use.cubic;
     s.features = featureNames(s.use);
 
     // The ray grid, the window of it cast, and whether the grid is upsampled to the frame.

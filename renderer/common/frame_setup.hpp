@@ -38,7 +38,6 @@ struct FrameFeatures {
 struct FrameSetup {
     Quality quality;                // compositedQuality(request.quality): the switches in use
     FrameFeatures use;              // the same, as the march branches on them
-    bool cubic = false;             // quality.interpolation == Cubic
     std::string features;           // featureNames(use): "JITTER CLIP_PLANES …"
     RenderStats stats;              // what the set-up knows already: stepUsed, stepRaised, raysWide, raysHigh
 

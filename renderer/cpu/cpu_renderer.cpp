@@ -177,7 +177,7 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     st.buildOptions = setup.features;
 
     std::lock_guard frameLock(mutex_);
-    DataSet &data = dataSet(quality.mipLevel, setup.cubic, st);
+    DataSet &data = dataSet(quality.mipLevel, setup.use.cubic, st);
     if (quality.emptySpaceSkipping) classify(data, quality.mipLevel, tf, st);
     const FrameTables::Rebuilt rebuilt = tables_.update(tf, setup, st);
     counts_.add(&PreprocessCounts::tfTables, rebuilt.tfTable);
@@ -199,8 +199,8 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     }
     // Cubic: the padded coefficients; trilinear: the level where it lies. dataSet and
     // padMirror checked that the indices (byte offsets, narrow) fit int32.
-    p.voxels = setup.cubic ? data.padded.data() : data.floats;
-    const int pad = setup.cubic ? 3 : 0;
+    p.voxels = setup.use.cubic ? data.padded.data() : data.floats;
+    const int pad = setup.use.cubic ? 3 : 0;
     if (data.narrow) {
         p.narrowVoxels = data.narrow;
         p.narrowBytes = data.width.bytes;

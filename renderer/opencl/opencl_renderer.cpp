@@ -189,7 +189,7 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
 
     std::lock_guard frameLock(mutex_);
     RenderStats st = setup.stats;
-    DataSet &data = dataSet(quality.mipLevel, setup.cubic, st);
+    DataSet &data = dataSet(quality.mipLevel, setup.use.cubic, st);
     st.buildOptions = buildOptions(quality, setup.clipPlaneCount > 0, data.width.bytes);
     const auto built = cl_->program(kRaycastKernelSource, st.buildOptions);
     st.kernelBuildSeconds = built.buildSeconds;
@@ -247,7 +247,7 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
         // Arguments in the order of the kernel's signature for this feature set.
         cl::Kernel kernel(built.program, "raycast");
         cl_uint arg = 0;
-        if (setup.cubic && cubicFromImage()) kernel.setArg(arg++, data.image);
+        if (setup.use.cubic && cubicFromImage()) kernel.setArg(arg++, data.image);
         else kernel.setArg(arg++, data.buffer);
         kernel.setArg(arg++, tfTable_);
         if (quality.preintegrated) {
