@@ -115,13 +115,24 @@ struct Client::Impl {
     }
 };
 
-Client::Client(const std::string &host, uint16_t port, const std::string &path, const std::string &origin)
+Client::Client(const std::string &host, uint16_t port, const std::string &path, const std::string &origin,
+               int receiveBufferBytes)
     : impl_(std::make_unique<Impl>()) {
     try {
         tcp::resolver resolver(impl_->ioc);
         auto &layer = beast::get_lowest_layer(impl_->ws);
         layer.expires_after(std::chrono::seconds(10));
-        layer.connect(resolver.resolve(host, std::to_string(port)));
+        const auto endpoints = resolver.resolve(host, std::to_string(port));
+        if (receiveBufferBytes > 0) {
+            // One endpoint, opened here: connecting to a range would close and reopen the
+            // socket, losing the option.
+            const tcp::endpoint endpoint = *endpoints.begin();
+            layer.socket().open(endpoint.protocol());
+            layer.socket().set_option(net::socket_base::receive_buffer_size(receiveBufferBytes));
+            layer.connect(endpoint);
+        } else {
+            layer.connect(endpoints);
+        }
         layer.socket().set_option(tcp::no_delay(true));
         impl_->ws.set_option(websocket::stream_base::decorator([origin](websocket::request_type &req) {
             req.set(beast::http::field::user_agent, "volcast-client/0.1.0");

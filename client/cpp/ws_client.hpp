@@ -47,7 +47,12 @@ class Client {
   public:
     // Connects and completes the WebSocket handshake; throws std::runtime_error naming the
     // host, port and what failed. `origin` is sent as the Origin header when not empty.
-    Client(const std::string &host, uint16_t port, const std::string &path = "/ws", const std::string &origin = "");
+    // `receiveBufferBytes` > 0 caps the socket's receive buffer (SO_RCVBUF, set before the
+    // connection, so that the window the kernel offers stays that small): a paused client then
+    // backs the server's writes up after that much, as a slow link would, instead of after the
+    // megabytes loopback buffers grow to.
+    Client(const std::string &host, uint16_t port, const std::string &path = "/ws", const std::string &origin = "",
+           int receiveBufferBytes = 0);
     ~Client();
     Client(const Client &) = delete;
     Client &operator=(const Client &) = delete;

@@ -41,8 +41,8 @@ inline const protocol::ProtocolError *asError(const client::Message &m) {
 // A client on loopback `port` that has said hello (request id 1) as `clientName`; the test
 // fails if the answer is not the server's hello.
 inline std::unique_ptr<client::Client> helloClient(uint16_t port, const std::string &clientName,
-                                                   std::chrono::milliseconds timeout) {
-    auto c = std::make_unique<client::Client>("127.0.0.1", port);
+                                                   std::chrono::milliseconds timeout, int receiveBufferBytes = 0) {
+    auto c = std::make_unique<client::Client>("127.0.0.1", port, "/ws", "", receiveBufferBytes);
     c->sendText(nlohmann::json{{"type", "hello"}, {"id", 1}, {"protocol", 1}, {"client", clientName}}.dump());
     const client::Message hello = client::waitForReply(*c, 1, timeout);
     EXPECT_TRUE(hello.decoded && std::holds_alternative<protocol::ServerHello>(*hello.decoded)) << hello.text;
