@@ -321,10 +321,13 @@ TEST(RenderScheduler, DraggingSessionsShareTheRendererFairly) {
 
 // Interactive frames are shared by count, so a dragging session's next frame waits for one
 // frame of each other dragging session: the interactive level is chosen to fit the session's
-// share of the target, not the whole target. At 0.02 ms a ray on a 64² view the quarter-size
-// levels take 5.1 ms and the half-size ones 20.5 ms: a session alone can afford half size
-// within its render share of 40 ms (32 ms), four sessions at once only quarter size (4 × 20.5
-// ms would keep each waiting 82 ms for its next frame).
+// share of the target, not the whole target. At 0.012 ms a ray on a 64² view the quarter-size
+// levels take 3.1 ms, the half-size ones 12.3 ms and full size 49 ms: a session alone can
+// afford half size within its render share of 40 ms (32 ms), four sessions at once only
+// quarter size (a share of 8 ms each; 4 × 12.3 ms would keep each waiting 49 ms for its next
+// frame). A loaded machine wakes the renderer's sleeps late, so levels measure slower than
+// their rays: the margins that can be eaten so (half size alone, 20 ms; quarter size among
+// four, 5 ms) are the wide ones, and the narrow one (half size among four, 4 ms over) only widens.
 TEST(RenderScheduler, EachDraggingSessionChoosesItsLevelFromItsShareOfTheTarget) {
     const auto drag = [](int sessionCount, std::vector<double> &scales, std::vector<double> &waits) {
         Metrics metrics;
@@ -332,7 +335,7 @@ TEST(RenderScheduler, EachDraggingSessionChoosesItsLevelFromItsShareOfTheTarget)
         std::vector<std::unique_ptr<Session>> sessions;
         for (int i = 0; i < sessionCount; ++i) {
             sessions.push_back(std::make_unique<Session>(
-                scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), uint64_t(i + 1)));
+                scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.012), uint64_t(i + 1)));
             scheduler.setInteracting(sessions.back()->slot, true);
         }
         std::mutex mutex;
@@ -359,8 +362,8 @@ TEST(RenderScheduler, EachDraggingSessionChoosesItsLevelFromItsShareOfTheTarget)
     // predicted within 40 / 4 ms once measured).
     EXPECT_GE(share(aloneScales, 0.5), 0.5) << "a session alone did not afford half size within 40 ms";
     EXPECT_GE(share(fourScales, 0.25), 0.9) << "four dragging sessions each chose levels beyond their share";
-    // Four frames of 5.1 ms and their scheduling, against 4 × 20.5 ms had each taken the whole target.
-    EXPECT_LT(percentile(fourWaits, 0.5), 60) << "four sessions waited as long as for four half-size frames";
+    // Four frames of 3.1 ms and their scheduling, against 4 × 12.3 ms had each taken the whole target.
+    EXPECT_LT(percentile(fourWaits, 0.5), 45) << "four sessions waited as long as for four half-size frames";
 }
 
 TEST(RenderScheduler, PreparationRunsInTheBackgroundWithProgressAndOtherSessionsCarryOn) {
