@@ -56,6 +56,22 @@ pageUnderTest({
 
 const volumeName = () => `dicomweb:pacs/${series.studyUid}/${series.seriesUid}`;
 
+// Waits (up to 120 s) until page `p` shows the series, or its panel reports an error. Either
+// way short of the series shown fails saying what the page knew: the panel's progress line,
+// the progress messages, the connection's state and what is open instead.
+async function waitForSeriesOpen(p) {
+  await p.waitForFunction((n) => window.volcast.session.volume?.name === n ||
+      document.querySelector("#study-open-status[data-kind='error']") !== null,
+    volumeName(), { timeout: 120000 }).catch(() => {});   // the assertion below says why
+  const state = await p.evaluate(() => ({
+    open: window.volcast.session.volume?.name ?? null,
+    panel: document.getElementById("study-open-status")?.textContent ?? null,
+    connection: document.getElementById("connection")?.dataset.state ?? null,
+    progress: window.progressLog ?? null,
+  }));
+  assert.equal(state.open, volumeName(), `the series did not open within 120 s: ${JSON.stringify(state)}`);
+}
+
 async function search({ name = "", id = "", date = "", modality = "" } = {}) {
   await page.fill("#study-patient-name", name);
   await page.fill("#study-patient-id", id);
@@ -108,7 +124,7 @@ test("a search by patient ID, date range and modality finds the study, which lis
 test("a click on the series retrieves it with progress, opens it, and draws a frame", async () => {
   const before = await shownSeq(page);
   await page.click("#study-list button.series");
-  await page.waitForFunction((n) => window.volcast.session.volume?.name === n, volumeName(), { timeout: 120000 });
+  await waitForSeriesOpen(page);
   const frame = await waitForFinal(page, { afterSeq: before });
   assert.ok(frame.final);
   const summary = await canvasSummary(page);
@@ -134,7 +150,7 @@ test("the view link reopens the DICOMweb series in a new page", async () => {
   assert.equal(new URL(link).searchParams.get("volume"), null, "a study's UIDs stay out of the query string (server logs)");
   const other = await openPage(page.context(), link);
   try {
-    await other.page.waitForFunction((n) => window.volcast.session.volume?.name === n, volumeName(), { timeout: 120000 });
+    await waitForSeriesOpen(other.page);
     await waitForFinal(other.page);
     assert.deepEqual(other.problems, []);
   } finally {
