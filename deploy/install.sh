@@ -8,8 +8,10 @@ packages=(
   cmake g++ make pkg-config git ca-certificates
   # Server: Boost.Beast/Asio (header-only in 1.81)
   libboost1.81-dev
-  # Images in and out (EXR, TIFF, PNG, JPEG)
+  # Image files in and out (EXR, TIFF, PNG, JPEG)
   libopenimageio-dev
+  # Frames on the wire: JPEG through libjpeg-turbo's TurboJPEG API, PNG through libpng
+  libturbojpeg0-dev libpng-dev
   # Volume formats: ITK image IO (NRRD, MetaImage, NIfTI, DICOM through GDCM)
   libinsighttoolkit5-dev
   # JSON, command line, logging

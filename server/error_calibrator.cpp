@@ -4,9 +4,8 @@
 #include "renderer/reference/reference_renderer.hpp"
 #include "server/frame_encoder.hpp"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
 #include <spdlog/spdlog.h>
+#include <turbojpeg.h>
 
 #include <algorithm>
 #include <chrono>
@@ -22,27 +21,26 @@ using Clock = std::chrono::steady_clock;
 constexpr size_t kMaxCubicReferenceVoxels = size_t(256) * 256 * 256;
 } // namespace
 
-Rgb8 toRgb8(const Image &image) {
-    Rgb8 out{image.width, image.height, std::vector<uint8_t>(size_t(image.width) * size_t(image.height) * 3)};
-    for (size_t p = 0, n = size_t(image.width) * size_t(image.height); p < n; ++p)
-        for (size_t c = 0; c < 3; ++c)
-            out.rgb[p * 3 + c] = uint8_t(std::lround(std::clamp(image.rgba[p * 4 + c], 0.0f, 1.0f) * 255.0f));
-    return out;
-}
+Rgb8 toRgb8(const Image &image) { return {image.width, image.height, toRgb8OverBlack(image)}; }
 
 Rgb8 decodeJpegRgb8(const std::vector<uint8_t> &jpeg) {
-    // In memory through an IOProxy, as frame_encoder.cpp writes them (docs/platform.md).
-    OIIO::Filesystem::IOMemReader reader(jpeg.data(), jpeg.size());
-    OIIO::ImageSpec config;
-    OIIO::Filesystem::IOProxy *proxy = &reader;
-    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-    auto in = OIIO::ImageInput::open("frame.jpg", &config, &reader);
-    if (!in) throw std::runtime_error("decoding a frame: " + OIIO::geterror());
-    const OIIO::ImageSpec &spec = in->spec();
-    if (spec.nchannels != 3) throw std::runtime_error("decoding a frame: not RGB");
-    Rgb8 out{spec.width, spec.height, std::vector<uint8_t>(size_t(spec.width) * size_t(spec.height) * 3)};
-    if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, out.rgb.data()))
-        throw std::runtime_error("decoding a frame: " + in->geterror());
+    // The frames frame_encoder.cpp wrote, decoded as a browser would: fancy upsampling and the
+    // accurate integer inverse DCT, TurboJPEG's defaults. One decompressor per thread, kept.
+    struct Decompressor {
+        tjhandle handle = tjInitDecompress();
+        ~Decompressor() {
+            if (handle) tjDestroy(handle);
+        }
+    };
+    thread_local Decompressor d;
+    if (!d.handle) throw std::runtime_error("decoding a frame: " + std::string(tjGetErrorStr2(nullptr)));
+    int width = 0, height = 0, subsampling = 0, colourSpace = 0;
+    if (tjDecompressHeader3(d.handle, jpeg.data(), jpeg.size(), &width, &height, &subsampling, &colourSpace) != 0)
+        throw std::runtime_error("decoding a frame: " + std::string(tjGetErrorStr2(d.handle)));
+    Rgb8 out{width, height, std::vector<uint8_t>(size_t(width) * size_t(height) * 3)};
+    if (tjDecompress2(d.handle, jpeg.data(), jpeg.size(), out.rgb.data(), width, 0, height, TJPF_RGB,
+                      TJFLAG_ACCURATEDCT) != 0)
+        throw std::runtime_error("decoding a frame: " + std::string(tjGetErrorStr2(d.handle)));
     return out;
 }
 

@@ -44,7 +44,7 @@ struct Rgb8 {
     std::vector<uint8_t> rgb;
 };
 Rgb8 toRgb8(const Image &image);
-// A delivered JPEG frame decoded to 8-bit RGB; throws std::runtime_error with OIIO's message.
+// A delivered JPEG frame decoded to 8-bit RGB (TurboJPEG); throws std::runtime_error with its message.
 Rgb8 decodeJpegRgb8(const std::vector<uint8_t> &jpeg);
 // RMSE over the channels in [0, 1] units; throws std::invalid_argument for different sizes.
 double rmseRgb8(const Rgb8 &a, const Rgb8 &b);

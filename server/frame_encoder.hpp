@@ -1,6 +1,8 @@
 #pragma once
-// Frames encoded in memory with OpenImageIO (docs/platform.md: ImageOutput::create with an
-// IOVecOutput proxy, no disk). The renderer's images are premultiplied float RGBA.
+// Frames encoded in memory for the wire: JPEG through libjpeg-turbo's TurboJPEG API (one
+// compressor kept per thread), PNG through libpng at zlib level 1 with the Sub filter. Image
+// files (volcast-render's EXR, TIFF, PNG) go through OpenImageIO instead, in the renderer.
+// The renderer's images are premultiplied float RGBA.
 //  - JPEG has no alpha: the premultiplied colour is the image composited over black, as
 //    volcast-render's .png writer does (renderer/model/image.cpp).
 //  - PNG (the final frame) is lossless RGBA: protocol/README.md's "premultiplied RGBA as 8-bit
@@ -10,6 +12,7 @@
 #include "renderer/model/image.hpp"
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace volcast::server {
@@ -19,7 +22,10 @@ std::vector<uint8_t> toRgb8OverBlack(const Image &image);
 // 8-bit straight RGBA: A = round(a · 255), C = round(min(c / a, 1) · 255) (0 where a = 0).
 std::vector<uint8_t> toStraightRgba8(const Image &image);
 
-// Throws std::runtime_error with OIIO's message on failure.
+// The libraries that encode, with their versions (for benchmark records).
+std::string encoderDescription();
+
+// Throw std::runtime_error with the library's message on failure.
 std::vector<uint8_t> encodeJpeg(const Image &image, int quality);
 // zlib level 1: ~5x faster than the default for ~20 % more bytes (docs/platform.md).
 std::vector<uint8_t> encodePng(const Image &image, int compressionLevel = 1);

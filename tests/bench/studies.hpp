@@ -60,6 +60,11 @@ void writeSyntheticCt(const std::filesystem::path &header, Vec3i dims);
 // one JSON line: the samples' bytes, the renderer's, resident and peak memory after each step.
 void memoryStudy(const std::filesystem::path &file, int size);
 
+// Renders `scan` on the native path at each size (the final frame, and the interactive one at
+// half scale, upsampled) and times the server's encoders on them, `rounds` interleaved rounds
+// after one untimed: JPEG at qualities 50 and 80, PNG. One JSON line per size on stdout.
+void encodeStudy(const std::filesystem::path &scan, const std::vector<std::pair<int, int>> &sizes, int rounds);
+
 // "512x512,800x600" → {{512, 512}, {800, 600}}; throws std::invalid_argument naming the part.
 std::vector<std::pair<int, int>> parseSizes(const std::string &text);
 

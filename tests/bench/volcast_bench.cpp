@@ -4,6 +4,7 @@
 //   volcast-bench all --out out/bench
 //   volcast-bench peers --volume phantom.nrrd --size 512x512,800x600 --frames 5
 //   volcast-bench byos --out out/bench      # needs Debian's orthanc and orthanc-dicomweb
+//   volcast-bench encode --sizes 512x512,1920x1080
 
 #include "renderer/make_frame_renderer.hpp"
 #include "tests/bench/byos.hpp"
@@ -93,6 +94,16 @@ int main(int argc, char **argv) {
     memory->add_option("--write-ct", writeCt, "Write a CT-like int16 NRRD of WxHxD to --volume instead, and stop");
     memory->add_option("--size", memorySize, "Square frame size")->check(CLI::Range(1, 8192))->capture_default_str();
 
+    std::filesystem::path encodeVolume = std::filesystem::path(VOLCAST_DATA_DIR) / "bonsai.nhdr";
+    std::string encodeSizes = "512x512,1920x1080,2048x1536";
+    int encodeRounds = 5;
+    auto *encode = app.add_subcommand("encode", "Frame encoding beside rendering: JPEG and PNG at viewport sizes");
+    encode->add_option("--volume", encodeVolume, "Volume file to draw")->capture_default_str();
+    encode->add_option("--sizes", encodeSizes, "Sizes, WxH,...")->capture_default_str();
+    encode->add_option("--rounds", encodeRounds, "Timed rounds, each encoding every size once in turn")
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
+
     ByosOptions byos;
     auto *byosCommand = app.add_subcommand(
         "byos", "Bring your own scan: first frame of a DICOMweb series against Orthanc serving it, and of an "
@@ -110,6 +121,16 @@ int main(int argc, char **argv) {
         spdlog::set_level(spdlog::level::warn);   // the servers' info lines would bury the progress
         try {
             byosStudy(byos);
+            return 0;
+        } catch (const std::exception &e) {
+            std::cerr << "volcast-bench: " << e.what() << std::endl;
+            return 1;
+        }
+    }
+    if (encode->parsed()) {
+        spdlog::set_default_logger(spdlog::stderr_color_mt("volcast-bench"));
+        try {
+            encodeStudy(encodeVolume, parseSizes(encodeSizes), encodeRounds);
             return 0;
         } catch (const std::exception &e) {
             std::cerr << "volcast-bench: " << e.what() << std::endl;

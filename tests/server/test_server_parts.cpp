@@ -1,5 +1,5 @@
-// The server's small parts on their own: the quality ladder and its policy, MIME types and
-// volume-file extensions.
+// The server's small parts on their own: the quality ladder and its policy, the frame
+// encoders, MIME types and volume-file extensions.
 
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/model/synthetic.hpp"
@@ -9,11 +9,14 @@
 #include "server/quality_ladder.hpp"
 #include "server/static_files.hpp"
 #include "server/volume_registry.hpp"
+#include "tests/server/png_decode.hpp"
 
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <cmath>
+#include <limits>
+#include <random>
 #include <thread>
 
 namespace {
@@ -341,6 +344,103 @@ TEST(VolumeRegistry, KnownExtensions) {
     for (const char *name : {"a.nrrd", "ct/b.NHDR", "c.mha", "d.mhd", "e.nii", "f.nii.gz"})
         EXPECT_TRUE(hasVolumeExtension(name)) << name;
     for (const char *name : {"a.raw", "b.gz", ".nrrd", "c.txt"}) EXPECT_FALSE(hasVolumeExtension(name)) << name;
+}
+
+// ---- frame encoding ------------------------------------------------------------------
+
+// An image with every case the conversions meet: alpha 0, 1 and between, colour above alpha
+// (a renderer's rounding), negative and over-range values, NaN; odd sizes (JPEG's 4:2:0
+// chroma halves them).
+Image encoderTestImage(int width, int height) {
+    Image image(width, height);
+    std::mt19937 random(7);
+    std::uniform_real_distribution<float> any(-0.1f, 1.1f);
+    for (size_t p = 0; p < size_t(width) * size_t(height); ++p) {
+        const float a = p % 7 == 0 ? 0.0f : p % 5 == 0 ? 1.0f : std::clamp(any(random), 0.0f, 1.0f);
+        for (size_t c = 0; c < 3; ++c) image.rgba[p * 4 + c] = a * any(random);
+        image.rgba[p * 4 + 3] = a;
+    }
+    float *last = image.pixel(width - 1, height - 1);
+    last[0] = std::numeric_limits<float>::quiet_NaN();
+    last[1] = 2.0f;
+    last[3] = 0.5f;
+    return image;
+}
+
+TEST(FrameEncoder, EightBitValuesRoundHalfAwayFromZeroAsLroundDoesAndNanIsZero) {
+    // Every 8-bit boundary: the exact halves (k + 0.5) / 255 and the floats either side.
+    std::vector<float> values;
+    for (int k = 0; k < 256; ++k) {
+        const float half = (float(k) + 0.5f) / 255.0f;
+        values.insert(values.end(), {float(k) / 255.0f, half, std::nextafter(half, 0.0f), std::nextafter(half, 2.0f)});
+    }
+    values.insert(values.end(), {-1.0f, -0.0f, 1.5f, std::numeric_limits<float>::infinity(),
+                                 -std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()});
+    Image image(int(values.size()), 1);
+    for (size_t i = 0; i < values.size(); ++i)
+        image.rgba[i * 4 + 0] = image.rgba[i * 4 + 1] = image.rgba[i * 4 + 2] = image.rgba[i * 4 + 3] = values[i];
+    const std::vector<uint8_t> rgb = toRgb8OverBlack(image);
+    for (size_t i = 0; i < values.size(); ++i) {
+        const float v = values[i];
+        const long expected = std::isnan(v) ? 0 : std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f);
+        EXPECT_EQ(int(rgb[i * 3]), int(expected)) << "value " << v;
+    }
+}
+
+TEST(FrameEncoder, PngHoldsTheStraightRgbaBytesExactly) {
+    for (const auto &[w, h] : std::vector<std::pair<int, int>>{{1, 1}, {37, 23}, {256, 3}}) {
+        const Image image = encoderTestImage(w, h);
+        int dw = 0, dh = 0, channels = 0;
+        // Decoded by OpenImageIO, a reader independent of the writer.
+        const std::vector<uint8_t> got = volcast::test::decodePng(encodePng(image), dw, dh, channels);
+        ASSERT_EQ(dw, w);
+        ASSERT_EQ(dh, h);
+        ASSERT_EQ(channels, 4);
+        EXPECT_EQ(got, toStraightRgba8(image)) << w << "x" << h;
+    }
+}
+
+TEST(FrameEncoder, JpegDecodesCloseToTheImageOverBlackAtEachLaddersQuality) {
+    // A smooth picture, as frames are: JPEG's error on it is small and falls with quality.
+    const int w = 97, h = 61;
+    Image image(w, h);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            float *p = image.pixel(x, y);
+            const float a = 0.5f + 0.5f * std::sin(0.07f * float(x)) * std::cos(0.05f * float(y));
+            p[0] = a * float(x) / float(w);
+            p[1] = a * float(y) / float(h);
+            p[2] = a * 0.5f;
+            p[3] = a;
+        }
+    const Rgb8 exact = toRgb8(image);
+    double previous = 1;
+    for (const int quality : {50, 70, 80, 95}) {
+        const Rgb8 decoded = decodeJpegRgb8(encodeJpeg(image, quality));
+        ASSERT_EQ(decoded.width, w);
+        ASSERT_EQ(decoded.height, h);
+        const double rmse = rmseRgb8(decoded, exact);
+        // Measured 0.0037-0.0094 (q 95-50) with libjpeg-turbo 2.1 here; 0.02 is twice the worst.
+        EXPECT_LT(rmse, 0.02) << "quality " << quality;
+        EXPECT_LE(rmse, previous * 1.05) << "quality " << quality << " is no closer than a lower one";
+        previous = rmse;
+    }
+}
+
+TEST(FrameEncoder, AnEmptyImageIsRefusedByName) {
+    const Image empty(0, 0);
+    try {
+        encodeJpeg(empty, 80);
+        ADD_FAILURE() << "an empty JPEG was encoded";
+    } catch (const std::runtime_error &e) {
+        EXPECT_NE(std::string(e.what()).find("empty"), std::string::npos) << e.what();
+    }
+    try {
+        encodePng(empty);
+        ADD_FAILURE() << "an empty PNG was encoded";
+    } catch (const std::runtime_error &e) {
+        EXPECT_NE(std::string(e.what()).find("empty"), std::string::npos) << e.what();
+    }
 }
 
 } // namespace
