@@ -97,11 +97,13 @@ struct PngSink {
 };
 void pngWrite(png_structp png, png_bytep data, png_size_t n) {
     auto *sink = static_cast<PngSink *>(png_get_io_ptr(png));
+    bool stored = true;
     try {
         sink->out->insert(sink->out->end(), data, data + n);
     } catch (const std::bad_alloc &) {
-        png_error(png, "out of memory");
+        stored = false;   // png_error jumps: not from inside the handler, where an exception is live
     }
+    if (!stored) png_error(png, "out of memory");
 }
 void pngFlush(png_structp) {}
 [[noreturn]] void pngError(png_structp png, png_const_charp message) {
