@@ -13,10 +13,6 @@ namespace volcast::server {
 namespace {
 using Ms = std::chrono::duration<double, std::milli>;
 constexpr double kRenderShare = 0.9;   // of the target frame time, for rendering and encoding
-// While refinements wait behind interactive frames, one unit in this many plus one is a
-// refinement's (workerLoop): a resting view's final frame takes at most about four times its
-// render time however many others drag, and a dragging frame waits at most one unit for it.
-constexpr int kInteractiveUnitsPerRefinement = 3;
 
 // Everything a level's error depends on besides the camera: volume, transfer function,
 // clip planes, the ladder and the frame size. The volume by its registry id, which is never
@@ -576,20 +572,9 @@ void RenderScheduler::workerLoop() {
         const auto now = Clock::now();
         Work work;
         auto wakeAt = Clock::time_point::max();
-        // Every session's interactive frame before anyone's refinement, but for one unit in
-        // kInteractiveUnitsPerRefinement + 1 while a refinement waits: with others dragging
-        // without a pause an interactive frame always waits, and a resting view would stay at
-        // its coarsest level for as long as they drag. A dragging frame then waits for at
-        // most one refinement unit (unitMs), as it may for a still's unit.
-        bool found = interactiveUnitsSinceRefinement_ >= kInteractiveUnitsPerRefinement &&
-                     pickWork(Kind::Refine, now, work, wakeAt);
-        if (!found)
-            found = pickWork(Kind::Interactive, now, work, wakeAt) || pickWork(Kind::Refine, now, work, wakeAt);
+        // Every session's interactive frame before anyone's refinement.
+        const bool found = pickWork(Kind::Interactive, now, work, wakeAt) || pickWork(Kind::Refine, now, work, wakeAt);
         if (found) {
-            if (work.kind == Kind::Interactive)
-                ++interactiveUnitsSinceRefinement_;
-            else
-                interactiveUnitsSinceRefinement_ = 0;
             lastServed_ = work.slot;
             rendering_ = work.job->renderer.get();
             lock.unlock();

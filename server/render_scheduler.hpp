@@ -242,9 +242,6 @@ class RenderScheduler {
     std::map<SlotId, Slot> slots_;
     SlotId nextId_ = 1;
     SlotId lastServed_ = 0;
-    // Interactive units run since the last refinement unit (workerLoop: every
-    // kInteractiveUnitsPerRefinement-th unit goes to a waiting refinement).
-    int interactiveUnitsSinceRefinement_ = 0;
     uint64_t viewSerial_ = 0;
     bool stopping_ = false;
     double longestUnitMs_ = 0;

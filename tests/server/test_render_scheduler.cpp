@@ -366,49 +366,6 @@ TEST(RenderScheduler, EachDraggingSessionChoosesItsLevelFromItsShareOfTheTarget)
     EXPECT_LT(percentile(fourWaits, 0.5), 45) << "four sessions waited as long as for four half-size frames";
 }
 
-// While others drag without a pause (a new camera as soon as each frame arrives, so an
-// interactive frame is always waiting), a resting session's view still reaches its final
-// frame: its refinement gets every fourth unit (kInteractiveUnitsPerRefinement). With
-// interactive frames always first, the resting view stayed at its first, coarsest level for
-// as long as the others dragged.
-TEST(RenderScheduler, ARestingViewReachesItsFinalFrameWhileOthersDragWithoutAPause) {
-    Metrics metrics;
-    RenderScheduler scheduler(metrics, options(20));
-    std::vector<std::unique_ptr<Session>> draggers;
-    for (int i = 0; i < 3; ++i) {
-        draggers.push_back(std::make_unique<Session>(
-            scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), uint64_t(i + 1)));
-        scheduler.setInteracting(draggers.back()->slot, true);
-    }
-    Session resting(scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), 9);
-    const auto begin = Clock::now();
-    std::mutex mutex;
-    std::vector<double> waits;
-    std::thread drag([&] {
-        dragClosedLoop(draggers, begin + std::chrono::milliseconds(4500),
-                       [&](int, Clock::time_point sent, const Session::Got &got) {
-                           std::lock_guard lock(mutex);
-                           waits.push_back(Ms(got.at - sent).count());
-                       });
-    });
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));   // the draggers' levels measured
-    const auto rested = Clock::now();
-    // 96² at 0.02 ms a ray: its final level alone is 184 ms of rays, about nine units.
-    scheduler.submit(resting.slot, resting.view(1, 0, 96, ladderFor(1)));
-    const auto final = resting.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 3500);
-    const bool stillDragging = Clock::now() < begin + std::chrono::milliseconds(4500);
-    drag.join();
-    ASSERT_TRUE(final) << "the resting view got no final frame in 3.5 s while three sessions dragged";
-    EXPECT_TRUE(stillDragging) << "the others had stopped dragging: the test did not load the scheduler";
-    // Its refinement takes a quarter of the units while others wait: about 4 × its own render
-    // time, well inside the 3 s a resting view should take at most.
-    EXPECT_LT(Ms(final->at - rested).count(), 3000);
-    // The draggers still get their frames, each waiting at most one refinement unit more.
-    std::lock_guard lock(mutex);
-    ASSERT_GT(waits.size(), 30u);
-    EXPECT_LT(percentile(waits, 0.5), 40 + 20 + 60) << "dragging frames waited too long behind the refinement";
-}
-
 TEST(RenderScheduler, PreparationRunsInTheBackgroundWithProgressAndOtherSessionsCarryOn) {
     Metrics metrics;
     RenderScheduler scheduler(metrics, options(20));
