@@ -35,6 +35,9 @@ inline uint8_t to8(float c) {
     return uint8_t(whole + int(p - float(whole) >= 0.5f));
 }
 
+// Buffers up to a 2560×1600 viewport's are kept per thread; larger ones (a still's) are let go.
+constexpr int kKeptWidth = 2560, kKeptHeight = 1600;
+
 // A buffer kept per thread between frames: a fresh one per 1080p frame (8 MB) cost more in
 // page faults and zeroing than encoding the JPEG does. Viewport-sized buffers are kept; one
 // grown for a large still is let go after it.
@@ -55,7 +58,7 @@ class Scratch {
     }
 
   private:
-    static constexpr size_t kKeptBytes = size_t(2560) * 1600 * 4;
+    static constexpr size_t kKeptBytes = size_t(kKeptWidth) * kKeptHeight * 4;
     std::unique_ptr<uint8_t[]> data_;
     size_t size_ = 0;
 };
@@ -187,7 +190,7 @@ std::vector<uint8_t> encodeJpeg(const Image &image, int quality) {
     rgbx.trim();
     if (failed) throw std::runtime_error("encoding a JPEG: " + std::string(tjGetErrorStr2(compressor.handle)));
     std::vector<uint8_t> out(compressor.out, compressor.out + bytes);
-    if (compressor.capacity > tjBufSize(2560, 1600, TJSAMP_420)) {   // as Scratch: let a still's go
+    if (compressor.capacity > tjBufSize(kKeptWidth, kKeptHeight, TJSAMP_420)) {
         tjFree(compressor.out);
         compressor.out = nullptr;
         compressor.capacity = 0;
