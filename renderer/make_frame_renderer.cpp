@@ -52,7 +52,7 @@ std::shared_ptr<OpenClContext> openContextFor(const DeviceChoice &choice, const 
     // Plain "opencl" is OpenCL's own choice, not $VOLCAST_DEVICE: the server reads that
     // variable as its --device, so it holds "opencl" itself there.
     return std::make_shared<OpenClContext>(
-        DeviceOptions{resolved.openClDevice.empty() ? "auto" : resolved.openClDevice, kernelCacheDir});
+        DeviceOptions{resolved.openClDevice.empty() ? "auto" : resolved.openClDevice, kernelCacheDir, ""});
 }
 
 bool openClGpuPresent() {

@@ -27,6 +27,11 @@
 #endif
 
 #if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+/* VC_FP_CONTRACT_OFF (a build option for diagnosis, tests/device/run-on-device.sh): the
+ * kernel as OpenCL C would be without the contraction of a·b + c it allows by default. */
+#ifdef VC_FP_CONTRACT_OFF
+#pragma OPENCL FP_CONTRACT OFF
+#endif
 #define VC_INLINE static inline
 #define VC_UINT uint
 #define VC_BOOL int

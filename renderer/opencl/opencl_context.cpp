@@ -69,6 +69,7 @@ OpenClContext::OpenClContext(const DeviceOptions &options) {
     if (!cacheDir.empty()) setenv("POCL_CACHE_DIR", cacheDir.c_str(), 1);
     if (const std::string folder = poclCacheFolder(); !folder.empty()) checkKernelCache(folder);
     const std::string wanted = lower(fromEnv(options.device, "VOLCAST_DEVICE", "auto"));
+    extraBuildOptions_ = fromEnv(options.extraBuildOptions, "VOLCAST_OPENCL_OPTIONS", "");
 
     std::vector<cl::Device> all;
     std::string seen;
@@ -144,14 +145,15 @@ OpenClContext::BuiltProgram OpenClContext::program(const std::string &source, co
     if (other.valid()) return {other.get(), 0};   // rethrows that build's error
     const auto start = std::chrono::steady_clock::now();
     cl::Program program(context_, source);
+    const std::string allOptions = extraBuildOptions_.empty() ? options : options + " " + extraBuildOptions_;
     try {
         try {
-            program.build({device_}, options.c_str());
+            program.build({device_}, allOptions.c_str());
         } catch (const cl::Error &) {
             std::string log;
             for (auto &[device, text] : program.getBuildInfo<CL_PROGRAM_BUILD_LOG>())
                 log += "\n--- build log for " + device.getInfo<CL_DEVICE_NAME>() + " ---\n" + text;
-            throw OpenClError("OpenCL program failed to build with options '" + options + "':" + log);
+            throw OpenClError("OpenCL program failed to build with options '" + allOptions + "':" + log);
         }
     } catch (...) {
         std::lock_guard lock(mutex_);

@@ -32,6 +32,10 @@ struct DeviceOptions {
     // (POCL_CACHE_DIR, else ~/.cache/pocl/kcache). The folder is created if missing and must
     // be writable: the constructor checks, and its OpenClError names the folder.
     std::string kernelCacheDir;
+    // Build options added to every program, for telling which of the liberties OpenCL C gives a
+    // device (contraction, division to 2.5 ulp, denormal flushing) a case depends on, e.g.
+    // "-cl-fp32-correctly-rounded-divide-sqrt" (docs/gpu.md). Empty: VOLCAST_OPENCL_OPTIONS.
+    std::string extraBuildOptions;
 };
 
 class OpenClContext {
@@ -54,11 +58,13 @@ class OpenClContext {
     // thread that finds its program cached is not made to wait for it.
     BuiltProgram program(const std::string &source, const std::string &options);
     size_t programsBuilt() const { return programsBuilt_; }
+    const std::string &extraBuildOptions() const { return extraBuildOptions_; }
 
   private:
     cl::Context context_;
     cl::Device device_;
     cl::CommandQueue queue_;
+    std::string extraBuildOptions_;
     std::mutex mutex_;
     // Keyed on (source, options): two kernels' sources may share an option string.
     std::map<std::pair<std::string, std::string>, cl::Program> programs_;

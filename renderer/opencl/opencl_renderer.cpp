@@ -13,6 +13,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <sstream>
 
 namespace volcast {
@@ -75,7 +76,10 @@ OpenClRenderer::OpenClRenderer(std::shared_ptr<OpenClContext> cl, const Volume &
     : OpenClRenderer(std::move(cl), std::make_shared<const Volume>(volume), options) {}
 
 bool OpenClRenderer::cubicFromImage() const {
-    if (options_.cubicFetch == CubicFetch::Auto) return cl_->isGpu();
+    if (options_.cubicFetch == CubicFetch::Auto) {
+        const char *v = std::getenv("VOLCAST_CUBIC_FETCH");
+        return v && std::string(v) == "image";
+    }
     return options_.cubicFetch == CubicFetch::Trilinear8;
 }
 

@@ -25,8 +25,11 @@
 namespace volcast {
 
 // Where the tricubic B-spline reads its 64 coefficients from: a buffer, tap by tap, or a
-// 3-D image, as 8 trilinear fetches (Sigg and Hadwiger). Auto: images on GPUs, whose
-// texture units filter for free (with ~8-bit weights), buffers elsewhere (docs/platform.md).
+// 3-D image, as 8 trilinear fetches (Sigg and Hadwiger). The fetches are filtered by the
+// device's texture unit, whose weights OpenCL leaves to the device: NVIDIA's hold 8
+// fractional bits, and the image then differs from the spline by up to 0.037 in opacity on
+// the stability cases (docs/gpu.md). Auto is therefore the buffer, on every device, unless
+// VOLCAST_CUBIC_FETCH says `image` (for measuring that difference on a device).
 enum class CubicFetch { Auto, Taps64, Trilinear8 };
 
 struct OpenClRendererOptions {

@@ -24,7 +24,7 @@ int main(int argc, char **argv) {
     spdlog::set_level(spdlog::level::err);
     try {
         std::shared_ptr<volcast::OpenClContext> cl;
-        if (backend == "opencl") cl = std::make_shared<volcast::OpenClContext>(volcast::DeviceOptions{device, ""});
+        if (backend == "opencl") cl = std::make_shared<volcast::OpenClContext>(volcast::DeviceOptions{device, "", ""});
         const volcast::stability::Backend be =
             cl ? volcast::stability::openClBackend(cl) : volcast::stability::cpuBackend();
         std::vector<volcast::stability::Row> rows;
