@@ -31,21 +31,6 @@ double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(
 constexpr size_t kGroupEdge = 8;
 size_t roundUp(int n) { return (size_t(n) + kGroupEdge - 1) / kGroupEdge * kGroupEdge; }
 
-// Coefficients padded by one before and two after on each axis with the mirror boundary,
-// so the kernel's 4×4×4 footprint around any clamped position stays inside.
-std::vector<float> padMirror(const std::vector<float> &c, Vec3i n) {
-    const Vec3i p{n.x + 3, n.y + 3, n.z + 3};
-    std::vector<float> out(size_t(p.x) * size_t(p.y) * size_t(p.z));
-    for (int k = 0; k < p.z; ++k)
-        for (int j = 0; j < p.y; ++j)
-            for (int i = 0; i < p.x; ++i) {
-                const int64_t si = mirrorIndex(i - 1, n.x), sj = mirrorIndex(j - 1, n.y), sk = mirrorIndex(k - 1, n.z);
-                out[(size_t(k) * size_t(p.y) + size_t(j)) * size_t(p.x) + size_t(i)] =
-                    c[(size_t(sk) * size_t(n.y) + size_t(sj)) * size_t(n.x) + size_t(si)];
-            }
-    return out;
-}
-
 cl::Buffer upload(OpenClContext &cl, const void *data, size_t bytes, const std::string &what) {
     try {
         return cl::Buffer(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, const_cast<void *>(data));
@@ -125,21 +110,22 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
         data.buffer = upload(*cl_, samples.isNarrow() ? static_cast<const void *>(samples.narrow) : samples.floats, bytes,
                              "volume " + volume_->name);
     } else {
-        // Prefilter on the device (the paper's Table 2), pad on the host, upload.
+        // The samples go up once as held; prefilter (the paper's Table 2) and mirror pad run
+        // on the device, and the coefficients never come back (bspline_prefilter_opencl.hpp).
         t = Clock::now();
-        const std::vector<float> coefficients = bsplinePrefilterOpenCl(*cl_, samples.toFloats().data(), dims);
-        const std::vector<float> padded = padMirror(coefficients, dims);
+        cl::Buffer padded = bsplinePaddedCoefficientsOpenCl(*cl_, samples);
         if (cubicFromImage()) {
+            const size_t px = size_t(dims.x) + 3, py = size_t(dims.y) + 3, pz = size_t(dims.z) + 3;
             try {
-                data.image = cl::Image3D(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
-                                         cl::ImageFormat(CL_R, CL_FLOAT), size_t(dims.x + 3), size_t(dims.y + 3),
-                                         size_t(dims.z + 3), 0, 0, const_cast<float *>(padded.data()));
+                data.image = cl::Image3D(cl_->context(), CL_MEM_READ_ONLY, cl::ImageFormat(CL_R, CL_FLOAT), px, py, pz);
+                cl_->queue().enqueueCopyBufferToImage(padded, data.image, 0, {0, 0, 0}, {px, py, pz});
+                cl_->queue().finish();
             } catch (const cl::Error &e) {
-                throw OpenClError("cannot upload B-spline coefficients of " + volume_->name + " as a 3-D image to " +
+                throw OpenClError("cannot copy B-spline coefficients of " + volume_->name + " to a 3-D image on " +
                                   cl_->deviceName() + ": " + describe(e));
             }
         } else {
-            data.buffer = upload(*cl_, padded, "B-spline coefficients of " + volume_->name);
+            data.buffer = std::move(padded);
         }
         st.coefficientSeconds = secondsSince(t);
         counts_.add(&PreprocessCounts::coefficientVolumes);
@@ -148,23 +134,22 @@ OpenClRenderer::DataSet &OpenClRenderer::dataSet(int level, bool cubic, RenderSt
 }
 
 std::vector<float> OpenClRenderer::readBackCoefficients(const DataSet &data) {
-    const Vec3i n = data.dims, p{n.x + 3, n.y + 3, n.z + 3};
-    std::vector<float> padded(size_t(p.x) * size_t(p.y) * size_t(p.z));
+    // The padded coefficients' interior (offset 1 on each axis), read as a box: no padded
+    // copy on the host.
+    const Vec3i n = data.dims;
+    const size_t px = size_t(n.x) + 3, py = size_t(n.y) + 3;
+    std::vector<float> c(size_t(n.x) * size_t(n.y) * size_t(n.z));
     try {
         if (cubicFromImage())
-            cl_->queue().enqueueReadImage(data.image, CL_TRUE, {0, 0, 0}, {size_t(p.x), size_t(p.y), size_t(p.z)}, 0, 0,
-                                         padded.data());
+            cl_->queue().enqueueReadImage(data.image, CL_TRUE, {1, 1, 1}, {size_t(n.x), size_t(n.y), size_t(n.z)}, 0, 0,
+                                         c.data());
         else
-            cl_->queue().enqueueReadBuffer(data.buffer, CL_TRUE, 0, padded.size() * sizeof(float), padded.data());
+            cl_->queue().enqueueReadBufferRect(data.buffer, CL_TRUE, {sizeof(float), 1, 1}, {0, 0, 0},
+                                               {size_t(n.x) * sizeof(float), size_t(n.y), size_t(n.z)},
+                                               px * sizeof(float), px * py * sizeof(float), 0, 0, c.data());
     } catch (const cl::Error &e) {
         throw OpenClError("cannot read back the B-spline coefficients: " + describe(e));
     }
-    std::vector<float> c(size_t(n.x) * size_t(n.y) * size_t(n.z));
-    for (int k = 0; k < n.z; ++k)
-        for (int j = 0; j < n.y; ++j)
-            for (int i = 0; i < n.x; ++i)
-                c[(size_t(k) * size_t(n.y) + size_t(j)) * size_t(n.x) + size_t(i)] =
-                    padded[(size_t(k + 1) * size_t(p.y) + size_t(j + 1)) * size_t(p.x) + size_t(i + 1)];
     return c;
 }
 
@@ -172,7 +157,9 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
     if (!data.bricks) {
         // Built the first time skipping is asked for: trilinear values are bounded by the
         // voxels around a brick, spline values by the coefficients (minmax_bricks.hpp), which
-        // live on the device only, so they are read back once for this.
+        // live on the device only, so they are read back once for this: one transfer of the
+        // volume, and the brick grid stays the one host code both back ends build
+        // (buildMinMaxBricks's footprint rules are not written twice).
         const auto t = Clock::now();
         if (data.cubic)
             data.bricks = buildMinMaxBricks(readBackCoefficients(data).data(), data.dims, options_.brickSize, 2);

@@ -1,4 +1,5 @@
 #include "renderer/common/bspline_prefilter.hpp"
+#include "renderer/common/narrow_samples.hpp"
 #include "renderer/opencl/bspline_prefilter_opencl.hpp"
 #include "renderer/reference/reconstruction.hpp"
 
@@ -6,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <string>
 #include <vector>
@@ -206,6 +208,120 @@ TEST(BSplinePrefilter, OpenClAgreesWithSimple) {
         expectAgreesWithSimple(bsplinePrefilterOpenCl(cl, samples.data(), dims), samples, dims,
                                name(dims) + " on " + cl.deviceName());
     }
+}
+
+// Odd sizes, axes of 1, 2 and 3 samples in every position, non-cubic shapes; x lines of one
+// tile, of whole tiles (32, 64) and of a partial last tile (33: one sample, whose anticausal
+// start needs the tile before; 40); lines shorter than, at and past the causal horizon (13);
+// row counts that leave the tiled pass's last work-group part empty.
+const Vec3i kDeviceDims[] = {{5, 1, 7},  {2, 2, 2},  {33, 17, 9}, {1, 1, 1}, {3, 3, 3}, {1, 2, 17}, {3, 1, 2},
+                             {2, 1, 1},  {37, 5, 3}, {40, 3, 14}, {64, 3, 2}, {32, 2, 1}, {13, 4, 3}, {14, 3, 2}};
+
+const PrefilterXPass kXPasses[] = {PrefilterXPass::Tiled, PrefilterXPass::Lines};
+const char *xPassName(PrefilterXPass p) { return p == PrefilterXPass::Tiled ? "tiled" : "lines"; }
+
+// The mirror pad the ray caster reads, written here from mirrorIndex alone: the reference the
+// device's pad is held to.
+std::vector<float> padMirrorReference(const std::vector<float> &c, Vec3i n) {
+    const Vec3i p{n.x + 3, n.y + 3, n.z + 3};
+    std::vector<float> out(size_t(p.x * p.y * p.z));
+    for (int64_t k = 0; k < p.z; ++k)
+        for (int64_t j = 0; j < p.y; ++j)
+            for (int64_t i = 0; i < p.x; ++i)
+                out[size_t((k * p.y + j) * p.x + i)] =
+                    c[size_t((mirrorIndex(k - 1, n.z) * n.y + mirrorIndex(j - 1, n.y)) * n.x + mirrorIndex(i - 1, n.x))];
+    return out;
+}
+
+std::vector<float> readBack(OpenClContext &cl, const cl::Buffer &buffer, size_t count) {
+    std::vector<float> out(count);
+    cl.queue().enqueueReadBuffer(buffer, CL_TRUE, 0, count * sizeof(float), out.data());
+    return out;
+}
+
+TEST(BSplinePrefilter, OpenClBothXPassesWithinFloatRoundingOfTheExactResult) {
+    // The kernels compute in float as the multithreaded prefilter does (gain folded into the
+    // causal sweep, the same initialisations), so they are held to the same derived bound.
+    OpenClContext &cl = sharedContext();
+    for (const Vec3i &dims : kDeviceDims)
+        for (PrefilterXPass xPass : kXPasses) {
+            const std::vector<float> samples = randomVolume(dims, 6);
+            PrefilterLaunch launch;
+            launch.xPass = xPass;
+            expectWithinFloatRounding(bsplinePrefilterOpenCl(cl, samples.data(), dims, launch), samples, dims,
+                                      name(dims) + " " + xPassName(xPass) + " on " + cl.deviceName());
+        }
+}
+
+TEST(BSplinePrefilter, OpenClSmallSlabsGiveTheBitsOfOneLaunchPerAxis) {
+    // A slab holds whole lines and every line's arithmetic is its own, so how the passes are
+    // cut into launches cannot change a bit.
+    OpenClContext &cl = sharedContext();
+    PrefilterLaunch whole;
+    whole.firstSlabSamples = SIZE_MAX; // every axis in one launch, one wait at the end
+    PrefilterLaunch small;
+    small.firstSlabSamples = 1;     // one unit (a z slice, a y row, or 32 x lines) per launch
+    small.slabTargetSeconds = 0;    // never grows
+    for (const Vec3i &dims : {Vec3i{33, 17, 9}, Vec3i{40, 3, 14}, Vec3i{5, 1, 7}})
+        for (PrefilterXPass xPass : kXPasses) {
+            const std::vector<float> samples = randomVolume(dims, 7);
+            whole.xPass = small.xPass = xPass;
+            const std::string what = name(dims) + " " + xPassName(xPass);
+            const size_t count = samples.size();
+            cl::Buffer a(cl.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, count * sizeof(float),
+                         const_cast<float *>(samples.data()));
+            cl::Buffer b(cl.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, count * sizeof(float),
+                         const_cast<float *>(samples.data()));
+            const PrefilterLaunchCounts one = bsplinePrefilterOpenCl(cl, a, dims, whole);
+            const PrefilterLaunchCounts many = bsplinePrefilterOpenCl(cl, b, dims, small);
+            const int axes = (dims.x > 1) + (dims.y > 1) + (dims.z > 1);
+            EXPECT_EQ(one.launches, axes) << what;
+            EXPECT_EQ(one.waits, 1) << what;
+            // One unit per launch: x in groups of 32 lines (tiled) or z slices, y in z slices, z in y rows.
+            const int64_t units = (dims.x > 1 ? (xPass == PrefilterXPass::Tiled ? (dims.y * dims.z + 31) / 32 : dims.z) : 0) +
+                                  (dims.y > 1 ? dims.z : 0) + (dims.z > 1 ? dims.y : 0);
+            EXPECT_EQ(many.launches, units) << what;
+            EXPECT_EQ(many.waits, many.launches) << what;
+            EXPECT_EQ(readBack(cl, a, count), readBack(cl, b, count)) << what;
+        }
+}
+
+TEST(BSplinePrefilter, OpenClPaddedCoefficientsArePadMirrorOfTheDevicePrefilter) {
+    // The renderer's path (upload as held, widen, filter, pad, nothing read back) gives the
+    // bits of padMirror applied to the device's coefficients: the pad is a copy and the
+    // widening exact (integers within 2^24). Float, 8-bit and 16-bit samples.
+    OpenClContext &cl = sharedContext();
+    int sixteenBit = 0;
+    for (const Vec3i &dims : kDeviceDims) {
+        std::vector<float> floats = randomVolume(dims, 8);
+        // Integers in [−100, 100] (+0, not −0: narrowWidth keeps −0 in float): ≤ 201 values fit 8 bits.
+        for (float &x : floats) x = std::round(x) + 0.0f;
+        std::vector<float> wide(floats.size());
+        for (size_t i = 0; i < wide.size(); ++i) wide[i] = floats[i] * 300; // 60,001 apart: 16 bits
+        for (const std::vector<float> *samples : {&floats, &wide})
+            for (bool narrow : {false, true})
+                for (PrefilterXPass xPass : kXPasses) {
+                    const NarrowWidth width = narrow ? narrowWidth(*samples) : NarrowWidth{};
+                    const std::string what = name(dims) + " " + std::to_string(width.bytes) + " bytes " +
+                                             xPassName(xPass) + " on " + cl.deviceName();
+                    ASSERT_EQ(width.bytes < 4, narrow) << what;
+                    sixteenBit += width.bytes == 2;
+                    std::vector<unsigned char> store(samples->size() * size_t(width.bytes) + kNarrowSlack);
+                    SampleGrid grid = SampleGrid::ofFloats(dims, samples->data());
+                    if (narrow) {
+                        packNarrow(samples->data(), samples->size(), width, store.data());
+                        grid = SampleGrid{dims, nullptr, store.data(), width};
+                    }
+                    PrefilterLaunch launch;
+                    launch.xPass = xPass;
+                    const cl::Buffer padded = bsplinePaddedCoefficientsOpenCl(cl, grid, launch);
+                    const std::vector<float> coefficients = bsplinePrefilterOpenCl(cl, samples->data(), dims, launch);
+                    const size_t paddedCount = size_t((dims.x + 3) * (dims.y + 3) * (dims.z + 3));
+                    EXPECT_EQ(readBack(cl, padded, paddedCount), padMirrorReference(coefficients, dims)) << what;
+                    expectWithinFloatRounding(coefficients, *samples, dims, what);
+                }
+    }
+    EXPECT_GT(sixteenBit, 0); // the larger volumes' ×300 samples span more than 256 values
 }
 
 TEST(BSplinePrefilter, MirrorIndexFoldsAtBothEnds) {
