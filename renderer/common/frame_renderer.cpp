@@ -1,6 +1,7 @@
 #include "renderer/common/frame_renderer.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <stdexcept>
 
@@ -30,6 +31,28 @@ void validateFrameRequest(const Volume &volume, const FrameRequest &request, int
     if (const std::string problem = signedPermutationProblem(quality.orientationCorrection); !problem.empty())
         throw std::invalid_argument("quality.orientation_correction: is not a signed permutation: " + problem);
     if (request.window) validateRayWindow(*request.window, request.width, request.height, quality);
+}
+
+Rgba8Image rgba8FromImage(const Image &image) {
+    Rgba8Image out;
+    out.width = image.width;
+    out.height = image.height;
+    out.rgba.resize(image.rgba.size());
+    const float *in = image.rgba.data();
+    uint8_t *bytes = out.rgba.data();
+    for (size_t i = 0, n = image.rgba.size(); i < n; ++i) bytes[i] = byteFromUnit(clampUnit(in[i]));
+    return out;
+}
+
+Rgba8Image FrameRenderer::renderRgba8(const FrameRequest &request, RenderStats *stats) {
+    RenderStats st;
+    const Image image = render(request, &st);
+    const auto t = std::chrono::steady_clock::now();
+    Rgba8Image out = rgba8FromImage(image);
+    st.hostConvertSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+    st.renderSeconds += st.hostConvertSeconds;
+    if (stats) *stats = st;
+    return out;
 }
 
 int raysForScale(int pixels, double imageScale) { return std::max(1, int(std::lround(pixels * imageScale))); }

@@ -34,6 +34,15 @@ struct RenderStats {
     int preintegrationNodes = 0;
     double preintegrationError = 0; // the table's own measured error
     double renderSeconds = 0;       // ray casting, read-back and upsampling
+    // The frame's parts (renderSeconds is their whole, wall clock). On OpenCL the device's
+    // own times from profiling events: what the queue spent on each command, not counting
+    // the wait before it started. The native path fills hostConvertSeconds only.
+    double hostSetUpSeconds = 0;      // the frame's set-up on the host up to the first command
+    double deviceUploadSeconds = 0;   // the parameter block (and counters zeroed)
+    double deviceKernelSeconds = 0;   // the ray-casting kernel
+    double deviceConvertSeconds = 0;  // float to 8-bit RGBA on the device (renderRgba8)
+    double deviceReadBackSeconds = 0; // the image and the counters to the host
+    double hostConvertSeconds = 0;    // float to 8-bit RGBA on the host (renderRgba8's default)
     int raysWide = 0, raysHigh = 0; // rays cast (image_scale < 1 casts fewer, then upsamples)
     uint64_t raysHit = 0;           // rays that entered the volume
     double meanSamplesPerRay = 0;   // over rays that hit the volume
@@ -80,6 +89,36 @@ struct FrameRequest {
     std::optional<RayWindow> window;
 };
 
+// A frame as 8-bit premultiplied RGBA, rows top down: each channel round(clamp(v, 0, 1) · 255)
+// (byteFromUnit), the float image's bytes as a JPEG of it over black takes them (RGBX).
+struct Rgba8Image {
+    int width = 0, height = 0;
+    std::vector<uint8_t> rgba;   // width × height × 4
+    const uint8_t *pixel(int x, int y) const { return rgba.data() + (size_t(y) * size_t(width) + size_t(x)) * 4; }
+    uint8_t *pixel(int x, int y) { return rgba.data() + (size_t(y) * size_t(width) + size_t(x)) * 4; }
+};
+
+// clamp(v) to [0, 1], NaN to 0: comparisons, so that loops of it vectorise (std::fmin is a
+// library call), and the same in OpenCL C (raycast.cl, rgba8FromFloat).
+inline float clampUnit(float v) {
+    const float c = v > 0.0f ? v : 0.0f;
+    return c < 1.0f ? c : 1.0f;
+}
+
+// round(c · 255) for c in [0, 1] with lround's rounding (half away from zero): the product's
+// whole part and its fraction are both exact in float, so comparing the fraction with one
+// half rounds exactly as lround does, and loops of it vectorise. The device's conversion
+// kernel does the same operations, each exact or correctly rounded in OpenCL C (a product,
+// a conversion toward zero, a subtraction), so its bytes are these bit for bit.
+inline uint8_t byteFromUnit(float c) {
+    const float p = c * 255.0f;
+    const int whole = int(p);
+    return uint8_t(whole + int(p - float(whole) >= 0.5f));
+}
+
+// The host conversion: byteFromUnit(clampUnit(v)) for every channel, alpha included.
+Rgba8Image rgba8FromImage(const Image &image);
+
 class FrameRenderer {
   public:
     virtual ~FrameRenderer() = default;
@@ -87,6 +126,11 @@ class FrameRenderer {
     // (window.width × window.height). Thread-safe; frames are rendered one at a time. Throws
     // std::invalid_argument for a request the scene contract forbids (validateFrameRequest).
     virtual Image render(const FrameRequest &request, RenderStats *stats = nullptr) = 0;
+    // The same frame (or window) as 8-bit RGBA (Rgba8Image), for frames that are encoded
+    // and nothing else: the bytes are rgba8FromImage(render(request)) exactly. This default
+    // converts on the host; a back end on a device overrides it to convert there and read
+    // back a quarter of the bytes.
+    virtual Rgba8Image renderRgba8(const FrameRequest &request, RenderStats *stats = nullptr);
     // Whether a window costs only its own rays. Both back ends cast a window alone; a back
     // end that answers false (one that casts the whole grid for any window) makes the
     // server's scheduler render each pass whole.

@@ -23,13 +23,14 @@ static_assert(VC_MAX_CLIP_PLANES == FrameRenderer::kMaxClipPlanes);
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using Clock = OpenClRenderer::Clock;
 double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 // Work-group edge: one fixed size, so PoCL compiles one launch configuration per program
 // (a new size costs it 0.25–2 s, docs/platform.md) and the global size is rounded up to it.
 constexpr size_t kGroupEdge = 8;
 size_t roundUp(int n) { return (size_t(n) + kGroupEdge - 1) / kGroupEdge * kGroupEdge; }
+constexpr size_t kConvertGroup = 64; // work-items per group of the 8-bit conversion
 
 cl::Buffer upload(OpenClContext &cl, const void *data, size_t bytes, const std::string &what) {
     try {
@@ -174,12 +175,66 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
 }
 
 Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
+    const auto start = Clock::now();
     const FrameSetup setup = setUpFrame(*volume_, request, pyramid_.maxLevel(), options_.brickSize);
-    const Quality &quality = setup.quality;
-    const TransferFunction &tf = request.transferFunction;
-
     std::lock_guard frameLock(mutex_);
     RenderStats st = setup.stats;
+    Image cast(setup.cast.width, setup.cast.height);
+    const Clock::time_point launched = castRays(request, setup, st, start, cast.rgba.data(), nullptr);
+    Image image = setup.upsample ? resizeBilinear(cast, request.width, request.height) : std::move(cast);
+    st.renderSeconds = secondsSince(launched);
+    if (stats) *stats = st;
+    return image;
+}
+
+Rgba8Image OpenClRenderer::renderRgba8(const FrameRequest &request, RenderStats *stats) {
+    const auto start = Clock::now();
+    const FrameSetup setup = setUpFrame(*volume_, request, pyramid_.maxLevel(), options_.brickSize);
+    // image_scale < 1 on a whole frame: the bilinear upsampling is the host's, on floats
+    // (resizeBilinear), so the conversion after it is too.
+    if (setup.upsample) return FrameRenderer::renderRgba8(request, stats);
+    std::lock_guard frameLock(mutex_);
+    RenderStats st = setup.stats;
+    Rgba8Image image;
+    image.width = setup.cast.width;
+    image.height = setup.cast.height;
+    image.rgba.resize(size_t(image.width) * size_t(image.height) * 4);
+    const Clock::time_point launched = castRays(request, setup, st, start, nullptr, image.rgba.data());
+    st.renderSeconds = secondsSince(launched);
+    if (stats) *stats = st;
+    return image;
+}
+
+namespace {
+
+// Seconds the device spent on a completed command (the queue profiles: opencl_context.cpp).
+double deviceSeconds(const cl::Event &e) {
+    return 1e-9 * double(e.getProfilingInfo<CL_PROFILING_COMMAND_END>() - e.getProfilingInfo<CL_PROFILING_COMMAND_START>());
+}
+
+// A buffer of at least `bytes`, grown (never shrunk) so that frames of one size reuse it.
+void ensureBuffer(OpenClContext &cl, cl::Buffer &buffer, size_t &capacity, size_t bytes, cl_mem_flags flags) {
+    if (bytes <= capacity && buffer()) return;
+    buffer = cl::Buffer(cl.context(), flags, bytes);
+    capacity = bytes;
+}
+
+// Sets a memory argument unless the kernel holds that object there already. The kept
+// references hold each object alive, so a handle cannot be freed and reused by another.
+void setMemoryArg(cl::Kernel &kernel, std::vector<cl::Memory> &set, cl_uint index, const cl::Memory &memory) {
+    if (set.size() <= index) set.resize(index + 1);
+    if (set[index]() == memory()) return;
+    kernel.setArg(index, memory);
+    set[index] = memory;
+}
+
+} // namespace
+
+OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &request, const FrameSetup &setup,
+                                                           RenderStats &st, Clock::time_point start, float *floats,
+                                                           uint8_t *bytes) {
+    const Quality &quality = setup.quality;
+    const TransferFunction &tf = request.transferFunction;
     DataSet &data = dataSet(quality.mipLevel, setup.use.cubic, st);
     st.buildOptions = buildOptions(quality, setup.clipPlaneCount > 0, data.width.bytes);
     const auto built = cl_->program(kRaycastKernelSource, st.buildOptions);
@@ -206,8 +261,10 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
     counts_.add(&PreprocessCounts::tfTables, rebuilt.tfTable);
     counts_.add(&PreprocessCounts::preintegrationTables, rebuilt.preintegration);
 
-    // The set-up as the kernel reads it.
-    RayCastParams p{};
+    // The set-up as the kernel reads it; kept in the renderer until the frame's commands end
+    // (the write is not blocking).
+    RayCastParams &p = hostParams_;
+    p = RayCastParams{};
     fillCommonParams(setup, p);
     p.narrowOffset = data.width.offset;
     const TfTable &tfTable = tables_.tfTable();
@@ -222,48 +279,70 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
         p.preLocatorScale = float(table.locatorScale);
     }
 
-    const auto t = Clock::now();
-    // A window casts only its own rays (the launch offset places them on the full grid) and
-    // reads back only its rows; the output buffer spans the grid so the kernel's indexing holds.
+    // A window casts only its own rays (the launch offset places them on the full grid, the
+    // kernel writes them into a buffer of the window's size), and the frame's commands queue
+    // without a wait: the last read is the one blocking call.
     const RayWindow &win = setup.cast;
-    const int raysWide = setup.raysWide, raysHigh = setup.raysHigh;
-    Image cast(win.width, win.height);
+    const size_t rays = size_t(win.width) * size_t(win.height);
+    Clock::time_point launched;
+    auto &queue = cl_->queue();
     try {
-        auto &queue = cl_->queue();
-        cl::Buffer params(cl_->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sizeof p, &p);
-        const size_t rowBytes = size_t(raysWide) * 4 * sizeof(float);
-        cl::Buffer out(cl_->context(), CL_MEM_WRITE_ONLY, size_t(raysHigh) * rowBytes);
-        cl_uint zeros[VC_STAT_COUNT] = {};
-        cl::Buffer counters(cl_->context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, sizeof zeros, zeros);
+        FrameKernels &k = kernels_[st.buildOptions];
+        if (!k.raycast()) {
+            k.raycast = cl::Kernel(built.program, "raycast");
+            k.convert = cl::Kernel(built.program, "rgba8FromFloat");
+        }
+        if (!params_()) params_ = cl::Buffer(cl_->context(), CL_MEM_READ_ONLY, sizeof(RayCastParams));
+        if (!counters_()) counters_ = cl::Buffer(cl_->context(), CL_MEM_READ_WRITE, sizeof hostCounts_);
+        ensureBuffer(*cl_, floatOut_, floatOutBytes_, rays * 4 * sizeof(float), CL_MEM_READ_WRITE);
+        if (bytes) ensureBuffer(*cl_, byteOut_, byteOutBytes_, rays * 4, CL_MEM_WRITE_ONLY);
+
         // Arguments in the order of the kernel's signature for this feature set.
-        cl::Kernel kernel(built.program, "raycast");
         cl_uint arg = 0;
-        if (setup.use.cubic && cubicFromImage()) kernel.setArg(arg++, data.image);
-        else kernel.setArg(arg++, data.buffer);
-        kernel.setArg(arg++, tfTable_);
+        if (setup.use.cubic && cubicFromImage()) setMemoryArg(k.raycast, k.raycastArgs, arg++, data.image);
+        else setMemoryArg(k.raycast, k.raycastArgs, arg++, data.buffer);
+        setMemoryArg(k.raycast, k.raycastArgs, arg++, tfTable_);
         if (quality.preintegrated) {
-            kernel.setArg(arg++, preRgba_);
-            kernel.setArg(arg++, preNodes_);
-            kernel.setArg(arg++, preLocator_);
+            setMemoryArg(k.raycast, k.raycastArgs, arg++, preRgba_);
+            setMemoryArg(k.raycast, k.raycastArgs, arg++, preNodes_);
+            setMemoryArg(k.raycast, k.raycastArgs, arg++, preLocator_);
         }
-        if (quality.emptySpaceSkipping) kernel.setArg(arg++, data.brickVisible);
-        kernel.setArg(arg++, params);
-        kernel.setArg(arg++, out);
-        kernel.setArg(arg++, counters);
-        queue.enqueueNDRangeKernel(kernel, cl::NDRange(size_t(win.x), size_t(win.y)),
+        if (quality.emptySpaceSkipping) setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickVisible);
+        setMemoryArg(k.raycast, k.raycastArgs, arg++, params_);
+        const cl_int4 window{{win.x, win.y, win.width, win.height}};
+        k.raycast.setArg(arg++, window);
+        setMemoryArg(k.raycast, k.raycastArgs, arg++, floatOut_);
+        setMemoryArg(k.raycast, k.raycastArgs, arg++, counters_);
+
+        launched = Clock::now();
+        st.hostSetUpSeconds = std::chrono::duration<double>(launched - start).count();
+        cl::Event writeParams, zeroCounters, kernel, convert, readImage, readCounters;
+        queue.enqueueWriteBuffer(params_, CL_FALSE, 0, sizeof p, &p, nullptr, &writeParams);
+        queue.enqueueFillBuffer(counters_, cl_uint(0), 0, sizeof hostCounts_, nullptr, &zeroCounters);
+        queue.enqueueNDRangeKernel(k.raycast, cl::NDRange(size_t(win.x), size_t(win.y)),
                                    cl::NDRange(roundUp(win.width), roundUp(win.height)),
-                                   cl::NDRange(kGroupEdge, kGroupEdge));
-        if (win.width == raysWide) {
-            queue.enqueueReadBuffer(out, CL_FALSE, size_t(win.y) * rowBytes, size_t(win.height) * rowBytes,
-                                    cast.rgba.data());
+                                   cl::NDRange(kGroupEdge, kGroupEdge), nullptr, &kernel);
+        if (bytes) {
+            setMemoryArg(k.convert, k.convertArgs, 0, floatOut_);
+            setMemoryArg(k.convert, k.convertArgs, 1, byteOut_);
+            k.convert.setArg(2, cl_int(rays));
+            // One fixed work-group size, as for the ray caster (PoCL compiles one per size).
+            const size_t groups = (rays + kConvertGroup - 1) / kConvertGroup;
+            queue.enqueueNDRangeKernel(k.convert, cl::NullRange, cl::NDRange(groups * kConvertGroup),
+                                       cl::NDRange(kConvertGroup), nullptr, &convert);
+            queue.enqueueReadBuffer(byteOut_, CL_FALSE, 0, rays * 4, bytes, nullptr, &readImage);
         } else {
-            const size_t pixel = 4 * sizeof(float);
-            queue.enqueueReadBufferRect(out, CL_FALSE, {size_t(win.x) * pixel, size_t(win.y), 0}, {0, 0, 0},
-                                        {size_t(win.width) * pixel, size_t(win.height), 1}, rowBytes, 0,
-                                        size_t(win.width) * pixel, 0, cast.rgba.data());
+            queue.enqueueReadBuffer(floatOut_, CL_FALSE, 0, rays * 4 * sizeof(float), floats, nullptr, &readImage);
         }
-        cl_uint counts[VC_STAT_COUNT];
-        queue.enqueueReadBuffer(counters, CL_TRUE, 0, sizeof counts, counts);
+        // In order on the queue: once this read ends, every command of the frame has.
+        queue.enqueueReadBuffer(counters_, CL_TRUE, 0, sizeof hostCounts_, hostCounts_, nullptr, &readCounters);
+        readImage.wait();
+
+        st.deviceUploadSeconds = deviceSeconds(writeParams) + deviceSeconds(zeroCounters);
+        st.deviceKernelSeconds = deviceSeconds(kernel);
+        st.deviceConvertSeconds = bytes ? deviceSeconds(convert) : 0;
+        st.deviceReadBackSeconds = deviceSeconds(readImage) + deviceSeconds(readCounters);
+        const cl_uint *counts = hostCounts_;
         st.raysHit = counts[VC_STAT_RAYS_HIT];
         const double hit = std::max<double>(counts[VC_STAT_RAYS_HIT], 1);
         const auto wide = [&](int low, int high) { return double(uint64_t(counts[high]) << 32 | counts[low]); };
@@ -272,12 +351,15 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
         st.earlyTerminatedFraction = counts[VC_STAT_TERMINATED_EARLY] / hit;
         st.raysTruncated = counts[VC_STAT_TRUNCATED];
     } catch (const cl::Error &e) {
+        // Commands queued before the failure may still read hostParams_ or write the caller's
+        // image: let them end before either goes.
+        try {
+            queue.finish();
+        } catch (const cl::Error &) {
+        }
         throw OpenClError("rendering on " + cl_->deviceName() + " failed: " + describe(e));
     }
-    Image image = setup.upsample ? resizeBilinear(cast, request.width, request.height) : std::move(cast);
-    st.renderSeconds = secondsSince(t);
-    if (stats) *stats = st;
-    return image;
+    return launched;
 }
 
 } // namespace volcast

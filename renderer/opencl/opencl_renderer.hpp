@@ -13,9 +13,11 @@
 #include "renderer/common/mip_pyramid.hpp"
 #include "renderer/common/narrow_samples.hpp"
 #include "renderer/opencl/opencl_context.hpp"
+#include "renderer/opencl/kernels/raycast_shared.h"
 #include "renderer/model/scene.hpp"
 #include "renderer/model/volume.hpp"
 
+#include <chrono>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -48,6 +50,9 @@ class OpenClRenderer : public FrameRenderer {
 
     // Thread-safe; frames are rendered one at a time. A window casts only its own rays.
     Image render(const FrameRequest &request, RenderStats *stats = nullptr) override;
+    // Converted to 8 bits on the device (the kernel rgba8FromFloat), a quarter of the bytes
+    // read back; a whole frame with image_scale < 1 is upsampled and converted on the host.
+    Rgba8Image renderRgba8(const FrameRequest &request, RenderStats *stats = nullptr) override;
     bool rendersWindowsCheaply() const override { return true; }
     int bandRows() const override;   // the work-group's height
     std::string description() const override;
@@ -57,6 +62,8 @@ class OpenClRenderer : public FrameRenderer {
     std::string buildOptions(const Quality &quality, bool hasClipPlanes, int voxelBytes = 4) const;
     PreprocessCounts preprocessCounts() const override;
     const Volume &volume() const override { return *volume_; }
+
+    using Clock = std::chrono::steady_clock;
 
   private:
     // The data a frame samples: a mip level's voxels, or its B-spline coefficients.
@@ -76,6 +83,11 @@ class OpenClRenderer : public FrameRenderer {
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
     std::vector<float> readBackCoefficients(const DataSet &data);
+    // Casts setup.cast's rays on the device and reads them into `floats` (float RGBA) or,
+    // converted there, into `bytes` (Rgba8Image's); fills st's device times. Returns when the
+    // first command was queued (start: when the frame's call began). Under mutex_.
+    Clock::time_point castRays(const FrameRequest &request, const FrameSetup &setup, RenderStats &st,
+                               Clock::time_point start, float *floats, uint8_t *bytes);
 
     std::shared_ptr<OpenClContext> cl_;
     std::shared_ptr<const Volume> volume_;
@@ -87,6 +99,19 @@ class OpenClRenderer : public FrameRenderer {
     cl::Buffer tfTable_;
     cl::Buffer preRgba_, preNodes_, preLocator_;
     PreprocessCounter counts_;
+
+    // What every frame uses and that does not change between frames, kept: the kernels of
+    // each program (by build options) with the memory objects set as their arguments, the
+    // parameter block and counters, and the output buffers (grown to the largest window).
+    struct FrameKernels {
+        cl::Kernel raycast, convert;
+        std::vector<cl::Memory> raycastArgs, convertArgs;   // by argument index
+    };
+    std::map<std::string, FrameKernels> kernels_;
+    cl::Buffer params_, counters_, floatOut_, byteOut_;
+    size_t floatOutBytes_ = 0, byteOutBytes_ = 0;
+    RayCastParams hostParams_{};           // the block being written (the write does not block)
+    cl_uint hostCounts_[VC_STAT_COUNT] = {};
 };
 
 } // namespace volcast

@@ -678,9 +678,13 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #ifdef EMPTY_SPACE_SKIPPING
                       __global const uchar *brickVisible,
 #endif
-                      __global const RayCastParams *P, __global float4 *image, __global volatile uint *stats) {
+                      __global const RayCastParams *P, const int4 window, __global float4 *image,
+                      __global volatile uint *stats) {
+    /* window: (x, y, width, height) of the ray grid this launch casts, its origin the launch's
+     * offset; the launch is rounded up to whole work-groups, and the rays past the window are
+     * not cast (nor counted). image holds the window alone, row by row. */
     const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= P->width || y >= P->height) return;
+    if (x >= window.x + window.z || y >= window.y + window.w || x >= P->width || y >= P->height) return;
 #ifdef VOXEL_BYTES
     const float narrowOffset = P->narrowOffset;
 #endif
@@ -697,5 +701,23 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #endif
     f.stats = stats;
     f.n = (int4)(P->levelDims[0], P->levelDims[1], P->levelDims[2], 0);
-    image[y * P->width + x] = castRay(VOLUME, &f, x, y);
+    image[(y - window.y) * window.z + (x - window.x)] = castRay(VOLUME, &f, x, y);
+}
+
+/* ---- the frame as it is encoded --------------------------------------------------------------- */
+
+/* 8-bit premultiplied RGBA, channel by channel round(clamp(v, 0, 1) · 255) with halves away
+ * from zero: renderer/common/frame_renderer.hpp's clampUnit and byteFromUnit bit for bit. The
+ * product is one correctly rounded multiply (nothing to contract it with), and round() is exact,
+ * so neither contraction nor a device's division or denormal liberties can change a byte. */
+uchar byteFromUnit(float v) {
+    const float c = v > 0.0f ? v : 0.0f; /* NaN to 0 */
+    return (uchar)round((c < 1.0f ? c : 1.0f) * 255.0f);
+}
+
+__kernel void rgba8FromFloat(__global const float4 *image, __global uchar4 *bytes, const int count) {
+    const int i = get_global_id(0);
+    if (i >= count) return;
+    const float4 v = image[i];
+    bytes[i] = (uchar4)(byteFromUnit(v.x), byteFromUnit(v.y), byteFromUnit(v.z), byteFromUnit(v.w));
 }
