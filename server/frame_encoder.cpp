@@ -1,5 +1,7 @@
 #include "server/frame_encoder.hpp"
 
+#include "renderer/common/frame_renderer.hpp"
+
 #include <jconfig.h>   // LIBJPEG_TURBO_VERSION_NUMBER
 #include <png.h>
 #include <turbojpeg.h>
@@ -19,21 +21,10 @@ namespace volcast::server {
 
 namespace {
 
-// clamp(v) to [0, 1], NaN to 0: comparisons, so that it compiles to minss/maxss and
-// vectorises (std::fmin is a library call).
-inline float clamp01(float v) {
-    const float c = v > 0.0f ? v : 0.0f;
-    return c < 1.0f ? c : 1.0f;
-}
-
-// round(c · 255) for c in [0, 1] with lround's rounding (half away from zero): the product's
-// whole part and its fraction are both exact in float, so comparing the fraction with one
-// half rounds exactly as lround does, and the loops below vectorise.
-inline uint8_t to8(float c) {
-    const float p = c * 255.0f;
-    const int whole = int(p);
-    return uint8_t(whole + int(p - float(whole) >= 0.5f));
-}
+// The one float-to-byte conversion (renderer/common/frame_renderer.hpp), which a device's
+// conversion kernel reproduces bit for bit (FrameRenderer::renderRgba8).
+inline float clamp01(float v) { return clampUnit(v); }
+inline uint8_t to8(float c) { return byteFromUnit(c); }
 
 // Buffers up to a 2560×1600 viewport's are kept per thread; larger ones (a still's) are let go.
 constexpr int kKeptWidth = 2560, kKeptHeight = 1600;
@@ -168,12 +159,13 @@ std::string encoderDescription() {
            " (Sub filter) on zlib " + zlibVersion();
 }
 
-std::vector<uint8_t> encodeJpeg(const Image &image, int quality) {
-    if (image.width < 1 || image.height < 1) throw std::runtime_error("encoding a JPEG: the image is empty");
+namespace {
+
+// JPEG of 8-bit RGBX (the alpha byte ignored) through the thread's kept compressor.
+std::vector<uint8_t> encodeJpegRgbx(const uint8_t *pixels, int width, int height, int quality) {
     thread_local Compressor compressor;
-    thread_local Scratch rgbx;
     if (!compressor.handle) throw std::runtime_error("encoding a JPEG: " + std::string(tjGetErrorStr2(nullptr)));
-    const unsigned long worst = tjBufSize(image.width, image.height, TJSAMP_420);
+    const unsigned long worst = tjBufSize(width, height, TJSAMP_420);
     if (worst == static_cast<unsigned long>(-1) || worst > unsigned(INT32_MAX)) throw std::runtime_error("encoding a JPEG: the image is too large");
     if (worst > compressor.capacity) {
         tjFree(compressor.out);
@@ -181,13 +173,10 @@ std::vector<uint8_t> encodeJpeg(const Image &image, int quality) {
         compressor.capacity = compressor.out ? worst : 0;
         if (!compressor.out) throw std::runtime_error("encoding a JPEG: out of memory");
     }
-    uint8_t *pixels = rgbx.get(image.rgba.size());
-    toRgbx8OverBlack(image, pixels);
     unsigned long bytes = compressor.capacity;
     // libjpeg's defaults: 4:2:0 chroma and the accurate integer DCT.
-    const int failed = tjCompress2(compressor.handle, pixels, image.width, 0, image.height, TJPF_RGBX, &compressor.out,
-                                   &bytes, TJSAMP_420, quality, TJFLAG_ACCURATEDCT | TJFLAG_NOREALLOC);
-    rgbx.trim();
+    const int failed = tjCompress2(compressor.handle, pixels, width, 0, height, TJPF_RGBX, &compressor.out, &bytes,
+                                   TJSAMP_420, quality, TJFLAG_ACCURATEDCT | TJFLAG_NOREALLOC);
     if (failed) throw std::runtime_error("encoding a JPEG: " + std::string(tjGetErrorStr2(compressor.handle)));
     std::vector<uint8_t> out(compressor.out, compressor.out + bytes);
     if (compressor.capacity > tjBufSize(kKeptWidth, kKeptHeight, TJSAMP_420)) {
@@ -195,6 +184,31 @@ std::vector<uint8_t> encodeJpeg(const Image &image, int quality) {
         compressor.out = nullptr;
         compressor.capacity = 0;
     }
+    return out;
+}
+
+} // namespace
+
+std::vector<uint8_t> encodeJpeg(const Rgba8Image &image, int quality) {
+    if (image.width < 1 || image.height < 1) throw std::runtime_error("encoding a JPEG: the image is empty");
+    if (image.rgba.size() != size_t(image.width) * size_t(image.height) * 4)
+        throw std::runtime_error("encoding a JPEG: the pixels do not match the image's size");
+    return encodeJpegRgbx(image.rgba.data(), image.width, image.height, quality);
+}
+
+std::vector<uint8_t> encodeJpeg(const Image &image, int quality) {
+    if (image.width < 1 || image.height < 1) throw std::runtime_error("encoding a JPEG: the image is empty");
+    thread_local Scratch rgbx;
+    uint8_t *pixels = rgbx.get(image.rgba.size());
+    toRgbx8OverBlack(image, pixels);
+    std::vector<uint8_t> out;
+    try {
+        out = encodeJpegRgbx(pixels, image.width, image.height, quality);
+    } catch (...) {
+        rgbx.trim();
+        throw;
+    }
+    rgbx.trim();
     return out;
 }
 

@@ -9,6 +9,7 @@
 //    straight RGBA", so a client can composite it over any background. toStraightRgba8 is the
 //    conversion, exposed so tests can reproduce it byte for byte.
 
+#include "renderer/common/frame_renderer.hpp"
 #include "renderer/model/image.hpp"
 
 #include <cstdint>
@@ -27,6 +28,9 @@ std::string encoderDescription();
 
 // Throw std::runtime_error with the library's message on failure.
 std::vector<uint8_t> encodeJpeg(const Image &image, int quality);
+// The same JPEG from the frame's 8-bit RGBA (FrameRenderer::renderRgba8: the bytes the float
+// image's encoding converts to), alpha ignored: over black.
+std::vector<uint8_t> encodeJpeg(const Rgba8Image &image, int quality);
 // zlib level 1: ~5x faster than the default for ~20 % more bytes (docs/platform.md).
 std::vector<uint8_t> encodePng(const Image &image, int compressionLevel = 1);
 

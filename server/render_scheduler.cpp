@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <stdexcept>
 
 namespace volcast::server {
 
@@ -470,9 +471,12 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
         bool substitute = false;
         const Quality q = renderable(id, s, l.quality, substitute);
         FrameUnderWay f;
+        // A frame sent as a JPEG (all but the final PNG, whose floats the error calibration
+        // reads) needs only its 8-bit bytes: TiledFrame renders them so when it can.
+        const bool jpeg = !(final && !substitute);
         f.frame = std::make_shared<TiledFrame>(FrameRequest{job.transferFunction, job.camera, job.width, job.height, q,
                                                job.clipPlanes},
-                                               substitute ? 1 : l.passes, job.renderer->bandRows());
+                                               substitute ? 1 : l.passes, job.renderer->bandRows(), jpeg);
         f.job = s.job;
         f.generation = s.generation;
         f.level = level;
@@ -618,7 +622,13 @@ void RenderScheduler::runUnit(Work &work) {
 
     const Level &level = job.ladder[size_t(work.level)];
     const double samples = predictedSamples(job.renderer->volume(), frame.quality(), job.width, job.height);
-    Image image = frame.finish();
+    // Floats, or (a JPEG frame rendered as bytes: TiledFrame::rgba8) the bytes it encodes.
+    Image image;
+    Rgba8Image bytes;
+    if (frame.rgba8())
+        bytes = frame.finishRgba8();
+    else
+        image = frame.finish();
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(work.slot);
@@ -645,7 +655,10 @@ void RenderScheduler::runUnit(Work &work) {
     RenderedFrame out;
     const auto t1 = Clock::now();
     try {
-        out.image = work.final ? encodePng(image) : encodeJpeg(image, level.jpegQuality);
+        if (work.final && frame.rgba8()) throw std::logic_error("a final frame rendered without its floats");
+        out.image = work.final      ? encodePng(image)
+                    : frame.rgba8() ? encodeJpeg(bytes, level.jpegQuality)
+                                    : encodeJpeg(image, level.jpegQuality);
     } catch (const std::exception &e) {
         spdlog::error("encoding failed: {}", e.what());
         fail(work, std::string("encoding the frame failed: ") + e.what());
@@ -656,8 +669,8 @@ void RenderScheduler::runUnit(Work &work) {
     h.level = work.level;
     h.quality = qualityToJson(frame.quality());
     if (frame.passes() > 1) h.quality["jitter"] = true;
-    h.width = image.width;
-    h.height = image.height;
+    h.width = frame.rgba8() ? bytes.width : image.width;
+    h.height = frame.rgba8() ? bytes.height : image.height;
     h.codec = work.final ? protocol::Codec::Png : protocol::Codec::Jpeg;
     h.renderMs = frame.renderMs();
     h.encodeMs = Ms(Clock::now() - t1).count();

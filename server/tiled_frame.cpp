@@ -21,11 +21,19 @@ std::vector<int> middleOutOrder(int n) {
     return order;
 }
 
-TiledFrame::TiledFrame(FrameRequest request, int passes, int bandRows)
+TiledFrame::TiledFrame(FrameRequest request, int passes, int bandRows, bool encodedOnly)
     : request_(std::move(request)), passes_(std::max(1, passes)),
       gridWidth_(raysForScale(request_.width, request_.quality.imageScale)),
-      gridHeight_(raysForScale(request_.height, request_.quality.imageScale)), current_(gridWidth_, gridHeight_) {
+      gridHeight_(raysForScale(request_.height, request_.quality.imageScale)),
+      rgba8_(encodedOnly && passes_ == 1 && gridWidth_ == request_.width && gridHeight_ == request_.height) {
     request_.window.reset();
+    if (rgba8_) {
+        bytes_.width = gridWidth_;
+        bytes_.height = gridHeight_;
+        bytes_.rgba.resize(size_t(gridWidth_) * size_t(gridHeight_) * 4);
+    } else {
+        current_ = Image(gridWidth_, gridHeight_);
+    }
     const int rows = std::max(1, bandRows);
     const int bands = (gridHeight_ + rows - 1) / rows;
     const int columns = (gridWidth_ + kCellColumns - 1) / kCellColumns;
@@ -75,18 +83,25 @@ double TiledFrame::renderUnit(FrameRenderer &renderer, int cells) {
     uint64_t rays = 0;
     for (const Cell &c : windows) {
         unit.window = RayWindow{c.x, c.y, c.width, c.height};
-        const Image part = renderer.render(unit);
-        for (int row = 0; row < c.height; ++row)
-            std::copy_n(part.pixel(0, row), size_t(c.width) * 4, current_.pixel(c.x, c.y + row));
+        if (rgba8_) {
+            const Rgba8Image part = renderer.renderRgba8(unit);
+            for (int row = 0; row < c.height; ++row)
+                std::copy_n(part.pixel(0, row), size_t(c.width) * 4, bytes_.pixel(c.x, c.y + row));
+        } else {
+            const Image part = renderer.render(unit);
+            for (int row = 0; row < c.height; ++row)
+                std::copy_n(part.pixel(0, row), size_t(c.width) * 4, current_.pixel(c.x, c.y + row));
+        }
         rays += uint64_t(c.width) * uint64_t(c.height);
     }
     next_ += take;
     ++units_;
     lastUnitCells_ = take;
     if (next_ >= cellsPerPass()) {
-        if (pass_ == 0)
+        // 8-bit: one pass, its bytes already in place.
+        if (!rgba8_ && pass_ == 0)
             sum_ = current_;
-        else
+        else if (!rgba8_)
             for (size_t i = 0; i < sum_.rgba.size(); ++i) sum_.rgba[i] += current_.rgba[i];
         ++pass_;
         next_ = 0;
@@ -104,6 +119,8 @@ Image TiledFrame::finish() {
     if (gridWidth_ == request_.width && gridHeight_ == request_.height) return std::move(sum_);
     return resizeBilinear(sum_, request_.width, request_.height);
 }
+
+Rgba8Image TiledFrame::finishRgba8() { return std::move(bytes_); }
 
 int cellsForBudget(double budgetMs, double msPerRay, int cellRays, int previousUnitCells) {
     if (!(msPerRay > 0) || cellRays <= 0) return 1;

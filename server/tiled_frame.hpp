@@ -26,14 +26,22 @@ class TiledFrame {
 
     // request: the whole frame, its quality what is rendered (the level's, or its substitute
     // while its preparation runs); its window is ignored (the frame sets one per unit).
-    TiledFrame(FrameRequest request, int passes, int bandRows);
+    // encodedOnly: the frame will only be encoded as a JPEG; then, when one pass at full
+    // resolution makes its bytes the cells' bytes (no averaging, no upsampling on floats),
+    // the cells are rendered as 8-bit RGBA (FrameRenderer::renderRgba8: on OpenCL converted
+    // on the device, a quarter of the read-back) and finishRgba8 gives the frame.
+    TiledFrame(FrameRequest request, int passes, int bandRows, bool encodedOnly = false);
 
     // Renders the next `cells` cells of this pass (at least one, at most cellsLeftInPass());
     // returns the unit's ms.
     double renderUnit(FrameRenderer &renderer, int cells);
     bool done() const { return pass_ >= passes_; }
-    // The averaged passes, brought to the frame's size; only once done().
+    // The averaged passes, brought to the frame's size; only once done() and !rgba8().
     Image finish();
+    // Whether the cells are rendered as 8-bit RGBA (see the constructor).
+    bool rgba8() const { return rgba8_; }
+    // The frame as rgba8FromImage(finish()) would give it; only once done() and rgba8().
+    Rgba8Image finishRgba8();
 
     const Quality &quality() const { return request_.quality; }
     int gridWidth() const { return gridWidth_; }
@@ -65,7 +73,9 @@ class TiledFrame {
     uint64_t raysDone_ = 0;
     double renderMs_ = 0;
     double lastUnitMsPerRay_ = 0;
+    bool rgba8_ = false;
     Image sum_, current_;
+    Rgba8Image bytes_;            // rgba8(): the pass's cells as 8-bit RGBA
 };
 
 // 0, ..., n-1 middle out and spread: n/2 first, then the other positions in bit-reversed

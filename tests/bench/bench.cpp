@@ -168,8 +168,8 @@ void writeText(const std::filesystem::path &p, const std::string &text) {
 
 void StudyOutput::writeJson(const nlohmann::json &j) const { writeText(dir_ / (study_ + ".json"), j.dump(2) + "\n"); }
 
-void StudyOutput::writeCsv(const std::vector<std::string> &header,
-                           const std::vector<std::vector<std::string>> &rows) const {
+void StudyOutput::writeCsv(const std::vector<std::string> &header, const std::vector<std::vector<std::string>> &rows,
+                           const std::string &suffix) const {
     std::ostringstream s;
     const auto line = [&](const std::vector<std::string> &cells) {
         for (size_t i = 0; i < cells.size(); ++i) s << (i ? "," : "") << cells[i];
@@ -177,7 +177,7 @@ void StudyOutput::writeCsv(const std::vector<std::string> &header,
     };
     line(header);
     for (const auto &r : rows) line(r);
-    writeText(dir_ / (study_ + ".csv"), s.str());
+    writeText(dir_ / (study_ + suffix + ".csv"), s.str());
 }
 
 void StudyOutput::writeSvg(const std::string &svg, const std::string &suffix) const {

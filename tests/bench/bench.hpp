@@ -64,7 +64,9 @@ class StudyOutput {
   public:
     StudyOutput(std::filesystem::path dir, std::string study);
     void writeJson(const nlohmann::json &j) const;
-    void writeCsv(const std::vector<std::string> &header, const std::vector<std::vector<std::string>> &rows) const;
+    // <study><suffix>.csv
+    void writeCsv(const std::vector<std::string> &header, const std::vector<std::vector<std::string>> &rows,
+                  const std::string &suffix = "") const;
     void writeSvg(const std::string &svg, const std::string &suffix = "") const;
     void writeMarkdown(const std::string &text) const;
     const std::filesystem::path &dir() const { return dir_; }

@@ -60,18 +60,45 @@ class OtherLoad {
     std::chrono::steady_clock::time_point t0_;
 };
 
+// The parts of the timed frames (RenderStats), ms: the device's own times from OpenCL
+// profiling events, 0 on the native path.
+struct FrameParts {
+    std::vector<double> setUp, upload, kernel, convert, readBack;
+    void add(const RenderStats &st) {
+        setUp.push_back(st.hostSetUpSeconds * 1e3);
+        upload.push_back(st.deviceUploadSeconds * 1e3);
+        kernel.push_back(st.deviceKernelSeconds * 1e3);
+        convert.push_back(st.deviceConvertSeconds * 1e3);
+        readBack.push_back(st.deviceReadBackSeconds * 1e3);
+    }
+    static double median(std::vector<double> v) { return v.empty() ? 0 : summarize(std::move(v)).median; }
+    nlohmann::json json(const Timing &frame) const {
+        const double k = median(kernel);
+        return {{"host_set_up_ms", median(setUp)},      {"device_upload_ms", median(upload)},
+                {"device_kernel_ms", k},                {"device_convert_ms", median(convert)},
+                {"device_read_back_ms", median(readBack)},
+                // The overhead target: frame ≤ 1.2 × kernel (medians of the same frames).
+                {"frame_over_kernel", k > 0 ? nlohmann::json(frame.median / k) : nlohmann::json(nullptr)}};
+    }
+};
+
 struct CellResult {
     Image last;
     Timing timing;
     double firstFrameMs = 0;
     double otherCpus = 0;
     RenderStats stats;
+    FrameParts parts;
+    // The same orbit as 8-bit RGBA (renderRgba8: what the server reads back for a frame it
+    // encodes as JPEG); OpenCL only, where the conversion runs on the device.
+    Timing rgba8;
+    FrameParts rgba8Parts;
 };
 
 // First frame (program build, bricks, tables) at frame 0, then the camera orbits one step
 // per timed frame, as in the peers' time_frames().
 CellResult timeOrbit(FrameRenderer &renderer, const TransferFunction &tf, const Quality &quality, int width,
-                     int height, const RepeatOptions &repeat) {
+                     int height, const RepeatOptions &repeat, bool alsoRgba8) {
     CellResult r;
     const auto t0 = std::chrono::steady_clock::now();
     renderer.render({tf, peerCamera(renderer.volume(), 0), width, height, quality, {}}, &r.stats);
@@ -81,7 +108,16 @@ CellResult timeOrbit(FrameRenderer &renderer, const TransferFunction &tf, const 
     timed.warmup = 0;
     r.timing = bench::repeat(timed, [&](int k) {
         r.last = renderer.render({tf, peerCamera(renderer.volume(), k + 1), width, height, quality, {}}, &r.stats);
+        r.parts.add(r.stats);
     });
+    if (alsoRgba8) {
+        RenderStats st;
+        renderer.renderRgba8({tf, peerCamera(renderer.volume(), 0), width, height, quality, {}}, &st); // its kernel
+        r.rgba8 = bench::repeat(timed, [&](int k) {
+            renderer.renderRgba8({tf, peerCamera(renderer.volume(), k + 1), width, height, quality, {}}, &st);
+            r.rgba8Parts.add(st);
+        });
+    }
     r.otherCpus = load.cpus();
     return r;
 }
@@ -175,17 +211,29 @@ void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &option
     std::vector<std::vector<std::string>> rows;
     std::map<std::string, std::map<std::string, CellResult>> cells;
     j["renderer"] = options.backEnd;
+    const bool openCl = options.backEnd == "opencl";
+    std::vector<std::vector<std::string>> partRows;
     for (const Entry &e : volumes) {
         const std::unique_ptr<FrameRenderer> renderer = makeStudyRenderer(cl, options.backEnd, e.volume);
         j["device"] = renderer->description();
         const TransferFunction tf = peerTransferFunction(e.range, e.volume->smallestSpacing());
         for (const auto &s : sizes) {
-            const CellResult r = timeOrbit(*renderer, tf, quality, s.first, s.second, options.repeat);
+            const CellResult r = timeOrbit(*renderer, tf, quality, s.first, s.second, options.repeat, openCl);
             cells[e.key][sizeName(s)] = r;
             const auto &paper = kPaperTable1.at(e.paper);
             const double paperMs = paper.count(sizeName(s)) ? paper.at(sizeName(s)) : 0;
             std::cerr << "table1: " << e.key << " " << sizeName(s) << " " << fmt(r.timing.median) << " ms (first "
                       << fmt(r.firstFrameMs) << " ms, other load " << fmt(r.otherCpus, 2) << " CPUs)\n";
+            if (openCl) {
+                const double kernelMs = FrameParts::median(r.parts.kernel), kernel8Ms = FrameParts::median(r.rgba8Parts.kernel);
+                std::cerr << "table1: " << e.key << " " << sizeName(s) << " kernel " << fmt(kernelMs, 2)
+                          << " ms, frame ÷ kernel " << fmt(r.timing.median / std::max(kernelMs, 1e-9), 2)
+                          << "; 8-bit frame " << fmt(r.rgba8.median, 2) << " ms, ÷ kernel "
+                          << fmt(r.rgba8.median / std::max(kernel8Ms, 1e-9), 2) << "\n";
+                partRows.push_back({e.key, sizeName(s), fmt(r.timing.median, 2), fmt(kernelMs, 2),
+                                    fmt(r.timing.median / std::max(kernelMs, 1e-9), 2), fmt(r.rgba8.median, 2),
+                                    fmt(kernel8Ms, 2), fmt(r.rgba8.median / std::max(kernel8Ms, 1e-9), 2)});
+            }
             j["cells"].push_back({{"volume", e.key},
                                   {"volume_label", e.label},
                                   {"resolution", {s.first, s.second}},
@@ -199,6 +247,11 @@ void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &option
                                                              std::max(1.0, double(r.stats.raysHit) * r.stats.meanSamplesPerRay)},
                                   {"empty_brick_fraction", r.stats.emptyBrickFraction},
                                   {"paper_ms", paperMs > 0 ? nlohmann::json(paperMs) : nlohmann::json(nullptr)}});
+            if (openCl) {
+                j["cells"].back()["parts"] = r.parts.json(r.timing);
+                j["cells"].back()["rgba8_ms"] = toJson(r.rgba8);
+                j["cells"].back()["rgba8_parts"] = r.rgba8Parts.json(r.rgba8);
+            }
             rows.push_back({e.key, sizeName(s), fmt(r.timing.median, 2), fmt(r.timing.min, 2), fmt(r.timing.max, 2),
                             fmt(r.firstFrameMs, 1), paperMs > 0 ? fmt(paperMs, 2) : "", fmt(r.otherCpus, 2)});
         }
@@ -226,6 +279,20 @@ void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &option
             md << " " << (p.count(sizeName(s)) ? fmt(p.at(sizeName(s)), 2) : "") << " |";
         }
         md << "\n";
+    }
+    if (openCl) {
+        // The frame's parts: the whole frame (float RGBA read back, Table 1's time) and the
+        // 8-bit one a server encodes, each beside its kernel's device time.
+        out.writeCsv({"volume", "resolution", "frame_ms", "kernel_ms", "frame_over_kernel", "rgba8_frame_ms",
+                      "rgba8_kernel_ms", "rgba8_frame_over_kernel"},
+                     partRows, "_parts");
+        md << "\n| volume | resolution | frame ms | kernel ms | frame ÷ kernel | 8-bit frame ms | its kernel ms | 8-bit ÷ kernel |\n"
+              "|---|---|---:|---:|---:|---:|---:|---:|\n";
+        for (const auto &row : partRows) {
+            md << "|";
+            for (const std::string &cell : row) md << " " << cell << " |";
+            md << "\n";
+        }
     }
     out.writeMarkdown(md.str());
     std::cout << md.str();
@@ -265,7 +332,7 @@ void peerMode(const std::shared_ptr<OpenClContext> &cl, const PeerModeOptions &o
     const Quality quality = table1Quality(options.sampleDistance);
     RepeatOptions repeat{0, std::max(1, options.frames - 1), options.maxSeconds};
     for (const auto &s : options.sizes) {
-        const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, repeat);
+        const CellResult r = timeOrbit(renderer, tf, quality, s.first, s.second, repeat, false);
         nlohmann::json line = {
             {"peer", "volcast"},
             {"renderer", options.backEnd == "cpu" ? "volcast native CPU ray caster" : "volcast OpenCL ray caster"},

@@ -7,6 +7,7 @@
 
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/model/synthetic.hpp"
+#include "server/frame_encoder.hpp"
 #include "server/render_scheduler.hpp"
 #include "slow_renderer.hpp"
 
@@ -566,14 +567,13 @@ class WindowRecorder : public FrameRenderer {
   public:
     explicit WindowRecorder(std::unique_ptr<FrameRenderer> inner) : inner_(std::move(inner)) {}
     Image render(const FrameRequest &request, RenderStats *stats = nullptr) override {
-        {
-            std::lock_guard lock(mutex_);
-            const int gridWidth = raysForScale(request.width, request.quality.imageScale);
-            const int gridHeight = raysForScale(request.height, request.quality.imageScale);
-            windows_.push_back({request.window ? *request.window : RayWindow{0, 0, gridWidth, gridHeight}, gridWidth,
-                                gridHeight});
-        }
+        record(request);
         return inner_->render(request, stats);
+    }
+    // Forwarded, so that frames sent as JPEG keep the inner renderer's own 8-bit path.
+    Rgba8Image renderRgba8(const FrameRequest &request, RenderStats *stats = nullptr) override {
+        record(request);
+        return inner_->renderRgba8(request, stats);
     }
     bool rendersWindowsCheaply() const override { return inner_->rendersWindowsCheaply(); }
     int bandRows() const override { return inner_->bandRows(); }
@@ -590,6 +590,13 @@ class WindowRecorder : public FrameRenderer {
     }
 
   private:
+    void record(const FrameRequest &request) {
+        std::lock_guard lock(mutex_);
+        const int gridWidth = raysForScale(request.width, request.quality.imageScale);
+        const int gridHeight = raysForScale(request.height, request.quality.imageScale);
+        windows_.push_back({request.window ? *request.window : RayWindow{0, 0, gridWidth, gridHeight}, gridWidth,
+                            gridHeight});
+    }
     std::unique_ptr<FrameRenderer> inner_;
     mutable std::mutex mutex_;
     std::vector<Cast> windows_;
@@ -950,6 +957,41 @@ TEST(TiledFrameCells, UnitsOfAnySizeAssembleTheWholeFrame) {
         ASSERT_EQ(assembled.rgba.size(), whole.rgba.size());
         EXPECT_TRUE(assembled.rgba == whole.rgba) << "units of " << unitCells << " cells";
     }
+}
+
+// A frame only encoded (a JPEG) is rendered as 8-bit RGBA when one pass at full resolution
+// makes its bytes the cells' bytes: assembled, they are the whole float frame's conversion,
+// so the JPEG is the one the floats would give. With passes to average or rays to upsample
+// the frame keeps its floats.
+TEST(TiledFrameCells, EncodedOnlyFramesAssembleTheWholeFramesBytes) {
+    const TransferFunction tf = rampTf();
+    const Camera camera = orbitCamera(0.3);
+    Quality q;
+    q.step = 0.5;
+    constexpr int kW = 150, kH = 97;
+    const auto check = [&](FrameRenderer &renderer) {
+        const Rgba8Image whole = rgba8FromImage(renderer.render({tf, camera, kW, kH, q, {}}));
+        for (int unitCells : {1, 7, 1000}) {
+            TiledFrame frame({tf, camera, kW, kH, q, {}}, 1, renderer.bandRows(), true);
+            ASSERT_TRUE(frame.rgba8());
+            while (!frame.done()) frame.renderUnit(renderer, unitCells);
+            const Rgba8Image assembled = frame.finishRgba8();
+            EXPECT_EQ(assembled.width, kW);
+            EXPECT_EQ(assembled.height, kH);
+            EXPECT_TRUE(assembled.rgba == whole.rgba) << renderer.description() << ", units of " << unitCells << " cells";
+            EXPECT_EQ(encodeJpeg(assembled, 80), encodeJpeg(renderer.render({tf, camera, kW, kH, q, {}}), 80));
+        }
+    };
+    SlowRenderer slow(smallVolume(), 0);   // FrameRenderer's default: converted on the host
+    check(slow);
+    const auto openCl = makeFrameRenderer(DeviceChoice::parse("opencl"), smallVolume());   // on the device
+    check(*openCl);
+
+    EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, q, {}}, 2, 8, true).rgba8());   // passes are averaged on floats
+    Quality scaled = q;
+    scaled.imageScale = 0.5;
+    EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, scaled, {}}, 1, 8, true).rgba8());   // upsampled on floats
+    EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, q, {}}, 1, 8, false).rgba8());   // a PNG's floats
 }
 
 } // namespace
