@@ -34,8 +34,14 @@ namespace volcast {
 // VOLCAST_CUBIC_FETCH says `image` (for measuring that difference on a device).
 enum class CubicFetch { Auto, Taps64, Trilinear8 };
 
+// Where renderRgba8 turns floats into bytes. On a GPU the device converts and a quarter of
+// the bytes cross the bus; on a CPU device (PoCL) the read-back is a memcpy and the host's
+// vectorised loop is faster than the conversion kernel (0.3 against 2–3 ms at 512², docs/gpu.md).
+enum class Rgba8Conversion { Auto, Device, Host };
+
 struct OpenClRendererOptions {
     CubicFetch cubicFetch = CubicFetch::Auto;
+    Rgba8Conversion rgba8Conversion = Rgba8Conversion::Auto;   // Auto: Device on a GPU, else Host
     int brickSize = 8; // level voxels per min-max brick edge
 };
 
@@ -51,7 +57,8 @@ class OpenClRenderer : public FrameRenderer {
     // Thread-safe; frames are rendered one at a time. A window casts only its own rays.
     Image render(const FrameRequest &request, RenderStats *stats = nullptr) override;
     // Converted to 8 bits on the device (the kernel rgba8FromFloat), a quarter of the bytes
-    // read back; a whole frame with image_scale < 1 is upsampled and converted on the host.
+    // read back (Rgba8Conversion); a whole frame with image_scale < 1 is upsampled and
+    // converted on the host.
     Rgba8Image renderRgba8(const FrameRequest &request, RenderStats *stats = nullptr) override;
     bool rendersWindowsCheaply() const override { return true; }
     int bandRows() const override;   // the work-group's height

@@ -32,8 +32,15 @@ FrameRequest blobFrame(int width, int height, bool shaded, bool preintegrated, b
     return {test::blobTf(), test::obliqueCamera(test::blob().volume, 30), width, height, q, planes, window};
 }
 
+// The device's conversion whatever the device (Auto converts on the host on PoCL).
+OpenClRendererOptions onDevice() {
+    OpenClRendererOptions o;
+    o.rgba8Conversion = Rgba8Conversion::Device;
+    return o;
+}
+
 OpenClRenderer &sharedRenderer() {
-    static OpenClRenderer r(sharedContext(), test::blob().volume);
+    static OpenClRenderer r(sharedContext(), test::blob().volume, onDevice());
     return r;
 }
 
@@ -102,6 +109,19 @@ TEST(OpenClFrameParts, EightBitFramesAreTheHostConversionOfTheFloatFrames) {
     EXPECT_GT(st.hostConvertSeconds, 0);
 }
 
+// Asked to convert on the host, the OpenCL renderer reads floats back and converts them there.
+TEST(OpenClFrameParts, TheHostConversionReadsBackFloats) {
+    OpenClRendererOptions o;
+    o.rgba8Conversion = Rgba8Conversion::Host;
+    OpenClRenderer r(sharedContext(), test::blob().volume, o);
+    const FrameRequest frame = blobFrame(40, 36, false, false, false);
+    RenderStats st;
+    EXPECT_EQ(r.renderRgba8(frame, &st).rgba, rgba8FromImage(r.render(frame)).rgba);
+    EXPECT_EQ(st.deviceConvertSeconds, 0);
+    EXPECT_GT(st.hostConvertSeconds, 0);
+    EXPECT_GT(st.deviceKernelSeconds, 0);
+}
+
 // The native path converts on the host (FrameRenderer's default), to the same bytes.
 TEST(OpenClFrameParts, TheDefaultConversionIsTheHostsOnTheNativePath) {
     const auto cpu = makeFrameRenderer(nullptr, std::make_shared<const Volume>(test::blob().volume));
@@ -153,7 +173,7 @@ TEST(OpenClFrameParts, AReusedRendererDrawsEachFrameAsAFreshOne) {
         blobFrame(31, 47, false, true, true),
         blobFrame(32, 24, false, false, false),
     };
-    OpenClRenderer reused(sharedContext(), test::blob().volume);
+    OpenClRenderer reused(sharedContext(), test::blob().volume, onDevice());
     for (size_t i = 0; i < frames.size(); ++i) {
         RenderStats again, fresh;
         const Image a = reused.render(frames[i], &again);

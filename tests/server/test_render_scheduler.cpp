@@ -984,7 +984,7 @@ TEST(TiledFrameCells, EncodedOnlyFramesAssembleTheWholeFramesBytes) {
     };
     SlowRenderer slow(smallVolume(), 0);   // FrameRenderer's default: converted on the host
     check(slow);
-    const auto openCl = makeFrameRenderer(DeviceChoice::parse("opencl"), smallVolume());   // on the device
+    const auto openCl = makeFrameRenderer(DeviceChoice::parse("opencl"), smallVolume());   // on a GPU, on the device
     check(*openCl);
 
     EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, q, {}}, 2, 8, true).rgba8());   // passes are averaged on floats
