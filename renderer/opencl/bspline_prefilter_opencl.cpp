@@ -22,6 +22,11 @@ constexpr size_t kTileLines = 32;
 constexpr size_t kGroup = 32;
 size_t roundUp(size_t n, size_t to) { return (n + to - 1) / to * to; }
 
+// Elements of a row one work-item of the copy kernels (widen, pad) moves: 1 on a GPU, so
+// neighbouring work-items move neighbouring floats; on a CPU a run of contiguous memory per
+// work-item (kernels/bspline_prefilter.cl), ≤ 4096 so that a z slice still spreads over the cores.
+size_t copyRun(OpenClContext &cl, size_t row) { return cl.isGpu() ? 1 : std::clamp<size_t>(row, 1, 4096); }
+
 cl::Kernel kernel(OpenClContext &cl, const char *name) {
     // A kernel of our own: setArg on a shared one would race with another caller.
     return cl::Kernel(cl.program(kBSplinePrefilterKernelSource, kPrefilterBuildOptions).program, name);
@@ -139,9 +144,13 @@ cl::Buffer padPasses(OpenClContext &cl, const cl::Buffer &coefficients, Vec3i di
     pad.setArg(2, cl_int(dims.x));
     pad.setArg(3, cl_int(dims.y));
     pad.setArg(4, cl_int(dims.z));
+    const size_t run = copyRun(cl, px);
+    pad.setArg(7, cl_int(run));
     slabs.run(pz, px * py, [&](size_t first, size_t count) {
-        cl.queue().enqueueNDRangeKernel(pad, cl::NDRange(0, 0, first), cl::NDRange(roundUp(px, kGroup), py, count),
-                                        cl::NDRange(kGroup, 1, 1));
+        pad.setArg(5, cl_int(first));
+        pad.setArg(6, cl_int(count));
+        cl.queue().enqueueNDRangeKernel(pad, cl::NullRange, cl::NDRange(roundUp((px + run - 1) / run, kGroup), py),
+                                        cl::NDRange(kGroup, 1));
     });
     return padded;
 }
@@ -203,7 +212,7 @@ cl::Buffer bsplinePaddedCoefficientsOpenCl(OpenClContext &cl, const SampleGrid &
             coefficients = cl::Buffer(cl.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, count * sizeof(float),
                                       const_cast<float *>(samples.floats));
         } else {
-            // Up as held (a quarter or half of the floats' bytes), widened on the device a z slice per unit.
+            // Up as held (a quarter or half of the floats' bytes), widened on the device, z slices as units.
             const size_t slice = size_t(samples.dims.x) * size_t(samples.dims.y);
             cl::Buffer narrow(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, count * size_t(samples.width.bytes),
                               const_cast<unsigned char *>(samples.narrow));
@@ -213,9 +222,13 @@ cl::Buffer bsplinePaddedCoefficientsOpenCl(OpenClContext &cl, const SampleGrid &
             widen.setArg(1, coefficients);
             widen.setArg(2, cl_ulong(slice));
             widen.setArg(3, samples.width.offset);
+            const size_t run = copyRun(cl, slice);
+            widen.setArg(6, cl_uint(run));
             slabs.run(size_t(samples.dims.z), slice, [&](size_t first, size_t n) {
-                cl.queue().enqueueNDRangeKernel(widen, cl::NDRange(0, first), cl::NDRange(roundUp(slice, kGroup), n),
-                                                cl::NDRange(kGroup, 1));
+                widen.setArg(4, cl_uint(first));
+                widen.setArg(5, cl_uint(n));
+                cl.queue().enqueueNDRangeKernel(widen, cl::NullRange, cl::NDRange(roundUp((slice + run - 1) / run, kGroup)),
+                                                cl::NDRange(kGroup));
             });
         }
         prefilterPasses(cl, coefficients, samples.dims, launch.xPass, slabs);

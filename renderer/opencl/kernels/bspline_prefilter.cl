@@ -170,35 +170,51 @@ __kernel __attribute__((reqd_work_group_size(TILE_LINES, 1, 1))) void bspline_pr
     }
 }
 
+// Work-item g of a copy kernel below moves elements g * run .. g * run + run - 1 of a row, for
+// every z slice of its slab. run = 1 on a GPU: neighbouring work-items on neighbouring floats.
+// run = the row on a CPU: each work-item walks contiguous memory (a work-item per element
+// made PoCL dispatch hundreds of thousands of groups; one per column walked a page per slice).
+
 // Narrow samples (sample - offset in 1 or 2 bytes, narrow_samples.hpp) widened to float:
 // float(u) + offset, exact (both integers within 2^24), the host's SampleGrid::operator[].
-// Work-item (i, k): sample i of z slice k; the first dimension is rounded up to the work-group.
+// The slice is the row here; the range is rounded up to the work-group.
 __kernel void bspline_widen_uchar(__global const uchar *narrow, __global float *out, const ulong slice,
-                                  const float offset) {
-    const ulong i = get_global_id(0);
-    if (i >= slice) return;
-    const ulong at = (ulong)get_global_id(1) * slice + i;
-    out[at] = (float)narrow[at] + offset;
+                                  const float offset, const uint firstK, const uint countK, const uint run) {
+    const ulong i0 = (ulong)get_global_id(0) * run;
+    if (i0 >= slice) return;
+    const ulong i1 = min(slice, i0 + run);
+    for (ulong k = firstK; k < (ulong)firstK + countK; ++k)
+        for (ulong i = k * slice + i0; i < k * slice + i1; ++i) out[i] = (float)narrow[i] + offset;
 }
 __kernel void bspline_widen_ushort(__global const ushort *narrow, __global float *out, const ulong slice,
-                                   const float offset) {
-    const ulong i = get_global_id(0);
-    if (i >= slice) return;
-    const ulong at = (ulong)get_global_id(1) * slice + i;
-    out[at] = (float)narrow[at] + offset;
+                                   const float offset, const uint firstK, const uint countK, const uint run) {
+    const ulong i0 = (ulong)get_global_id(0) * run;
+    if (i0 >= slice) return;
+    const ulong i1 = min(slice, i0 + run);
+    for (ulong k = firstK; k < (ulong)firstK + countK; ++k)
+        for (ulong i = k * slice + i0; i < k * slice + i1; ++i) out[i] = (float)narrow[i] + offset;
 }
 
 // The coefficients padded by one before and two after on each axis with the mirror boundary
 // (p = n + 3 per axis), so the ray caster's 4x4x4 footprint around any clamped position stays
 // inside: out(i, j, k) = c(mirror(i - 1), mirror(j - 1), mirror(k - 1)). A copy, so the same
-// bits as the host's padMirror. The range is rounded up to the work-group.
+// bits as the host's padMirror. Work-item (g, j): row j of padded slices firstK .. firstK +
+// countK - 1, elements g * run on. The range is rounded up to the work-group.
 __kernel void bspline_pad_mirror(__global const float *c, __global float *out, const int nx, const int ny,
-                                 const int nz) {
-    const int i = (int)get_global_id(0), j = (int)get_global_id(1), k = (int)get_global_id(2);
-    const int px = nx + 3, py = ny + 3, pz = nz + 3;
-    if (i >= px || j >= py || k >= pz) return;
-    const int si = bspline_mirror_index(i - 1, nx), sj = bspline_mirror_index(j - 1, ny),
-              sk = bspline_mirror_index(k - 1, nz);
-    out[((ulong)k * (ulong)py + (ulong)j) * (ulong)px + (ulong)i] =
-        c[((ulong)sk * (ulong)ny + (ulong)sj) * (ulong)nx + (ulong)si];
+                                 const int nz, const int firstK, const int countK, const int run) {
+    const int i0 = (int)get_global_id(0) * run, j = (int)get_global_id(1);
+    const int px = nx + 3, py = ny + 3;
+    if (i0 >= px || j >= py) return;
+    const int i1 = min(px, i0 + run);
+    const ulong plane = (ulong)nx * (ulong)ny;
+    for (int k = firstK; k < firstK + countK; ++k) {
+        __global const float *from = c + (ulong)bspline_mirror_index(k - 1, nz) * plane +
+                                     (ulong)bspline_mirror_index(j - 1, ny) * (ulong)nx;
+        __global float *to = out + ((ulong)k * (ulong)py + (ulong)j) * (ulong)px;
+        for (int i = i0; i < i1; ++i) {
+            // Inside the volume the mirror is the identity; only the 3 pad columns fold.
+            const int si = i >= 1 && i <= nx ? i - 1 : bspline_mirror_index(i - 1, nx);
+            to[i] = from[si];
+        }
+    }
 }
