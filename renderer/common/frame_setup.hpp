@@ -209,6 +209,8 @@ void fillCommonParams(const FrameSetup &s, Params &p) {
     p.brickSize = s.brickSize;
     p.width = s.raysWide;
     p.height = s.raysHigh;
+    p.inverseWidth = float(1.0 / s.raysWide);
+    p.inverseHeight = float(1.0 / s.raysHigh);
     p.maxSamples = FrameRenderer::kMaxSamplesPerRay;
     p.step = float(s.step);
     p.opacityUnit = float(s.opacityUnit);

@@ -84,12 +84,44 @@ VC_INLINE float vcRandom01(VC_UINT x, VC_UINT y, VC_UINT seed, VC_UINT pass) {
 /* ---- ray set-up ------------------------------------------------------------------------ */
 
 /* Image-plane coordinates of pixel centre x of n, from −1 (left, bottom) to 1 (docs/design.md's
- * camera): u = 2(x + ½)/n − 1 across, v = 1 − 2(y + ½)/n down the rows. */
-VC_INLINE VC_REAL vcImageU(VC_REAL x, VC_REAL n) {
-    return VC_CONST(2.0f) * (x + VC_CONST(0.5f)) / n - VC_CONST(1.0f);
+ * camera): u = 2(x + ½)/n − 1 across, v = 1 − 2(y + ½)/n down the rows, as the exact integer
+ * 2x + 1 − n times inverseN = 1/n rounded once on the host. Products are correctly rounded on
+ * every OpenCL device, quotients only to 2.5 ulp: the middle pixel of an odd n is exactly 0,
+ * mirrored pixels exactly opposite, and edge pixels of a power-of-two n exact, whatever the
+ * device. 1 − 2(y + ½)/n put the middle row of a camera on a face, looking along it, 1 ulp off
+ * the face on an NVIDIA GPU: outside the box (tests/renderer/test_device_rounding.cpp). */
+VC_INLINE VC_REAL vcImageU(VC_REAL x, VC_REAL n, VC_REAL inverseN) {
+    return (VC_CONST(2.0f) * x + VC_CONST(1.0f) - n) * inverseN;
 }
-VC_INLINE VC_REAL vcImageV(VC_REAL y, VC_REAL n) {
-    return VC_CONST(1.0f) - VC_CONST(2.0f) * (y + VC_CONST(0.5f)) / n;
+VC_INLINE VC_REAL vcImageV(VC_REAL y, VC_REAL n, VC_REAL inverseN) {
+    return (n - VC_CONST(2.0f) * y - VC_CONST(1.0f)) * inverseN;
+}
+
+/* The world ray through image-plane point (u, v) of the camera (eye, forward, right, up: the
+ * frame's constants, right and up scaled by the view's half-extents): origin and direction,
+ * the direction a unit vector in perspective. A zero component of forward, right and up
+ * with a zero u or v stays exactly zero, whether or not a·b + c is fused. */
+VC_INLINE void vcCameraRay(VC_REAL u, VC_REAL v, const float *eye, const float *forward, const float *right,
+                           const float *up, int orthographic, VC_REAL *origin, VC_REAL *dir) {
+    for (int a = 0; a < 3; ++a) {
+        const VC_REAL offset = u * VC_CONST(right[a]) + v * VC_CONST(up[a]);
+        origin[a] = orthographic ? VC_CONST(eye[a]) + offset : VC_CONST(eye[a]);
+        dir[a] = orthographic ? VC_CONST(forward[a]) : VC_CONST(forward[a]) + offset;
+    }
+    if (!orthographic) {
+        const VC_REAL len = vc_sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+        for (int a = 0; a < 3; ++a) dir[a] = dir[a] / len;
+    }
+}
+
+/* Row r·x + r[3] of an affine map (r: the row's linear part, then its translation), and its
+ * linear part alone: a point and a direction into index space, a point's and a direction's
+ * value under a plane (n, w). Summed left to right on both back ends. */
+VC_INLINE VC_REAL vcAffineRow(const float *r, const VC_REAL *x) {
+    return VC_CONST(r[0]) * x[0] + VC_CONST(r[1]) * x[1] + VC_CONST(r[2]) * x[2] + VC_CONST(r[3]);
+}
+VC_INLINE VC_REAL vcLinearRow(const float *r, const VC_REAL *x) {
+    return VC_CONST(r[0]) * x[0] + VC_CONST(r[1]) * x[1] + VC_CONST(r[2]) * x[2];
 }
 
 /* Clips the ray's [t0, t1] to the slab lo ≤ p + t·d ≤ hi of one axis. A ray parallel to the

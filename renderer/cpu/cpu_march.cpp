@@ -68,37 +68,24 @@ struct PacketRays {
     MF hit;
 };
 
-inline VF dot3(const float *m, const VF v[3]) {
-    const DF df;
-    return hn::Add(hn::Add(hn::Mul(hn::Set(df, m[0]), v[0]), hn::Mul(hn::Set(df, m[1]), v[1])),
-                   hn::Mul(hn::Set(df, m[2]), v[2]));
-}
-
 PacketRays setUpPacket(const FrameParams &P, VF x, VF y, MF inside) {
     const DF df;
     const VF zero = hn::Zero(df), half = hn::Set(df, 0.5f), inf = hn::Set(df, kInf);
-    const VF u = vcImageU(x, hn::Set(df, float(P.width))), v = vcImageV(y, hn::Set(df, float(P.height)));
+    const VF u = vcImageU(x, hn::Set(df, float(P.width)), hn::Set(df, P.inverseWidth));
+    const VF v = vcImageV(y, hn::Set(df, float(P.height)), hn::Set(df, P.inverseHeight));
     VF origin[3], dir[3];
-    for (int a = 0; a < 3; ++a) {
-        const VF offset = hn::Add(hn::Mul(u, hn::Set(df, P.right[a])), hn::Mul(v, hn::Set(df, P.up[a])));
-        origin[a] = P.orthographic ? hn::Add(hn::Set(df, P.eye[a]), offset) : hn::Set(df, P.eye[a]);
-        dir[a] = P.orthographic ? hn::Set(df, P.forward[a]) : hn::Add(hn::Set(df, P.forward[a]), offset);
-    }
-    if (!P.orthographic) {
-        const VF len = hn::Sqrt(hn::Add(hn::Add(hn::Mul(dir[0], dir[0]), hn::Mul(dir[1], dir[1])), hn::Mul(dir[2], dir[2])));
-        for (VF &c : dir) c = hn::Div(c, len);
-    }
+    vcCameraRay(u, v, P.eye, P.forward, P.right, P.up, P.orthographic, origin, dir);
     VF p0[3], dq[3];
     for (int a = 0; a < 3; ++a) {
-        p0[a] = hn::Add(dot3(P.indexFromWorld[a], origin), hn::Set(df, P.indexFromWorld[a][3]));
-        dq[a] = dot3(P.indexFromWorld[a], dir);
+        p0[a] = vcAffineRow(P.indexFromWorld[a], origin);
+        dq[a] = vcLinearRow(P.indexFromWorld[a], dir);
     }
     VF t0 = zero, t1 = inf;
     for (int a = 0; a < 3; ++a) vcClipToSlab(p0[a], dq[a], hn::Set(df, P.boxLo[a]), hn::Set(df, P.boxHi[a]), &t0, &t1);
     if (P.features.clipPlanes)
         for (int c = 0; c < P.clipPlaneCount; ++c) {
             const float *plane = P.clipPlanes[c];
-            vcClipToPlane(hn::Add(dot3(plane, origin), hn::Set(df, plane[3])), dot3(plane, dir), &t0, &t1);
+            vcClipToPlane(vcAffineRow(plane, origin), vcLinearRow(plane, dir), &t0, &t1);
         }
     PacketRays r;
     r.hit = hn::And(inside, hn::Gt(t1, t0));

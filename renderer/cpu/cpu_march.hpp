@@ -28,6 +28,7 @@ struct FrameParams {
     float boxLo[3], boxHi[3];       // the box rays are clipped to, level-0 index space: the
                                     // volume's [−1/2, n − 1/2] or the crop box inside it
     int width = 0, height = 0;      // rays of the whole grid (after image_scale)
+    float inverseWidth = 1, inverseHeight = 1; // 1/width, 1/height rounded once (vcImageU)
     // The window of the grid that rgba holds: rays [outX, outX + outWidth) × [outY, …); the
     // whole grid is 0, 0, width. Rays keep their grid coordinates (camera, jitter).
     int outX = 0, outY = 0, outWidth = 0;

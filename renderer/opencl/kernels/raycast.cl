@@ -226,20 +226,25 @@ typedef struct {
 /* Ray through the pixel centre (docs/design.md's camera), world space, and into index space,
  * where the volume is the box [-1/2, n - 1/2]. */
 Ray cameraRay(__global const RayCastParams *P, int x, int y) {
-    const float u = vcImageU((float)x, (float)P->width), v = vcImageV((float)y, (float)P->height);
-    const float3 offset = u * P->right.xyz + v * P->up.xyz;
-    Ray r;
-    r.origin = P->eye.xyz;
-    if (P->orthographic) {
-        r.origin += offset;
-        r.dir = P->forward.xyz;
-    } else {
-        r.dir = normalize(P->forward.xyz + offset);
+    const float u = vcImageU((float)x, (float)P->width, P->inverseWidth);
+    const float v = vcImageV((float)y, (float)P->height, P->inverseHeight);
+    /* ray_math.h reads the frame's constants from private arrays (OpenCL 1.2 has no generic
+     * address space). */
+    const float eye[3] = {P->eye.x, P->eye.y, P->eye.z}, forward[3] = {P->forward.x, P->forward.y, P->forward.z};
+    const float right[3] = {P->right.x, P->right.y, P->right.z}, up[3] = {P->up.x, P->up.y, P->up.z};
+    float origin[3], dir[3], p0[3], dq[3];
+    vcCameraRay(u, v, eye, forward, right, up, P->orthographic, origin, dir);
+    for (int a = 0; a < 3; ++a) {
+        const float4 m = P->indexFromWorld[a];
+        const float row[4] = {m.x, m.y, m.z, m.w};
+        p0[a] = vcAffineRow(row, origin);
+        dq[a] = vcLinearRow(row, dir);
     }
-    __global const float4 *m = P->indexFromWorld;
-    r.p0 = (float3)(dot(m[0].xyz, r.origin) + m[0].w, dot(m[1].xyz, r.origin) + m[1].w,
-                    dot(m[2].xyz, r.origin) + m[2].w);
-    r.dq = (float3)(dot(m[0].xyz, r.dir), dot(m[1].xyz, r.dir), dot(m[2].xyz, r.dir));
+    Ray r;
+    r.origin = (float3)(origin[0], origin[1], origin[2]);
+    r.dir = (float3)(dir[0], dir[1], dir[2]);
+    r.p0 = (float3)(p0[0], p0[1], p0[2]);
+    r.dq = (float3)(dq[0], dq[1], dq[2]);
     return r;
 }
 
@@ -258,8 +263,10 @@ void clipToPlanes(__global const RayCastParams *P, Ray *r) {
 #ifdef CLIP_PLANES
     float t0 = r->t0, t1 = r->t1;
     for (int c = 0; c < P->clipPlaneCount; ++c) {
-        const float4 plane = P->clipPlanes[c];
-        vcClipToPlane(dot(plane.xyz, r->origin) + plane.w, dot(plane.xyz, r->dir), &t0, &t1);
+        const float4 n = P->clipPlanes[c];
+        const float plane[4] = {n.x, n.y, n.z, n.w};
+        const float origin[3] = {r->origin.x, r->origin.y, r->origin.z}, dir[3] = {r->dir.x, r->dir.y, r->dir.z};
+        vcClipToPlane(vcAffineRow(plane, origin), vcLinearRow(plane, dir), &t0, &t1);
     }
     r->t0 = t0;
     r->t1 = t1;

@@ -51,7 +51,8 @@ typedef struct {
     vc_int preLocatorSize;
     vc_float preLocatorMin;
     vc_float preLocatorScale;       /* locator buckets per data unit */
-    vc_int pad1, pad2, pad3, pad4;
+    vc_float inverseWidth, inverseHeight; /* 1/width, 1/height rounded once on the host (vcImageU) */
+    vc_int pad3, pad4;
     /* The box rays are clipped to, level-0 index space: [-1/2, n - 1/2] per axis, or the crop box. */
     vc_float4 boxLo, boxHi;
 } RayCastParams;
