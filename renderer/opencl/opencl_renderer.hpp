@@ -36,7 +36,7 @@ enum class CubicFetch { Auto, Taps64, Trilinear8 };
 
 // Where renderRgba8 turns floats into bytes. On a GPU the device converts and a quarter of
 // the bytes cross the bus; on a CPU device (PoCL) the read-back is a memcpy and the host's
-// vectorised loop is faster than the conversion kernel (0.3 against 2–3 ms at 512², docs/gpu.md).
+// vectorised loop is faster than the conversion kernel (0.6–1 against 2–3 ms at 512², docs/gpu.md).
 enum class Rgba8Conversion { Auto, Device, Host };
 
 struct OpenClRendererOptions {
