@@ -8,6 +8,7 @@
 
 #include "renderer/make_frame_renderer.hpp"
 #include "tests/bench/byos.hpp"
+#include "tests/bench/ladder_choice.hpp"
 #include "tests/bench/studies.hpp"
 
 #include <CLI/CLI.hpp>
@@ -68,6 +69,21 @@ int main(int argc, char **argv) {
         sub->add_option("--error-viewport", viewportError, "The error study's square viewport")->capture_default_str();
         sub->add_option("--scans", scans, "Scans of the error study")->delimiter(',')->capture_default_str();
     }
+
+    // The quality ladder's choice while dragging, on this device (ladder_choice.hpp).
+    std::string ladderSizes = "512x512,1920x1080";
+    std::vector<int> ladderSessions = {1, 4, 16, 32};
+    auto *ladder = app.add_subcommand("ladder", "The level the server's quality ladder picks while 1, 4, 16, 32 "
+                                                "sessions drag bonsai on this device, with each level's time and error");
+    common(ladder);
+    ladder->add_option("--backend", options.backEnd, "Ray caster: auto (an OpenCL GPU, else cpu), opencl (on --device) or cpu (native)")
+        ->check(CLI::IsMember({"auto", "opencl", "cpu"}))
+        ->capture_default_str();
+    ladder->add_option("--sizes", ladderSizes, "Output sizes, WxH,...")->capture_default_str();
+    ladder->add_option("--sessions", ladderSessions, "Numbers of sessions dragging at once")
+        ->delimiter(',')
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
 
     PeerModeOptions peer;
     std::string sizes = "512x512";
@@ -175,13 +191,14 @@ int main(int argc, char **argv) {
         }
         options.backEnd = resolveBackEnd(options.backEnd);
         for (std::string &b : options.backEnds) b = resolveBackEnd(b);
-        if (t1->parsed() || all->parsed()) announce(options.backEnd);
+        if (t1->parsed() || all->parsed() || ladder->parsed()) announce(options.backEnd);
         if (f5->parsed() || ev->parsed() || all->parsed())
             for (const std::string &b : options.backEnds) announce(b);
         if (t1->parsed() || all->parsed()) table1(cl, options);
         if (t2->parsed() || all->parsed()) prefilter(*cl, options);
         if (f5->parsed() || all->parsed()) figure5(cl, options, viewportFigure5);
         if (ev->parsed() || all->parsed()) errorVsTime(cl, options, viewportError, scans);
+        if (ladder->parsed()) ladderChoice(cl, options, parseSizes(options.quick ? "48x40" : ladderSizes), ladderSessions);
         std::cerr << "volcast-bench: results in " << options.out << "\n";
         return 0;
     } catch (const std::exception &e) {
