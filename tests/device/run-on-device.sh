@@ -3,7 +3,7 @@
 # the GPU through NVIDIA's OpenCL driver, and the native path on that machine's cores.
 # Everything it prints goes to the log; result files go to $OUT/res.tgz. Each step is bounded.
 # Usage there: bash .device-bundle/run-on-device.sh [STEP...]
-# STEPs: tests rounding table1 prefilter figure5 cpu (default: all, in that order; about 2 minutes).
+# STEPs: tests rounding table1 prefilter figure5 ladder cpu (default: all, in that order; about 2 minutes).
 # `rounding` reruns the device-sensitive cases with each liberty OpenCL C gives a device taken
 # away in turn (division, contraction, denormals, the cubic spline from hardware-filtered fetches).
 cd "$(dirname "$0")"
@@ -17,7 +17,7 @@ mkdir -p /tmp/volcast-icd; echo "$nv" > /tmp/volcast-icd/nvidia.icd; export OCL_
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
 echo "CPU: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2)"
 B=/tmp/volcast-device/bin; export VOLCAST_DEVICE=gpu
-steps=${*:-tests rounding table1 prefilter figure5 cpu}
+steps=${*:-tests rounding table1 prefilter figure5 ladder cpu}
 sensitive='*CamerasAndRays_OpenCl*:*DegenerateVolumes_OpenCl*:CpuRenderer.DrawsTheOpenClImageToFloatRounding:DeviceRounding.*'
 t0=$SECONDS
 for s in $steps; do
@@ -36,6 +36,7 @@ for s in $steps; do
     table1)    timeout 120 $B/volcast-bench table1 --backend opencl --device gpu --data data --repeats 10 --out $R/table1-gpu 2>&1 | tail -9 ;;
     prefilter) timeout 150 $B/volcast-bench prefilter --device gpu --out $R/prefilter-gpu 2>&1 | tail -6 ;;
     figure5)   timeout 150 $B/volcast-bench figure5 --backends opencl --device gpu --data data --out $R/figure5-gpu 2>&1 | tail -9 ;;
+    ladder)    timeout 120 $B/volcast-bench ladder --backend opencl --device gpu --data data --out $R/ladder-gpu 2>&1 | tail -14 ;;
     cpu)       timeout 120 $B/volcast-bench table1 --backend cpu --data data --repeats 10 --out $R/table1-cpu 2>&1 | tail -9 ;;
     *)         echo "unknown step $s" ;;
   esac
