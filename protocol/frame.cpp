@@ -31,6 +31,9 @@ void requireFinite(double v, const char *what) {
 json headerToJson(const FrameHeader &h, size_t imageBytes) {
     if (h.width <= 0 || h.height <= 0 || h.width > kMaxFrameSide || h.height > kMaxFrameSide)
         throw std::invalid_argument("frame header: width and height must be in [1, 65536]");
+    const int viewWidth = h.viewWidth == 0 ? h.width : h.viewWidth, viewHeight = h.viewHeight == 0 ? h.height : h.viewHeight;
+    if (viewWidth < h.width || viewHeight < h.height || viewWidth > kMaxFrameSide || viewHeight > kMaxFrameSide)
+        throw std::invalid_argument("frame header: view_width and view_height must be in [width, 65536] and [height, 65536]");
     if (h.level < 0) throw std::invalid_argument("frame header: level must not be negative");
     requireFinite(h.renderMs, "render_ms");
     requireFinite(h.encodeMs, "encode_ms");
@@ -53,6 +56,9 @@ json headerToJson(const FrameHeader &h, size_t imageBytes) {
             {"final", h.final},
             {"camera", h.camera},
             {"image_bytes", imageBytes}};
+    // The view's size where it is set (the server always sets it; older headers lack it).
+    if (h.viewWidth != 0) header["view_width"] = viewWidth;
+    if (h.viewHeight != 0) header["view_height"] = viewHeight;
     // Only on a level the server lowered to stay within its limits: older headers lack it.
     if (!h.limited.empty()) header["limited"] = h.limited;
     return header;
@@ -97,6 +103,11 @@ FrameHeader readHeader(const json &root, uint64_t &imageBytes) {
     if (const json *q = f.find("quality"); q && !q->is_null()) h.quality = detail::object(*q, "quality");
     h.width = int(detail::integer(f.require("width"), "width", 1, kMaxFrameSide));
     h.height = int(detail::integer(f.require("height"), "height", 1, kMaxFrameSide));
+    // The view's size; absent (0) from older servers, which sent frames at it.
+    if (const json *v = f.find("view_width"); v && !v->is_null())
+        h.viewWidth = int(detail::integer(*v, "view_width", h.width, kMaxFrameSide));
+    if (const json *v = f.find("view_height"); v && !v->is_null())
+        h.viewHeight = int(detail::integer(*v, "view_height", h.height, kMaxFrameSide));
     const std::string codec = detail::string(f.require("codec"), "codec", 64);
     bool known = false;
     for (const auto &[c, name] : kCodecs)

@@ -50,8 +50,10 @@ struct FrameHeader {
     RequestId request;         // id of the latest request the frame reflects; null if none had one
     int level = 0;             // refinement level, 0 the cheapest; explicit quality has only 0
     nlohmann::json quality;    // scene-file "quality" switches this level rendered with
-    int width = 0;             // pixels of the encoded image (image_scale < 1 makes it smaller
-    int height = 0;            //   than the viewport; clients scale it up)
+    int width = 0;             // pixels of the encoded image: the rays the level cast
+    int height = 0;            //   (image_scale < 1 makes it smaller than the view)
+    int viewWidth = 0;         // pixels of the view the image fills (the viewport, a still's
+    int viewHeight = 0;        //   size); clients scale the image up to it. 0: the image's own
     Codec codec = Codec::Jpeg;
     double renderMs = 0;       // ms, from render start to pixels on the host
     double encodeMs = 0;       // ms, image encoding
@@ -61,6 +63,9 @@ struct FrameHeader {
     std::string limited;       // what the automatic policy lowered to stay within the server's
                                //   limits ("image scale 0.5 to stay within …"); empty: nothing
     bool operator==(const FrameHeader &) const = default;
+    // The size the image is shown at: the view's, or the image's own where none is given.
+    int shownWidth() const { return viewWidth != 0 ? viewWidth : width; }
+    int shownHeight() const { return viewHeight != 0 ? viewHeight : height; }
 };
 
 // The frame message for header and image. Throws std::invalid_argument for a header that

@@ -44,6 +44,35 @@ Rgb8 decodeJpegRgb8(const std::vector<uint8_t> &jpeg) {
     return out;
 }
 
+Rgb8 scaledRgb8(Rgb8 image, int width, int height) {
+    if (image.width == width && image.height == height) return image;
+    Rgb8 out{width, height, std::vector<uint8_t>(size_t(width) * size_t(height) * 3)};
+    if (image.width < 1 || image.height < 1) return out;
+    auto axis = [](int x, int dst, int src, int &i0, int &i1, double &f) {
+        const double s = std::clamp((x + 0.5) * src / dst - 0.5, 0.0, double(src - 1));
+        i0 = int(s);
+        i1 = std::min(i0 + 1, src - 1);
+        f = s - i0;
+    };
+    for (int y = 0; y < height; ++y) {
+        int y0, y1;
+        double fy;
+        axis(y, height, image.height, y0, y1, fy);
+        for (int x = 0; x < width; ++x) {
+            int x0, x1;
+            double fx;
+            axis(x, width, image.width, x0, x1, fx);
+            const auto at = [&](int px, int py, int c) { return double(image.rgb[(size_t(py) * size_t(image.width) + size_t(px)) * 3 + size_t(c)]); };
+            for (int c = 0; c < 3; ++c) {
+                const double top = at(x0, y0, c) + fx * (at(x1, y0, c) - at(x0, y0, c));
+                const double bottom = at(x0, y1, c) + fx * (at(x1, y1, c) - at(x0, y1, c));
+                out.rgb[(size_t(y) * size_t(width) + size_t(x)) * 3 + size_t(c)] = uint8_t(std::lround(top + fy * (bottom - top)));
+            }
+        }
+    }
+    return out;
+}
+
 double rmseRgb8(const Rgb8 &a, const Rgb8 &b) {
     if (a.width != b.width || a.height != b.height || a.rgb.size() != b.rgb.size())
         throw std::invalid_argument("images of different sizes compared");
@@ -110,7 +139,12 @@ void ErrorCalibrator::finalRendered(std::shared_ptr<const CalibrationView> view,
                             for (const auto &[level, jpeg] : shared->first) {
                                 if (size_t(level) + 1 >= ladderSize) continue;
                                 try {
-                                    record(key, level, rmseRgb8(decodeJpegRgb8(jpeg), shared->second), ladderSize);
+                                    const Rgb8 &finalImage = shared->second;
+                                    // As the client shows it: scaled up to the view where the level cast fewer rays.
+                                    record(key, level,
+                                           rmseRgb8(scaledRgb8(decodeJpegRgb8(jpeg), finalImage.width, finalImage.height),
+                                                    finalImage),
+                                           ladderSize);
                                 } catch (const std::exception &e) {
                                     spdlog::warn("error calibration: level {} not measured: {}", level, e.what());
                                 }
@@ -138,10 +172,14 @@ void ErrorCalibrator::calibrateLevels(const CalibrationView &view, const Rgb8 &f
         const Level &level = view.ladder[l];
         try {
             const auto t = Clock::now();
+            // Its rays alone, as the scheduler sends the level (the whole grid as the window: not
+            // upsampled), then scaled up to the view as the client shows it.
+            const RayWindow grid{0, 0, raysForScale(view.width, level.quality.imageScale),
+                                 raysForScale(view.height, level.quality.imageScale)};
             const Image image = view.renderer->render({view.transferFunction, view.camera, view.width, view.height,
-                                                      level.quality, view.clipPlanes});
+                                                      level.quality, view.clipPlanes, grid});
             const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-            const double rmse = rmseRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), final);
+            const double rmse = rmseRgb8(scaledRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), final.width, final.height), final);
             record(view.key, int(l), rmse, count);
             costs[l] = ms / std::max(1.0, predictedSamples(view.renderer->volume(), level.quality, view.width,
                                                            view.height));

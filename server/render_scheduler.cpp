@@ -671,6 +671,8 @@ void RenderScheduler::runUnit(Work &work) {
     if (frame.passes() > 1) h.quality["jitter"] = true;
     h.width = frame.rgba8() ? bytes.width : image.width;
     h.height = frame.rgba8() ? bytes.height : image.height;
+    h.viewWidth = job.width;
+    h.viewHeight = job.height;
     h.codec = work.final ? protocol::Codec::Png : protocol::Codec::Jpeg;
     h.renderMs = frame.renderMs();
     h.encodeMs = Ms(Clock::now() - t1).count();

@@ -25,7 +25,7 @@ TiledFrame::TiledFrame(FrameRequest request, int passes, int bandRows, bool enco
     : request_(std::move(request)), passes_(std::max(1, passes)),
       gridWidth_(raysForScale(request_.width, request_.quality.imageScale)),
       gridHeight_(raysForScale(request_.height, request_.quality.imageScale)),
-      rgba8_(encodedOnly && passes_ == 1 && gridWidth_ == request_.width && gridHeight_ == request_.height) {
+      rgba8_(encodedOnly && passes_ == 1) {
     request_.window.reset();
     if (rgba8_) {
         bytes_.width = gridWidth_;
@@ -116,8 +116,7 @@ double TiledFrame::renderUnit(FrameRenderer &renderer, int cells) {
 Image TiledFrame::finish() {
     if (passes_ > 1)
         for (float &v : sum_.rgba) v /= float(passes_);
-    if (gridWidth_ == request_.width && gridHeight_ == request_.height) return std::move(sum_);
-    return resizeBilinear(sum_, request_.width, request_.height);
+    return std::move(sum_);
 }
 
 Rgba8Image TiledFrame::finishRgba8() { return std::move(bytes_); }

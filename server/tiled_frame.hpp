@@ -26,9 +26,8 @@ class TiledFrame {
 
     // request: the whole frame, its quality what is rendered (the level's, or its substitute
     // while its preparation runs); its window is ignored (the frame sets one per unit).
-    // encodedOnly: the frame will only be encoded as a JPEG; then, when one pass at full
-    // resolution makes its bytes the cells' bytes (no averaging, no upsampling on floats),
-    // the cells are rendered as 8-bit RGBA (FrameRenderer::renderRgba8: on OpenCL converted
+    // encodedOnly: the frame will only be encoded as a JPEG; then, when one pass makes its
+    // bytes the cells' bytes (no averaging on floats), the cells are rendered as 8-bit RGBA (FrameRenderer::renderRgba8: on OpenCL converted
     // on the device, a quarter of the read-back) and finishRgba8 gives the frame.
     TiledFrame(FrameRequest request, int passes, int bandRows, bool encodedOnly = false);
 
@@ -36,7 +35,8 @@ class TiledFrame {
     // returns the unit's ms.
     double renderUnit(FrameRenderer &renderer, int cells);
     bool done() const { return pass_ >= passes_; }
-    // The averaged passes, brought to the frame's size; only once done() and !rgba8().
+    // The averaged passes at the ray grid's size (image_scale < 1: smaller than the view; it
+    // is sent so, and clients scale it up); only once done() and !rgba8().
     Image finish();
     // Whether the cells are rendered as 8-bit RGBA (see the constructor).
     bool rgba8() const { return rgba8_; }
@@ -64,7 +64,7 @@ class TiledFrame {
     };
     FrameRequest request_;
     int passes_;
-    int gridWidth_, gridHeight_;  // rays cast (image_scale < 1: fewer, upsampled at the end)
+    int gridWidth_, gridHeight_;  // rays cast (image_scale < 1: fewer than the view's pixels)
     int cellRays_;
     std::vector<Cell> order_;     // the cells of a pass, in the order they are rendered
     int pass_ = 0, next_ = 0;

@@ -161,7 +161,10 @@ int main(int argc, char **argv) {
                 .write(reinterpret_cast<const char *>(frames[i].image.data()), std::streamsize(frames[i].image.size()));
             json row = {{"seq", h.seq},          {"request", h.request}, {"level", h.level},
                         {"final", h.final},      {"codec", std::string(volcast::protocol::codecName(h.codec))},
-                        {"width", h.width},      {"height", h.height},   {"render_ms", h.renderMs},
+                        {"width", h.width},      {"height", h.height},
+                        // The image file is as sent (a level of fewer rays smaller than the
+                        // view); a viewer shows it scaled up to the view's size.
+                        {"view_width", h.shownWidth()}, {"view_height", h.shownHeight()}, {"render_ms", h.renderMs},
                         {"encode_ms", h.encodeMs}, {"bytes", frames[i].messageBytes}, {"file", file}};
             row["error"] = h.error ? json{{"value", h.error->value}, {"method", h.error->method}} : json(nullptr);
             if (auto it = sentAt.find(h.request); it != sentAt.end()) {

@@ -212,7 +212,33 @@ TEST(Frame, HeaderFieldsAreChecked) {
               "frame header: error.value: must not be negative, got -0.5");
     EXPECT_EQ(withField("error", {{"value", 0.5}, {"method", ""}}), "frame header: error.method: must not be empty");
     EXPECT_EQ(withField("camera", 3), "frame header: camera: must be a JSON object, got an integer");
+    // The view is at least the image: an image is never sent larger than the view it fills.
+    EXPECT_EQ(withField("view_width", 1), "frame header: view_width: must be an integer in [2, 65536], got 1");
+    EXPECT_EQ(withField("view_height", 65537), "frame header: view_height: must be an integer in [2, 65536], got 65537");
+    EXPECT_EQ(withField("view_width", "wide"), "frame header: view_width: must be an integer in [2, 65536], got a string");
     EXPECT_EQ(decodeErrorOf(frameWith(json::array())), "frame header: must be a JSON object, got an array");
+}
+
+// A level of fewer rays is sent at its own size with the view's beside it; a header without
+// the view's size (an older server's, which sent every frame at the view's size) is shown at
+// the image's own.
+TEST(Frame, TheViewsSizeTravelsBesideTheImagesAndDefaultsToIt) {
+    FrameHeader h = exampleHeader();
+    h.width = 240;
+    h.height = 135;
+    h.viewWidth = 960;
+    h.viewHeight = 540;
+    const DecodedFrame d = decodeFrame(encodeFrame(h, kExampleImage));
+    EXPECT_EQ(d.header, h);
+    EXPECT_EQ(d.header.shownWidth(), 960);
+    EXPECT_EQ(d.header.shownHeight(), 540);
+    const DecodedFrame old = decodeFrame(encodeFrame(exampleHeader(), kExampleImage));
+    EXPECT_EQ(old.header.viewWidth, 0);
+    EXPECT_EQ(old.header.shownWidth(), 4);
+    EXPECT_EQ(old.header.shownHeight(), 2);
+    const Bytes bytes = encodeFrame(exampleHeader(), kExampleImage);
+    const json sent = json::parse(std::string(bytes.begin() + 8, bytes.end() - std::ptrdiff_t(kExampleImage.size())));
+    EXPECT_EQ(sent.count("view_width"), 0u) << "a header without a view sends none";
 }
 
 TEST(Frame, EncoderRefusesHeadersThatCouldNotBeDecoded) {
@@ -221,6 +247,12 @@ TEST(Frame, EncoderRefusesHeadersThatCouldNotBeDecoded) {
     };
     FrameHeader h = exampleHeader();
     h.width = 0;
+    refused(h);
+    h = exampleHeader();
+    h.viewWidth = 3;   // smaller than the image's 4
+    refused(h);
+    h = exampleHeader();
+    h.viewHeight = 65537;
     refused(h);
     h = exampleHeader();
     h.renderMs = std::nan("");

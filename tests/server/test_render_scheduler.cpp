@@ -959,10 +959,10 @@ TEST(TiledFrameCells, UnitsOfAnySizeAssembleTheWholeFrame) {
     }
 }
 
-// A frame only encoded (a JPEG) is rendered as 8-bit RGBA when one pass at full resolution
-// makes its bytes the cells' bytes: assembled, they are the whole float frame's conversion,
-// so the JPEG is the one the floats would give. With passes to average or rays to upsample
-// the frame keeps its floats.
+// A frame only encoded (a JPEG) is rendered as 8-bit RGBA when one pass makes its bytes the
+// cells' bytes: assembled, they are the whole float frame's conversion, so the JPEG is the one
+// the floats would give. With passes to average the frame keeps its floats. A level of fewer
+// rays is sent at its ray grid's size, for the client to scale up.
 TEST(TiledFrameCells, EncodedOnlyFramesAssembleTheWholeFramesBytes) {
     const TransferFunction tf = rampTf();
     const Camera camera = orbitCamera(0.3);
@@ -988,10 +988,26 @@ TEST(TiledFrameCells, EncodedOnlyFramesAssembleTheWholeFramesBytes) {
     check(*openCl);
 
     EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, q, {}}, 2, 8, true).rgba8());   // passes are averaged on floats
+    EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, q, {}}, 1, 8, false).rgba8());   // a PNG's floats
+
+    // Half the rays a side: raysForScale's max(1, round(150 / 2)) × round(97 / 2) = 75 × 49, the
+    // window of the grid the renderer casts alone.
     Quality scaled = q;
     scaled.imageScale = 0.5;
-    EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, scaled, {}}, 1, 8, true).rgba8());   // upsampled on floats
-    EXPECT_FALSE(TiledFrame({tf, camera, kW, kH, q, {}}, 1, 8, false).rgba8());   // a PNG's floats
+    SlowRenderer slow2(smallVolume(), 0);
+    TiledFrame half({tf, camera, kW, kH, scaled, {}}, 1, 4, true);
+    ASSERT_TRUE(half.rgba8());
+    while (!half.done()) half.renderUnit(slow2, 5);
+    const Rgba8Image grid = half.finishRgba8();
+    EXPECT_EQ(grid.width, 75);
+    EXPECT_EQ(grid.height, 49);
+    const Image rays = slow2.render({tf, camera, kW, kH, scaled, {}, RayWindow{0, 0, 75, 49}});
+    EXPECT_TRUE(grid.rgba == rgba8FromImage(rays).rgba) << "the scaled frame is its rays' bytes, not upsampled";
+    TiledFrame halfFloats({tf, camera, kW, kH, scaled, {}}, 1, 4, false);
+    while (!halfFloats.done()) halfFloats.renderUnit(slow2, 5);
+    const Image floats = halfFloats.finish();
+    EXPECT_EQ(floats.width, 75);
+    EXPECT_EQ(floats.height, 49);
 }
 
 } // namespace

@@ -278,9 +278,27 @@ TEST(QualityLadder, TheAutomaticLadderIsFittedWithinTheLimitsImageScaleFirst) {
 }
 
 // The front the ladder chooses from: once a view's final frame is in, every level below it is
-// rendered in the background, JPEG-coded as it would be sent, and its RMSE against the final
-// frame recorded, with its cost. Checked against the same measurement made here, and against
+// rendered in the background, JPEG-coded as it would be sent (at its ray grid's size) and
+// scaled up to the view as a client shows it, and its RMSE against the final frame recorded,
+// with its cost. Checked against the same measurement made here, and against
 // what the levels are: the coarsest level is further from the final than the finest one.
+// A frame of fewer rays is compared as the client shows it: scaled up bilinearly between pixel
+// centres, clamped at the edges. A 2×1 image of a 4×2 view: the view's pixel centres fall at
+// −0.25, 0.25, 0.75 and 1.25 of the image's along x, so red 0 → 200 becomes 0, 50, 150, 200.
+TEST(ErrorCalibrator, ScalesASmallerFrameAsTheClientShowsIt) {
+    const Rgb8 small{2, 1, {0, 10, 20, 200, 10, 20}};
+    const Rgb8 view = scaledRgb8(small, 4, 2);
+    ASSERT_EQ(view.width, 4);
+    ASSERT_EQ(view.height, 2);
+    for (int y = 0; y < 2; ++y) {
+        const uint8_t *row = &view.rgb[size_t(y) * 12];
+        EXPECT_EQ((std::vector<int>{row[0], row[3], row[6], row[9]}), (std::vector<int>{0, 50, 150, 200})) << "row " << y;
+        EXPECT_EQ(row[4], 10);
+        EXPECT_EQ(row[5], 20);
+    }
+    EXPECT_EQ(scaledRgb8(small, 2, 1).rgb, small.rgb) << "its own size: unchanged";
+}
+
 TEST(ErrorCalibrator, MeasuresEveryLevelAsDeliveredAgainstTheFinalFrame) {
     const SyntheticVolume blob = makeGaussianBlob({48, 48, 48}, {1, 1, 1}, 5, 200);
     auto renderer = std::make_shared<CpuRenderer>(blob.volume);
@@ -311,9 +329,13 @@ TEST(ErrorCalibrator, MeasuresEveryLevelAsDeliveredAgainstTheFinalFrame) {
         ASSERT_TRUE(measured.errors[l].has_value()) << "level " << l << " not measured";
         EXPECT_GT(measured.backgroundMsPerSample[l], 0) << "level " << l;
         const Level &level = view->ladder[l];
-        const Image image = renderer->render({view->transferFunction, view->camera, 64, 64, level.quality, {}});
-        // The renderer and the JPEG coder are deterministic: the same measurement, to the bit.
-        EXPECT_DOUBLE_EQ(*measured.errors[l], rmseRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), finalRgb))
+        const int side = raysForScale(64, level.quality.imageScale);
+        const Image image = renderer->render({view->transferFunction, view->camera, 64, 64, level.quality, {},
+                                              RayWindow{0, 0, side, side}});
+        ASSERT_EQ(image.width, side);
+        // The renderer, the JPEG coder and the scaling are deterministic: the same measurement, to the bit.
+        EXPECT_DOUBLE_EQ(*measured.errors[l],
+                         rmseRgb8(scaledRgb8(decodeJpegRgb8(encodeJpeg(image, level.jpegQuality)), 64, 64), finalRgb))
             << "level " << l;
     }
     // Level 0 is the cheapest (quarter size, mip 2, step 4); the finest plain level (full

@@ -307,6 +307,11 @@ TEST(WsHardening, TheAutomaticPolicyRendersAnyWindowWithinTheLimits) {
         EXPECT_LE(samples, double(config.maxSamplesPerFrame)) << h.quality.dump();
         const double passes = h.final && h.quality.value("jitter", false) ? config.jitterPasses : 1;
         EXPECT_LE(rays * 16.0 * passes, double(config.maxRequestBytes)) << h.quality.dump();
+        // Sent as rendered (raysForScale a side), with the view's size beside it.
+        EXPECT_EQ(h.width, std::max(1, int(std::lround(3840 * scale)))) << h.quality.dump();
+        EXPECT_EQ(h.height, std::max(1, int(std::lround(2160 * scale)))) << h.quality.dump();
+        EXPECT_EQ(h.viewWidth, 3840);
+        EXPECT_EQ(h.viewHeight, 2160);
         if (!h.limited.empty()) {
             ++limitedFrames;
             EXPECT_NE(h.limited.find("to stay within the server's"), std::string::npos) << h.limited;

@@ -65,6 +65,9 @@ export class View {
     if (frame.header.seq < this.shownSeq) { bitmap.close(); return false; }
     this.bitmap?.close();
     this.bitmap = bitmap;
+    // The view the image fills: a level of fewer rays comes smaller than it (older servers
+    // sent every frame at the view's size and no view_width).
+    this.bitmapView = [frame.header.view_width ?? bitmap.width, frame.header.view_height ?? bitmap.height];
     this.shownSeq = frame.header.seq;
     this.draw();
     return true;
@@ -82,15 +85,18 @@ export class View {
 
   get hasImage() { return this.bitmap !== null; }
 
-  // Draw the frame over black, scaled to fit (frames at image_scale < 1 are smaller than the
-  // viewport; the aspect ratio is the viewport's, so "fit" fills the canvas).
+  // Draw the frame over black: the view it fills fitted to the canvas (the view is the
+  // canvas's size unless it was resized since), the image stretched over that view. A frame
+  // of fewer rays (image_scale < 1) is smaller than the view; its grid, rounded a side at a
+  // time, need not have the view's aspect, so it is stretched to the view, not fitted.
   draw() {
     const { ctx, canvas } = this;
     ctx.fillStyle = "#000";
     ctx.fillRect(0, 0, canvas.width, canvas.height);
     if (!this.bitmap) return;
-    const s = Math.min(canvas.width / this.bitmap.width, canvas.height / this.bitmap.height);
-    const w = this.bitmap.width * s, h = this.bitmap.height * s;
+    const [vw, vh] = this.bitmapView;
+    const s = Math.min(canvas.width / vw, canvas.height / vh);
+    const w = vw * s, h = vh * s;
     ctx.imageSmoothingEnabled = true;
     ctx.imageSmoothingQuality = "high";
     ctx.drawImage(this.bitmap, (canvas.width - w) / 2, (canvas.height - h) / 2, w, h);

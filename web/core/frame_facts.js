@@ -1,19 +1,24 @@
 // What a frame really is, from its header: the size of the ray grid the server rendered
-// (the viewport × quality.image_scale, renderer/common/frame_renderer.cpp's raysForScale), the size
-// it was sent at (the server scales a reduced grid up to the viewport), and its level.
+// (the viewport × quality.image_scale, renderer/common/frame_renderer.cpp's raysForScale), the
+// view it fills, and its level. The server sends a frame at its ray grid's size, with the
+// view's size beside it (view_width, view_height), and the canvas scales it up; an older
+// server sent every frame at the view's size, scaled up on the server.
 
 // The server's raysForScale: max(1, lround(pixels · scale)).
 export function raysForScale(pixels, scale) {
   return Math.max(1, Math.round(pixels * scale));
 }
 
-// {rendered: [w, h], sent: [w, h], scale, level, final, codec, mip, step}
+// {rendered: [w, h], sent: [w, h], view: [w, h], scale, level, final, codec, mip, step}
 export function frameFacts(header) {
   const q = header.quality ?? {};
   const scale = Number.isFinite(q.image_scale) && q.image_scale > 0 ? q.image_scale : 1;
+  const hasView = Number.isInteger(header.view_width) && Number.isInteger(header.view_height);
+  const view = hasView ? [header.view_width, header.view_height] : [header.width, header.height];
   return {
-    rendered: [raysForScale(header.width, scale), raysForScale(header.height, scale)],
+    rendered: hasView ? [header.width, header.height] : [raysForScale(header.width, scale), raysForScale(header.height, scale)],
     sent: [header.width, header.height],
+    view,
     scale,
     level: header.level,
     final: !!header.final,
@@ -25,11 +30,14 @@ export function frameFacts(header) {
 
 const fmtScale = (s) => (s === 0.5 ? "½" : s === 0.25 ? "¼" : String(Number(s.toPrecision(3))));
 
-// The overlay's two lines: the image as rendered (and sent, when that differs) and the level.
+// The overlay's two lines: the image as rendered (and the view it fills, or the size an older
+// server sent it at, when that differs) and the level.
 export function describeFrame(header) {
   const f = frameFacts(header);
-  const [rw, rh] = f.rendered, [sw, sh] = f.sent;
-  const image = rw === sw && rh === sh ? `${rw}×${rh}` : `${rw}×${rh} (${fmtScale(f.scale)} scale, sent as ${sw}×${sh})`;
+  const [rw, rh] = f.rendered, [sw, sh] = f.sent, [vw, vh] = f.view;
+  const image = rw === vw && rh === vh ? `${rw}×${rh}`
+    : rw === sw && rh === sh ? `${rw}×${rh} (${fmtScale(f.scale)} scale of ${vw}×${vh})`
+      : `${rw}×${rh} (${fmtScale(f.scale)} scale, sent as ${sw}×${sh})`;
   const parts = [`${f.level}${f.final ? " · final" : ""}`];
   if (f.mip !== null && f.mip > 0) parts.push(`mip ${f.mip}`);
   if (f.step !== null) parts.push(`step ${Number(f.step.toPrecision(3))}`);

@@ -66,6 +66,17 @@ class Frame:
         return self.header["height"]
 
     @property
+    def view_width(self) -> int:
+        """The width of the view the image fills (the viewport): a level of fewer rays is sent
+        smaller (width) and shown scaled up to this. An older server's frames lack it: then the
+        image's own."""
+        return self.header.get("view_width", self.width)
+
+    @property
+    def view_height(self) -> int:
+        return self.header.get("view_height", self.height)
+
+    @property
     def codec(self) -> str:
         return self.header["codec"]
 
@@ -94,8 +105,11 @@ class Frame:
     def camera(self) -> Optional[Dict[str, Any]]:
         return self.header.get("camera")
 
-    def to_numpy(self) -> "numpy.ndarray":
-        """The image as a height x width x 4 uint8 array (RGBA; a JPEG's alpha is 255).
+    def to_numpy(self, at_view_size: bool = True) -> "numpy.ndarray":
+        """The image as a view_height x view_width x 4 uint8 array (RGBA; a JPEG's alpha is
+        255): a frame sent smaller than its view (quality image_scale < 1) is scaled up to it,
+        bilinearly, as the web client's canvas shows it. at_view_size=False: the image as
+        sent, height x width.
 
         Needs numpy and Pillow (Debian: python3-numpy python3-pil); raises
         MissingDependencyError (an ImportError) naming the one that is absent, and FrameError
@@ -106,13 +120,15 @@ class Frame:
         Image = pil.Image  # __import__("PIL.Image") returns the PIL package, Image loaded
         try:
             with Image.open(io.BytesIO(self.image), formats=[self.codec.upper()]) as picture:
-                pixels = np.asarray(picture.convert("RGBA"), dtype=np.uint8)
+                rgba = picture.convert("RGBA")
         except (OSError, ValueError) as e:  # Pillow's UnidentifiedImageError is an OSError
             raise FrameError(f"frame {self.seq}: the {self.codec} image does not decode: {e}") from None
-        if pixels.shape != (self.height, self.width, 4):
-            raise FrameError(f"frame {self.seq}: the image is {pixels.shape[1]}x{pixels.shape[0]} "
+        if rgba.size != (self.width, self.height):
+            raise FrameError(f"frame {self.seq}: the image is {rgba.size[0]}x{rgba.size[1]} "
                              f"but the header says {self.width}x{self.height}")
-        return pixels
+        if at_view_size and rgba.size != (self.view_width, self.view_height):
+            rgba = rgba.resize((self.view_width, self.view_height), Image.BILINEAR)
+        return np.asarray(rgba, dtype=np.uint8)
 
 
 def _compact(obj: Any) -> bytes:
@@ -178,6 +194,11 @@ def decode_frame(data: Union[bytes, bytearray, memoryview]) -> Frame:
     for key, low in (("seq", 0), ("level", 0), ("width", 1), ("height", 1)):
         if _require(header, key, (int,), "an integer") < low:
             raise FrameError(f"frame header: {key}: must be at least {low}, got {header[key]}")
+    for key, image_key in (("view_width", "width"), ("view_height", "height")):
+        if key in header and (_require(header, key, (int,), "an integer") < header[image_key]
+                              or header[key] > 65536):
+            raise FrameError(f"frame header: {key}: must be an integer in [{header[image_key]}, 65536], "
+                             f"got {header[key]}")
     codec = _require(header, "codec", (str,), "a string")
     if codec not in CODECS:
         raise FrameError(f"frame header: codec: unknown codec {codec!r} (known: jpeg, png)")

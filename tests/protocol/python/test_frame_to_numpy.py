@@ -37,9 +37,11 @@ def png(width, height, channels, pixel):
             + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b""))
 
 
-def frame(image, width, height, codec="png"):
+def frame(image, width, height, codec="png", view=None):
     header = {"seq": 7, "level": 0, "width": width, "height": height, "codec": codec,
               "render_ms": 1.0, "encode_ms": 0.5, "final": True}
+    if view is not None:
+        header["view_width"], header["view_height"] = view
     return vc.decode_frame(vc.encode_frame(header, image))
 
 
@@ -84,12 +86,39 @@ class Decode(unittest.TestCase):
         with self.assertRaisesRegex(vc.FrameError, r"frame 7: the image is 5x3 but the header says 6x3"):
             bad.to_numpy()
 
+    def test_a_frame_smaller_than_its_view_is_scaled_up_to_it(self):
+        # A 2x1 image of a 4x2 view: bilinear between pixel centres, clamped at the edges, as
+        # the browser's canvas draws it. Along x the centres of the view's pixels fall at
+        # -0.25, 0.25, 0.75, 1.25 of the image's: 0, 1/4, 3/4 and 1 of the way from 0 to 200.
+        picture = frame(png(2, 1, 4, lambda x, y: (200 * x, 0, 0, 255)), 2, 1, view=(4, 2))
+        self.assertEqual((picture.view_width, picture.view_height), (4, 2))
+        pixels = picture.to_numpy()
+        self.assertEqual(pixels.shape, (2, 4, 4), "view_height x view_width x RGBA")
+        numpy.testing.assert_allclose(pixels[:, :, 0], [[0, 50, 150, 200]] * 2, atol=1,
+                                      err_msg="Pillow's bilinear, rounded: within one level")
+        self.assertEqual(picture.to_numpy(at_view_size=False).shape, (1, 2, 4), "as sent")
+
+    def test_a_frame_without_a_view_size_is_shown_at_its_own(self):
+        picture = frame(png(3, 2, 4, rgba), 3, 2)
+        self.assertEqual((picture.view_width, picture.view_height), (3, 2))
+        self.assertEqual(picture.to_numpy().shape, (2, 3, 4))
+
     def test_bytes_that_are_not_the_codec_are_refused(self):
         with self.assertRaisesRegex(vc.FrameError, "frame 7: the png image does not decode"):
             frame(b"not a png at all", 2, 2).to_numpy()
         # A PNG sent as a JPEG frame: the header's codec is what is decoded, not a guess.
         with self.assertRaisesRegex(vc.FrameError, "frame 7: the jpeg image does not decode"):
             frame(png(2, 2, 4, rgba), 2, 2, codec="jpeg").to_numpy()
+
+
+class ViewSize(unittest.TestCase):
+    def test_a_view_smaller_than_the_image_is_refused(self):
+        with self.assertRaisesRegex(vc.FrameError, r"view_width: must be an integer in \[3, 65536\], got 2"):
+            frame(b"", 3, 2, view=(2, 2))
+        with self.assertRaisesRegex(vc.FrameError, r"view_height: must be an integer in \[2, 65536\], got 70000"):
+            frame(b"", 3, 2, view=(3, 70000))
+        with self.assertRaisesRegex(vc.FrameError, r"view_width: must be an integer, got str"):
+            frame(b"", 3, 2, view=("wide", 2))
 
 
 class MissingPackages(unittest.TestCase):

@@ -45,9 +45,10 @@ test("the canvas shows a non-blank rendering of the demo volume", async () => {
   const css = await page.$eval("#view-canvas", (el) => [el.clientWidth, el.clientHeight]);
   assert.deepEqual([c.width, c.height], css);
   assert.deepEqual([final.width, final.height], css, "the final frame has the view's size (CSS pixels on a CPU server)");
-  // So has every frame before it: the "Connected" text re-wraps the top bar as the session
-  // starts, and the size sent then is the view's after that, not the one measured before.
-  const sizes = await page.evaluate(() => window.volcast.frames.map((h) => `${h.width}×${h.height}`));
+  // Every frame before it fills the same view (a level of fewer rays comes smaller, with the
+  // view's size beside it): the "Connected" text re-wraps the top bar as the session starts,
+  // and the size sent then is the view's after that, not the one measured before.
+  const sizes = await page.evaluate(() => window.volcast.frames.map((h) => `${h.view_width ?? h.width}×${h.view_height ?? h.height}`));
   assert.deepEqual([...new Set(sizes)], [css.join("×")], "the sizes of the frames since the page connected");
   await screenshot(page, "02-demo-volume.png");
 });

@@ -118,8 +118,10 @@ test("the stats state the size a frame was rendered at, and its level", async ()
   const final = await waitForFinal(page, { minRequest: await lastSentId(page, "quality_policy") });
   assert.equal(final.quality.image_scale, 0.5);
   await page.waitForTimeout(400);   // the overlay refreshes every 250 ms
-  const rw = Math.max(1, Math.round(final.width * 0.5)), rh = Math.max(1, Math.round(final.height * 0.5));
-  assert.equal(await page.textContent("#stat-image"), `${rw}×${rh} (½ scale, sent as ${final.width}×${final.height})`);
+  // Sent at its ray grid's size, lround(view · ½) a side, with the view's size beside it.
+  const rw = Math.max(1, Math.round(final.view_width * 0.5)), rh = Math.max(1, Math.round(final.view_height * 0.5));
+  assert.deepEqual([final.width, final.height], [rw, rh]);
+  assert.equal(await page.textContent("#stat-image"), `${rw}×${rh} (½ scale of ${final.view_width}×${final.view_height})`);
   assert.match(await page.textContent("#stat-level"), new RegExp(`^${final.level} · final · step ${final.quality.step}`));
 });
 

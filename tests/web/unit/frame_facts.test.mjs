@@ -7,7 +7,7 @@ import { describeFrame, frameFacts, raysForScale } from "../../../web/core/frame
 
 const header = (quality, extra = {}) => ({ seq: 1, request: 3, level: 0, width: 950, height: 755, codec: "jpeg", final: false, quality, ...extra });
 
-test("an interactive frame at a quarter scale says it was rendered at a quarter of the viewport", () => {
+test("an older server's frame, scaled up on the server, says it was rendered at a quarter of the viewport", () => {
   const h = header({ step: 2, mip_level: 1, image_scale: 0.25 });
   const f = frameFacts(h);
   // raysForScale as the server rounds: lround(950 · 0.25) = 238 (237.5 rounds away from 0), lround(755 · 0.25) = 189.
@@ -16,6 +16,17 @@ test("an interactive frame at a quarter scale says it was rendered at a quarter 
   const d = describeFrame(h);
   assert.equal(d.image, "238×189 (¼ scale, sent as 950×755)");
   assert.equal(d.level, "0 · mip 1 · step 2 (jpeg)");
+});
+
+test("a frame sent at its ray grid's size says the view it fills", () => {
+  const h = header({ step: 2, mip_level: 1, image_scale: 0.25 }, { width: 238, height: 189, view_width: 950, view_height: 755 });
+  const f = frameFacts(h);
+  assert.deepEqual(f.rendered, [238, 189]);
+  assert.deepEqual(f.sent, [238, 189]);
+  assert.deepEqual(f.view, [950, 755]);
+  assert.equal(describeFrame(h).image, "238×189 (¼ scale of 950×755)");
+  const full = header({ image_scale: 1 }, { view_width: 950, view_height: 755 });
+  assert.equal(describeFrame(full).image, "950×755");
 });
 
 test("a full-scale final frame says its size once, and final", () => {
