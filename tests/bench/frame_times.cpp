@@ -78,7 +78,7 @@ struct FrameParts {
         return {{"host_set_up_ms", median(setUp)},      {"device_upload_ms", median(upload)},
                 {"device_kernel_ms", k},                {"device_convert_ms", median(convert)},
                 {"device_read_back_ms", median(readBack)}, {"host_convert_ms", median(hostConvert)},
-                // The overhead target: frame ≤ 1.2 × kernel (medians of the same frames).
+                // The overhead target on a GPU: frame ≤ 1.2 × kernel (medians of the same frames; docs/gpu.md).
                 {"frame_over_kernel", k > 0 ? nlohmann::json(frame.median / k) : nlohmann::json(nullptr)}};
     }
 };
