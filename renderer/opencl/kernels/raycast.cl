@@ -6,7 +6,8 @@
  *   EARLY_TERMINATION    stop once the optical depth reaches the threshold's
  *   CLIP_PLANES          honour the scene's clip planes
  *   CUBIC                prefiltered tricubic B-spline, 64 taps from a padded coefficient buffer
- *   CUBIC_IMAGE          the same spline as 8 trilinear fetches from a 3-D image (GPUs)
+ *   CUBIC_IMAGE          the same spline as 8 trilinear fetches from a 3-D image (only when asked:
+ *                        texture filtering rounds its weights as the device chooses, docs/gpu.md)
  *   PREINTEGRATED        segment colour and opacity from the 2-D pre-integration table
  *   EMPTY_SPACE_SKIPPING skip the segments whose sample lies in a brick the transfer function makes
  *                        transparent (pre-integrated: that lie wholly in one), found by a brick walk
