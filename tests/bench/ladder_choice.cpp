@@ -24,7 +24,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <iostream>
 #include <sstream>
 
@@ -82,36 +81,6 @@ RenderedFrame renderAsServer(FrameRenderer &renderer, const FrameRequest &reques
         t0 = std::chrono::steady_clock::now();
         out.jpeg = frame.rgba8() ? server::encodeJpeg(bytes, level.jpegQuality) : server::encodeJpeg(out.image, level.jpegQuality);
         out.encodeMs = msSince(t0);
-    }
-    return out;
-}
-
-// A frame smaller than its view (a scaled level sent at its ray grid's size) as the client
-// shows it: scaled up to the view, bilinear between pixel centres, clamped at the edges.
-server::Rgb8 shownAtView(server::Rgb8 frame, int width, int height) {
-    if (frame.width == width && frame.height == height) return frame;
-    server::Rgb8 out{width, height, std::vector<uint8_t>(size_t(width) * size_t(height) * 3)};
-    const auto axis = [](int x, int dst, int src, int &i0, int &i1, double &f) {
-        const double s = std::clamp((x + 0.5) * src / dst - 0.5, 0.0, double(src - 1));
-        i0 = int(s);
-        i1 = std::min(i0 + 1, src - 1);
-        f = s - i0;
-    };
-    const auto at = [&](int x, int y, int c) { return double(frame.rgb[(size_t(y) * size_t(frame.width) + size_t(x)) * 3 + size_t(c)]); };
-    for (int y = 0; y < height; ++y) {
-        int y0, y1;
-        double fy;
-        axis(y, height, frame.height, y0, y1, fy);
-        for (int x = 0; x < width; ++x) {
-            int x0, x1;
-            double fx;
-            axis(x, width, frame.width, x0, x1, fx);
-            for (int c = 0; c < 3; ++c) {
-                const double top = at(x0, y0, c) + fx * (at(x1, y0, c) - at(x0, y0, c));
-                const double bottom = at(x0, y1, c) + fx * (at(x1, y1, c) - at(x0, y1, c));
-                out.rgb[(size_t(y) * size_t(width) + size_t(x)) * 3 + size_t(c)] = uint8_t(std::lround(top + fy * (bottom - top)));
-            }
-        }
     }
     return out;
 }
@@ -183,7 +152,7 @@ void ladderChoice(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &
             const bool isFinal = l == last;
             // The untimed first frame (tables, kernels, caches) at camera 0: the error's frame.
             const RenderedFrame first = renderAsServer(*renderer, {tf, camera0, width, height, r.level.quality, {}}, r.level, isFinal);
-            if (!isFinal) r.error = server::rmseRgb8(shownAtView(server::decodeJpegRgb8(first.jpeg), width, height), final8);
+            if (!isFinal) r.error = server::rmseRgb8(server::scaledRgb8(server::decodeJpegRgb8(first.jpeg), width, height), final8);
             server::LevelTimer timer;
             timer.reset(1);
             std::vector<double> encodes, finishes;
