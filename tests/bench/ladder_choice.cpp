@@ -39,7 +39,7 @@ struct LevelResult {
     Timing frameMs;               // TiledFrame::renderMs of the timed frames
     double predictedMs = 0;       // the LevelTimer's prediction after those frames
     double deviationMs = 0;       // the LevelTimer's deviation, this level's frames alone
-    Timing finishMs;              // the frame's finish (upsampling scaled levels), budgeted nowhere
+    Timing finishMs;              // the frame's finish (averaging passes), budgeted nowhere
     Timing encodeMs;              // JPEG at the level's quality (the final: PNG, not timed)
     std::optional<double> error;  // RMSE against the final frame; none for the final itself
 };
@@ -54,7 +54,7 @@ struct Choice {
 // One frame as the scheduler renders it: every cell of each pass in one unit.
 struct RenderedFrame {
     double ms = 0;
-    double finishMs = 0;          // TiledFrame::finish / finishRgba8: upsampling, averaging passes
+    double finishMs = 0;          // TiledFrame::finish / finishRgba8: averaging jittered passes
     double encodeMs = 0;
     std::vector<uint8_t> jpeg;    // non-final levels
     Image image;                  // the final level
@@ -264,8 +264,8 @@ void ladderChoice(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &
         }
         j["cells"].push_back(cell);
     }
-    md << "\nFrame ms: TiledFrame::renderMs, what the scheduler's LevelTimer records; finish ms (upsampling a "
-          "scaled level on the host) is in neither the frame's render nor its encode time.\n";
+    md << "\nFrame ms: TiledFrame::renderMs, what the scheduler's LevelTimer records; finish ms (TiledFrame::finish: "
+          "averaging jittered passes) is in neither the frame's render nor its encode time.\n";
     md << "\nThe level chosen while dragging (budget = " << kSchedulerRenderShare << " × " << fmt(targetMs, 0)
        << " ms ÷ sessions − the shown level's encode ms − 2 × its deviation):\n"
        << choicesMd.str();
