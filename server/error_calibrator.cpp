@@ -1,6 +1,7 @@
 #include "server/error_calibrator.hpp"
 
 #include "renderer/model/camera.hpp"
+#include "renderer/model/image.hpp"
 #include "renderer/reference/reference_renderer.hpp"
 #include "server/frame_encoder.hpp"
 
@@ -46,30 +47,14 @@ Rgb8 decodeJpegRgb8(const std::vector<uint8_t> &jpeg) {
 
 Rgb8 scaledRgb8(Rgb8 image, int width, int height) {
     if (image.width == width && image.height == height) return image;
+    // Through the renderer's own bilinear scaling (resizeBilinear), on floats of the bytes.
+    Image from(image.width, image.height);
+    for (size_t p = 0; p < size_t(image.width) * size_t(image.height); ++p)
+        for (size_t c = 0; c < 3; ++c) from.rgba[p * 4 + c] = float(image.rgb[p * 3 + c]);
+    const Image to = resizeBilinear(from, width, height);
     Rgb8 out{width, height, std::vector<uint8_t>(size_t(width) * size_t(height) * 3)};
-    if (image.width < 1 || image.height < 1) return out;
-    auto axis = [](int x, int dst, int src, int &i0, int &i1, double &f) {
-        const double s = std::clamp((x + 0.5) * src / dst - 0.5, 0.0, double(src - 1));
-        i0 = int(s);
-        i1 = std::min(i0 + 1, src - 1);
-        f = s - i0;
-    };
-    for (int y = 0; y < height; ++y) {
-        int y0, y1;
-        double fy;
-        axis(y, height, image.height, y0, y1, fy);
-        for (int x = 0; x < width; ++x) {
-            int x0, x1;
-            double fx;
-            axis(x, width, image.width, x0, x1, fx);
-            const auto at = [&](int px, int py, int c) { return double(image.rgb[(size_t(py) * size_t(image.width) + size_t(px)) * 3 + size_t(c)]); };
-            for (int c = 0; c < 3; ++c) {
-                const double top = at(x0, y0, c) + fx * (at(x1, y0, c) - at(x0, y0, c));
-                const double bottom = at(x0, y1, c) + fx * (at(x1, y1, c) - at(x0, y1, c));
-                out.rgb[(size_t(y) * size_t(width) + size_t(x)) * 3 + size_t(c)] = uint8_t(std::lround(top + fy * (bottom - top)));
-            }
-        }
-    }
+    for (size_t p = 0; p < size_t(width) * size_t(height); ++p)
+        for (size_t c = 0; c < 3; ++c) out.rgb[p * 3 + c] = uint8_t(std::lround(std::clamp(to.rgba[p * 4 + c], 0.0f, 255.0f)));
     return out;
 }
 

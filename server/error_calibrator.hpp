@@ -46,8 +46,8 @@ struct Rgb8 {
 Rgb8 toRgb8(const Image &image);
 // A delivered JPEG frame decoded to 8-bit RGB (TurboJPEG); throws std::runtime_error with its message.
 Rgb8 decodeJpegRgb8(const std::vector<uint8_t> &jpeg);
-// The image scaled to width × height as a client shows a frame smaller than its view
-// (bilinear between pixel centres, clamped at the edges, as resizeBilinear); itself if the size is its own.
+// The image scaled to width × height as a client shows a frame smaller than its view:
+// resizeBilinear's (between pixel centres, clamped at the edges); itself if the size is its own.
 Rgb8 scaledRgb8(Rgb8 image, int width, int height);
 // RMSE over the channels in [0, 1] units; throws std::invalid_argument for different sizes.
 double rmseRgb8(const Rgb8 &a, const Rgb8 &b);
