@@ -72,6 +72,21 @@ struct LevelOutlook {
     std::optional<double> error;
 };
 
+// Of the target frame time, the share planned for rendering and encoding; the rest is the
+// send, the client's decoding and the scheduler's own time (one session dragging the demo in
+// a closed loop, tests/server/fairness_bench.py: frames planned to the whole target arrived
+// after 57–62 ms at p95, to 0.9 of it after 43–46 ms, to 0.8 after 20 ms; bonsai at 512²,
+// tests/bench/drag_quality.py: 43.7, 43 and 36 dB, docs/service.md).
+inline constexpr double kRenderShare = 0.9;
+
+// The render budget of one dragging session's interactive frame. Interactive frames are
+// shared by count, so a dragging session's next frame waits for one frame of every other
+// dragging session: each of the n (at least 1: the one asking) gets its share of the target,
+// less the encoding its frames take and twice their measured deviation from their prediction.
+inline double interactiveBudgetMs(double targetFrameMs, size_t sessionsDragging, double encodeMs, double deviationMs) {
+    return kRenderShare * targetFrameMs / double(sessionsDragging > 0 ? sessionsDragging : 1) - encodeMs - 2 * deviationMs;
+}
+
 // The level to show while interacting: of the non-final levels predicted to fit targetMs,
 // the one with the lowest error (the cheaper on a tie), or the costliest while any of them
 // has no measured error; 0 (the cheapest) if none fits.

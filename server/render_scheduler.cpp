@@ -13,7 +13,6 @@ namespace volcast::server {
 
 namespace {
 using Ms = std::chrono::duration<double, std::milli>;
-constexpr double kRenderShare = 0.9;   // of the target frame time, for rendering and encoding
 
 // Everything a level's error depends on besides the camera: volume, transfer function,
 // clip planes, the ladder and the frame size. The volume by its registry id, which is never
@@ -439,18 +438,10 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
             if (last == 0 && still) {
                 level = 0;   // an explicit policy, already still: straight to the final frame
             } else {
-                // The interactive level: the lowest error predicted to fit the render budget.
-                // Interactive frames are shared by count, so a dragging session's next frame
-                // waits for one frame of every other dragging session: each gets its share of
-                // the target, less the encoding every frame takes at its full size whatever
-                // the level, and twice the frames' measured deviation from their prediction; of
-                // the target, kRenderShare: the rest is the send, the client's decoding and the
-                // scheduler's own time (one session dragging the demo in a closed loop,
-                // tests/server/fairness_bench.py: frames planned to the whole target arrived
-                // after 57–62 ms at p95, to 0.9 of it after 43–46 ms, to 0.8 after 20 ms; bonsai
-                // at 512², tests/bench/drag_quality.py: 43.7, 43 and 36 dB, docs/service.md).
-                const double renderBudgetMs = kRenderShare * job.targetFrameMs / double(sessionsDragging()) -
-                                              s.encodeMs - 2 * s.timer.deviationMs();
+                // The interactive level: the lowest error predicted to fit the render budget
+                // (interactiveBudgetMs, quality_ladder.hpp).
+                const double renderBudgetMs =
+                    interactiveBudgetMs(job.targetFrameMs, sessionsDragging(), s.encodeMs, s.timer.deviationMs());
                 level = last == 0 ? 0 : int(chooseInteractiveLevel(outlook(), renderBudgetMs));
             }
         } else {

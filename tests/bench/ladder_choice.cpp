@@ -126,7 +126,7 @@ void ladderChoice(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &
     j["camera"] = "peers' framing (bounding sphere fits a 30° view, 20° elevation), 3° orbit per timed frame";
     j["final_quality"] = qualityToJson(finalQuality);
     j["target_frame_ms"] = targetMs;
-    j["render_share"] = kSchedulerRenderShare;
+    j["render_share"] = server::kRenderShare;
     j["budget"] = "render_share · target_frame_ms / sessions − encode_ms − 2 · deviation_ms (the chosen level's)";
     std::vector<std::vector<std::string>> levelRows, choiceRows;
     std::ostringstream md;
@@ -224,7 +224,7 @@ void ladderChoice(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &
             std::vector<Choice> settled;
             for (;;) {
                 const LevelResult &shown = results[shownSeq.back()];
-                budgets.push_back(interactiveBudgetMs(targetMs, size_t(std::max(n, 1)), shown.encodeMs.median, shown.deviationMs));
+                budgets.push_back(server::interactiveBudgetMs(targetMs, size_t(std::max(n, 1)), shown.encodeMs.median, shown.deviationMs));
                 const size_t next = last == 0 ? 0 : server::chooseInteractiveLevel(outlook, budgets.back());
                 const auto again = std::find(shownSeq.begin(), shownSeq.end(), next);
                 if (again == shownSeq.end()) {
@@ -266,7 +266,7 @@ void ladderChoice(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &
     }
     md << "\nFrame ms: TiledFrame::renderMs, what the scheduler's LevelTimer records; finish ms (TiledFrame::finish: "
           "averaging jittered passes) is in neither the frame's render nor its encode time.\n";
-    md << "\nThe level chosen while dragging (budget = " << kSchedulerRenderShare << " × " << fmt(targetMs, 0)
+    md << "\nThe level chosen while dragging (budget = " << server::kRenderShare << " × " << fmt(targetMs, 0)
        << " ms ÷ sessions − the shown level's encode ms − 2 × its deviation):\n"
        << choicesMd.str();
 

@@ -16,23 +16,9 @@
 
 namespace volcast::bench {
 
-// Of the target frame time, the share the scheduler plans for rendering and encoding
-// (kRenderShare in server/render_scheduler.cpp, which keeps it private; the rest is the send,
-// the client's decoding and the scheduler's own time).
-inline constexpr double kSchedulerRenderShare = 0.9;
-
-// The render budget of one dragging session's interactive frame, as RenderScheduler::nextWork
-// computes it: interactive frames are shared by count, so each of the n sessions dragging
-// (at least 1: the one asking) gets its share of the target, less its frames' encoding and
-// twice its frames' measured deviation from their prediction:
-//
-//   budget = kRenderShare · targetFrameMs / max(n, 1) − encodeMs − 2 · deviationMs
-//
-// The level chosen is then chooseInteractiveLevel(levels, budget).
-inline double interactiveBudgetMs(double targetFrameMs, size_t sessionsDragging, double encodeMs, double deviationMs) {
-    return kSchedulerRenderShare * targetFrameMs / double(std::max<size_t>(sessionsDragging, 1)) - encodeMs -
-           2 * deviationMs;
-}
+// The render budget of one dragging session's interactive frame is the scheduler's own
+// (server::interactiveBudgetMs, server/quality_ladder.hpp); the level chosen is then
+// chooseInteractiveLevel(levels, budget).
 
 // bonsai (options.data / "bonsai.nhdr", Figure 5's camera and the scans' transfer function)
 // at each size, with the server's default final quality and ladder: every level timed

@@ -2,6 +2,7 @@
 
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/model/synthetic.hpp"
+#include "server/quality_ladder.hpp"
 #include "tests/bench/bench.hpp"
 #include "tests/bench/ladder_choice.hpp"
 #include "tests/bench/phantom.hpp"
@@ -132,12 +133,12 @@ TEST(Bench, SizesParseAndBadOnesAreNamed) {
 // count among the sessions dragging (the one asking counts when none is recorded), less the
 // shown level's encoding and twice its deviation. Values exact in binary, so EXPECT_DOUBLE_EQ.
 TEST(Bench, LadderBudgetIsTheTargetSharedByCountLessEncodingAndDeviation) {
-    EXPECT_DOUBLE_EQ(interactiveBudgetMs(40, 1, 0, 0), kSchedulerRenderShare * 40);
-    EXPECT_DOUBLE_EQ(interactiveBudgetMs(40, 0, 0, 0), interactiveBudgetMs(40, 1, 0, 0));
-    EXPECT_DOUBLE_EQ(interactiveBudgetMs(40, 4, 0, 0), kSchedulerRenderShare * 10);
-    EXPECT_DOUBLE_EQ(interactiveBudgetMs(40, 4, 1.5, 0.25), kSchedulerRenderShare * 10 - 2);
+    EXPECT_DOUBLE_EQ(server::interactiveBudgetMs(40, 1, 0, 0), server::kRenderShare * 40);
+    EXPECT_DOUBLE_EQ(server::interactiveBudgetMs(40, 0, 0, 0), server::interactiveBudgetMs(40, 1, 0, 0));
+    EXPECT_DOUBLE_EQ(server::interactiveBudgetMs(40, 4, 0, 0), server::kRenderShare * 10);
+    EXPECT_DOUBLE_EQ(server::interactiveBudgetMs(40, 4, 1.5, 0.25), server::kRenderShare * 10 - 2);
     // 32 sessions at 40 ms leave ~1.1 ms each: a 2 ms encoder alone exceeds it.
-    EXPECT_LT(interactiveBudgetMs(40, 32, 2, 0), 0);
+    EXPECT_LT(server::interactiveBudgetMs(40, 32, 2, 0), 0);
 }
 
 TEST(Bench, SvgLeavesOutPointsALogAxisCannotShow) {
