@@ -21,10 +21,8 @@ namespace volcast::server {
 
 namespace {
 
-// The one float-to-byte conversion (renderer/common/frame_renderer.hpp), which a device's
-// conversion kernel reproduces bit for bit (FrameRenderer::renderRgba8).
-inline float clamp01(float v) { return clampUnit(v); }
-inline uint8_t to8(float c) { return byteFromUnit(c); }
+// Bytes come from the one float-to-byte conversion (clampUnit, byteFromUnit in
+// renderer/common/frame_renderer.hpp), which a device's conversion kernel reproduces bit for bit.
 
 // Buffers up to a 2560×1600 viewport's are kept per thread; larger ones (a still's) are let go.
 constexpr int kKeptWidth = 2560, kKeptHeight = 1600;
@@ -57,16 +55,16 @@ class Scratch {
 // Every float to 8 bits, in order: RGBA stays RGBA (JPEG reads it as RGBX).
 void toRgbx8OverBlack(const Image &image, uint8_t *out) {
     const float *in = image.rgba.data();
-    for (size_t i = 0, n = image.rgba.size(); i < n; ++i) out[i] = to8(clamp01(in[i]));
+    for (size_t i = 0, n = image.rgba.size(); i < n; ++i) out[i] = byteFromUnit(clampUnit(in[i]));
 }
 
 void toStraightRgba8(const Image &image, uint8_t *out) {
     const float *in = image.rgba.data();
     for (size_t i = 0, n = size_t(image.width) * size_t(image.height); i < n; ++i) {
-        const float a = clamp01(in[i * 4 + 3]);
+        const float a = clampUnit(in[i * 4 + 3]);
         const float divisor = a > 0.0f ? a : 1.0f;   // where a is 0 the quotient is not used
-        for (size_t c = 0; c < 3; ++c) out[i * 4 + c] = a > 0.0f ? to8(clamp01(in[i * 4 + c] / divisor)) : 0;
-        out[i * 4 + 3] = to8(a);
+        for (size_t c = 0; c < 3; ++c) out[i * 4 + c] = a > 0.0f ? byteFromUnit(clampUnit(in[i * 4 + c] / divisor)) : 0;
+        out[i * 4 + 3] = byteFromUnit(a);
     }
 }
 
@@ -142,7 +140,7 @@ std::vector<uint8_t> toRgb8OverBlack(const Image &image) {
     const float *in = image.rgba.data();
     uint8_t *out = rgb.data();
     for (size_t i = 0; i < n; ++i)
-        for (size_t c = 0; c < 3; ++c) out[i * 3 + c] = to8(clamp01(in[i * 4 + c]));
+        for (size_t c = 0; c < 3; ++c) out[i * 3 + c] = byteFromUnit(clampUnit(in[i * 4 + c]));
     return rgb;
 }
 

@@ -189,13 +189,14 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
 
 Rgba8Image OpenClRenderer::renderRgba8(const FrameRequest &request, RenderStats *stats) {
     const auto start = Clock::now();
-    const FrameSetup setup = setUpFrame(*volume_, request, pyramid_.maxLevel(), options_.brickSize);
-    // image_scale < 1 on a whole frame: the bilinear upsampling is the host's, on floats
-    // (resizeBilinear), so the conversion after it is too.
     const Rgba8Conversion where = options_.rgba8Conversion == Rgba8Conversion::Auto
                                       ? (cl_->isGpu() ? Rgba8Conversion::Device : Rgba8Conversion::Host)
                                       : options_.rgba8Conversion;
-    if (setup.upsample || where == Rgba8Conversion::Host) return FrameRenderer::renderRgba8(request, stats);
+    if (where == Rgba8Conversion::Host) return FrameRenderer::renderRgba8(request, stats);
+    const FrameSetup setup = setUpFrame(*volume_, request, pyramid_.maxLevel(), options_.brickSize);
+    // image_scale < 1 on a whole frame: the bilinear upsampling is the host's, on floats
+    // (resizeBilinear), so the conversion after it is too.
+    if (setup.upsample) return FrameRenderer::renderRgba8(request, stats);
     std::lock_guard frameLock(mutex_);
     RenderStats st = setup.stats;
     Rgba8Image image;

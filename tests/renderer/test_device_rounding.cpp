@@ -125,6 +125,7 @@ inline bool isinf(F x) { return std::isinf(x.v); }
 #include "renderer/cpu/cpu_march.hpp"
 #include "renderer/model/camera.hpp"
 #include "renderer/model/synthetic.hpp"
+#include "tests/stability/stability_cases.hpp"
 
 #include <gtest/gtest.h>
 
@@ -221,23 +222,8 @@ struct View {
     int size;
 };
 
-Camera perspective(Vec3d eye, Vec3d target, Vec3d up, double fovYDeg) {
-    Camera c;
-    c.eye = eye;
-    c.target = target;
-    c.up = up;
-    c.fovYDeg = fovYDeg;
-    return c;
-}
-Camera orthographic(Vec3d eye, Vec3d forward, Vec3d up, double height) {
-    Camera c;
-    c.eye = eye;
-    c.target = eye + forward;
-    c.up = up;
-    c.projection = Projection::Orthographic;
-    c.height = height;
-    return c;
-}
+using stability::orthographic;
+using stability::perspective;
 
 // The stability suite's placements (tests/stability/stability_cases.cpp) whose rays lie in a
 // face or along an edge of the box, where a hit depends on the ray being exactly there.

@@ -166,7 +166,8 @@ std::vector<std::pair<std::string, Quality>> variants(double step) {
             {"skipping + early termination", skipping}};
 }
 
-// An orthographic camera looking along +axis from `eye`, the image's y axis along `up`.
+} // namespace
+
 Camera orthographic(Vec3d eye, Vec3d forward, Vec3d up, double height) {
     Camera c;
     c.eye = eye;
@@ -184,6 +185,9 @@ Camera perspective(Vec3d eye, Vec3d target, Vec3d up, double fovYDeg) {
     c.fovYDeg = fovYDeg;
     return c;
 }
+
+namespace {
+
 Camera oblique(const Volume &v, Vec3d offset, double fovYDeg) {
     return perspective(v.center() + offset, v.center() + Vec3d{0.3, -0.2, 0.1}, {0.1, 1, 0.2}, fovYDeg);
 }

@@ -9,6 +9,7 @@
 // the table shows what the tests check.
 
 #include "renderer/common/frame_renderer.hpp"
+#include "renderer/model/camera.hpp"
 #include "renderer/opencl/opencl_context.hpp"
 
 #include <cstddef>
@@ -35,6 +36,11 @@ struct Row {
 
     bool passed() const { return nonFinite == 0 && worst <= bound && failures.empty(); }
 };
+
+// The cameras the cases place: an orthographic one looking along the unit axis `forward` from
+// `eye` (its view `height` world units), the image's y axis along `up`; a perspective one.
+Camera orthographic(Vec3d eye, Vec3d forward, Vec3d up, double height);
+Camera perspective(Vec3d eye, Vec3d target, Vec3d up, double fovYDeg);
 
 // The back end a case renders with: its name starts every row's path ("OpenCL", "CPU").
 struct Backend {

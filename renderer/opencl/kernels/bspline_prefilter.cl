@@ -178,22 +178,18 @@ __kernel __attribute__((reqd_work_group_size(TILE_LINES, 1, 1))) void bspline_pr
 // Narrow samples (sample - offset in 1 or 2 bytes, narrow_samples.hpp) widened to float:
 // float(u) + offset, exact (both integers within 2^24), the host's SampleGrid::operator[].
 // The slice is the row here; the range is rounded up to the work-group.
-__kernel void bspline_widen_uchar(__global const uchar *narrow, __global float *out, const ulong slice,
-                                  const float offset, const uint firstK, const uint countK, const uint run) {
-    const ulong i0 = (ulong)get_global_id(0) * run;
-    if (i0 >= slice) return;
-    const ulong i1 = min(slice, i0 + run);
-    for (ulong k = firstK; k < (ulong)firstK + countK; ++k)
-        for (ulong i = k * slice + i0; i < k * slice + i1; ++i) out[i] = (float)narrow[i] + offset;
-}
-__kernel void bspline_widen_ushort(__global const ushort *narrow, __global float *out, const ulong slice,
-                                   const float offset, const uint firstK, const uint countK, const uint run) {
-    const ulong i0 = (ulong)get_global_id(0) * run;
-    if (i0 >= slice) return;
-    const ulong i1 = min(slice, i0 + run);
-    for (ulong k = firstK; k < (ulong)firstK + countK; ++k)
-        for (ulong i = k * slice + i0; i < k * slice + i1; ++i) out[i] = (float)narrow[i] + offset;
-}
+// One body for both widths (OpenCL C has no templates).
+#define BSPLINE_WIDEN_KERNEL(name, narrow_type)                                                              \
+    __kernel void name(__global const narrow_type *narrow, __global float *out, const ulong slice,          \
+                       const float offset, const uint firstK, const uint countK, const uint run) {          \
+        const ulong i0 = (ulong)get_global_id(0) * run;                                                      \
+        if (i0 >= slice) return;                                                                             \
+        const ulong i1 = min(slice, i0 + run);                                                               \
+        for (ulong k = firstK; k < (ulong)firstK + countK; ++k)                                              \
+            for (ulong i = k * slice + i0; i < k * slice + i1; ++i) out[i] = (float)narrow[i] + offset;      \
+    }
+BSPLINE_WIDEN_KERNEL(bspline_widen_uchar, uchar)
+BSPLINE_WIDEN_KERNEL(bspline_widen_ushort, ushort)
 
 // The coefficients padded by one before and two after on each axis with the mirror boundary
 // (p = n + 3 per axis), so the ray caster's 4x4x4 footprint around any clamped position stays
