@@ -71,6 +71,10 @@ def frames():
     write("fuzz_frame", "no_image.bin", frame(dict(base, image_bytes=0), b""))
     write("fuzz_frame", "truncated.bin", frame(base, image)[:-3])
     write("fuzz_frame", "wrong_magic.bin", b"VCF2" + frame(base, image)[4:])
+    # A level of fewer rays, sent at its grid's size with the view's beside it; a view smaller
+    # than its image (refused).
+    write("fuzz_frame", "scaled_view.bin", frame(dict(base, width=2, height=1, view_width=4, view_height=2), image))
+    write("fuzz_frame", "view_smaller_than_image.bin", frame(dict(base, view_width=3, view_height=2), image))
 
 
 def volume_names():
