@@ -127,6 +127,12 @@ class Frame:
             raise FrameError(f"frame {self.seq}: the image is {rgba.size[0]}x{rgba.size[1]} "
                              f"but the header says {self.width}x{self.height}")
         if at_view_size and rgba.size != (self.view_width, self.view_height):
+            # The view's size comes from the server like the image: held to the bound Pillow
+            # holds a decoded image to (its decompression-bomb error), not up to 65536².
+            limit = Image.MAX_IMAGE_PIXELS
+            if limit is not None and self.view_width * self.view_height > 2 * limit:
+                raise FrameError(f"frame {self.seq}: a view of {self.view_width}x{self.view_height} is over "
+                                 f"the {2 * limit} pixels an image may have here (PIL.Image.MAX_IMAGE_PIXELS x 2)")
             rgba = rgba.resize((self.view_width, self.view_height), Image.BILINEAR)
         return np.asarray(rgba, dtype=np.uint8)
 

@@ -98,6 +98,13 @@ class Decode(unittest.TestCase):
                                       err_msg="Pillow's bilinear, rounded: within one level")
         self.assertEqual(picture.to_numpy(at_view_size=False).shape, (1, 2, 4), "as sent")
 
+    def test_a_view_too_large_to_allocate_is_refused_naming_it(self):
+        # 65536 x 65536 passes the header's checks; scaled up it would be 16 GiB of RGBA.
+        huge = frame(png(2, 1, 4, rgba), 2, 1, view=(65536, 65536))
+        with self.assertRaisesRegex(vc.FrameError, r"frame 7: a view of 65536x65536 is over"):
+            huge.to_numpy()
+        self.assertEqual(huge.to_numpy(at_view_size=False).shape, (1, 2, 4), "as sent it still decodes")
+
     def test_a_frame_without_a_view_size_is_shown_at_its_own(self):
         picture = frame(png(3, 2, 4, rgba), 3, 2)
         self.assertEqual((picture.view_width, picture.view_height), (3, 2))
