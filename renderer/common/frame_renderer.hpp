@@ -29,6 +29,8 @@ struct RenderStats {
     double coefficientSeconds = 0;  // B-spline prefilter (on the device) and upload
     double brickGridSeconds = 0;    // min-max grid of the sampled data
     double brickClassifySeconds = 0;
+    double adaptiveStepSeconds = 0; // the adaptive step's per-brick gradients and steps
+    double adaptiveMeanStep = 0;    // voxels: the adaptive step's mean over the bricks marched
     double emptyBrickFraction = 0;  // under the current transfer function
     double preintegrationSeconds = 0;
     int preintegrationNodes = 0;

@@ -20,15 +20,20 @@ Quality compositedQuality(const Quality &quality) {
         q.shading = false;
         q.earlyTermination = 1;
         q.emptySpaceSkipping = false;
+        q.adaptiveStep = false;
     }
     return q;
 }
 
-double frameStep(const Volume &volume, const Quality &quality, RenderStats &stats) {
+double frameStep(const Volume &volume, const Quality &quality, RenderStats &stats, double brickEdge) {
     const double smallest = minComponent(volume.spacing);
     double step = quality.step * smallest;
-    // The 16 spare segments cover a jittered first segment and rounding.
-    const double shortestStep = length(volume.extent()) / (FrameRenderer::kMaxSamplesPerRay - 16);
+    if (quality.adaptiveStep && brickEdge > 0 && step > brickEdge) step = brickEdge;
+    // The 16 spare segments cover a jittered first segment and rounding (the adaptive step
+    // re-jitters after each skip, at most one segment more per brick crossed; the range's
+    // factor leaves room for them).
+    const double range = quality.adaptiveStep ? kAdaptiveStepRange * 2 : 1;
+    const double shortestStep = length(volume.extent()) / (FrameRenderer::kMaxSamplesPerRay - 16) * range;
     if (step < shortestStep) {
         spdlog::warn("{}: quality.step {:g} voxels would take more than {} samples per ray across the volume; "
                      "using {:g} voxels",
@@ -50,6 +55,7 @@ FrameFeatures frameFeatures(const Quality &q, bool hasClipPlanes) {
     f.shading = q.shading;
     f.cubic = q.interpolation == Interpolation::Cubic;
     f.preintegrated = q.preintegrated;
+    f.adaptiveStep = q.adaptiveStep;
     f.intensityProjection = q.compositing == Compositing::Maximum ? 1 : q.compositing == Compositing::Minimum ? -1 : 0;
     return f;
 }
@@ -64,6 +70,7 @@ std::string featureNames(const FrameFeatures &f) {
     if (f.preintegrated) o += " PREINTEGRATED";
     if (f.emptySpaceSkipping) o += " EMPTY_SPACE_SKIPPING";
     if (f.shading) o += " SHADING";
+    if (f.adaptiveStep) o += " ADAPTIVE_STEP";
     if (f.intensityProjection > 0) o += " COMPOSITING_MAX";
     if (f.intensityProjection < 0) o += " COMPOSITING_MIN";
     return o.empty() ? o : o.substr(1);
@@ -126,12 +133,15 @@ FrameSetup setUpFrame(const Volume &volume, const FrameRequest &request, int max
     s.levelDims = mipLevelDims(volume.dims, q.mipLevel);
     s.levelScale = std::ldexp(1.0, -q.mipLevel);
     s.brickSize = brickSize;
-    if (q.emptySpaceSkipping)
+    if (q.emptySpaceSkipping || q.adaptiveStep)
         for (int a = 0; a < 3; ++a) s.bricks[a] = (s.levelDims[a] + brickSize - 1) / brickSize;
+    for (int a = 0; a < 3; ++a) s.levelVoxel[a] = volume.spacing[a] / s.levelScale;
 
-    // The march: the step (raised if rays would be too long), the opacity unit, early
+    // The march: the step (raised if rays would be too long; with the adaptive step at most a
+    // brick's edge along the axis of the smallest level voxel), the opacity unit, early
     // termination as an optical depth (compared without an exp per sample), the jitter's seed.
-    s.step = frameStep(volume, q, s.stats);
+    s.step = frameStep(volume, q, s.stats, double(brickSize) * minComponent(s.levelVoxel));
+    s.shortestStep = q.adaptiveStep ? s.step / kAdaptiveStepRange : s.step;
     s.opacityUnit = request.transferFunction.opacityUnit ? *request.transferFunction.opacityUnit
                                                          : minComponent(volume.spacing);
     s.terminationDepth =
@@ -159,6 +169,30 @@ bool BrickClassification::update(const MinMaxBricks &bricks, const TransferFunct
     st.brickClassifySeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
     st.emptyBrickFraction = emptyFraction;
     return true;
+}
+
+bool AdaptiveStepTable::update(const MinMaxBricks &bricks, const BrickGradients &gradients, const TransferFunction &tf,
+                               const TfTable &table, const FrameSetup &setup, const std::vector<uint8_t> *visible,
+                               RenderStats &st) {
+    AdaptiveStepInput in;
+    in.longest = setup.step;
+    in.shortest = setup.shortestStep;
+    in.opacityUnit = setup.opacityUnit;
+    in.levelVoxel = setup.levelVoxel;
+    in.skipEmpty = setup.use.emptySpaceSkipping;
+    const double voxel = minComponent(setup.levelVoxel) * setup.levelScale; // the smallest spacing
+    const bool same = stepsFor && *stepsFor == tf && input.longest == in.longest && input.shortest == in.shortest &&
+                      input.opacityUnit == in.opacityUnit && input.levelVoxel == in.levelVoxel &&
+                      input.skipEmpty == in.skipEmpty;
+    if (!same) {
+        const auto t = std::chrono::steady_clock::now();
+        steps = adaptiveBrickSteps(bricks, gradients, table, in, in.skipEmpty ? visible : nullptr);
+        stepsFor = tf;
+        input = in;
+        st.adaptiveStepSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+    }
+    st.adaptiveMeanStep = steps.meanStep / voxel;
+    return !same;
 }
 
 FrameTables::Rebuilt FrameTables::update(const TransferFunction &tf, const FrameSetup &setup, RenderStats &st) {

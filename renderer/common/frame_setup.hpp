@@ -6,6 +6,7 @@
 // (cpu::FrameParams, RayCastParams) and launches, so both cast the same rays from the same
 // numbers. The steps, in order, are setUpFrame's.
 
+#include "renderer/common/adaptive_step.hpp"
 #include "renderer/common/frame_renderer.hpp"
 #include "renderer/common/minmax_bricks.hpp"
 #include "renderer/common/preintegration.hpp"
@@ -32,6 +33,7 @@ struct FrameFeatures {
     bool shading = false;
     bool cubic = false;             // prefiltered tricubic B-spline
     bool preintegrated = false;
+    bool adaptiveStep = false;      // per-brick segment lengths (adaptive_step.hpp)
     int intensityProjection = 0;    // +1 maximum (MIP), −1 minimum (MinIP), 0 emission–absorption
 };
 
@@ -63,14 +65,16 @@ struct FrameSetup {
     Vec3d boxLo, boxHi;
 
     // The data sampled: level 0's and the mip level's samples per axis, and the min-max
-    // brick grid over the level (empty-space skipping; 0 without it).
+    // brick grid over the level (empty-space skipping and the adaptive step; 0 without them).
     Vec3i dims, levelDims;
     double levelScale = 1;          // 2^-mip_level: level index = (index + 1/2)·scale − 1/2
     int brickSize = 0;
     Vec3i bricks{0, 0, 0};
 
     // The march.
-    double step = 0;                // world units (frameStep)
+    double step = 0;                // world units (frameStep); the longest with the adaptive step
+    double shortestStep = 0;        // world units: the adaptive step's shortest, else step
+    Vec3d levelVoxel;               // world length of a level voxel along each axis
     double opacityUnit = 0;         // world units: the transfer function's, else the smallest spacing
     double terminationDepth = 0;    // optical depth of the early-termination opacity; ∞ without it
     uint32_t seed = 0;              // the jitter's, folded to 32 bits
@@ -120,6 +124,20 @@ struct BrickClassification {
     bool update(const MinMaxBricks &bricks, const TransferFunction &tf, RenderStats &st);
 };
 
+// A level's adaptive steps (adaptive_step.hpp), kept until the transfer function, the steps,
+// the opacity unit or skipping change.
+struct AdaptiveStepTable {
+    std::optional<TransferFunction> stepsFor;
+    AdaptiveStepInput input;
+    AdaptiveSteps steps;
+    // Brings the steps up to date for `tf` (tabulated in `table`) and the frame; true when it
+    // recomputed them (a back end then uploads `steps.step`). `visible`: the bricks'
+    // classification when the frame skips empty space. Fills st.adaptiveMeanStep and, when
+    // it recomputes, st.adaptiveStepSeconds.
+    bool update(const MinMaxBricks &bricks, const BrickGradients &gradients, const TransferFunction &tf,
+                const TfTable &table, const FrameSetup &setup, const std::vector<uint8_t> *visible, RenderStats &st);
+};
+
 // PreprocessCounts that a frame adds to while another thread may read them (preprocessCounts()).
 class PreprocessCounter {
   public:
@@ -138,23 +156,27 @@ class PreprocessCounter {
 };
 
 // The switches a frame really uses: an intensity projection (MIP, MinIP) takes no
-// pre-integration, shading, early termination or empty-space skipping (a projection has no
-// opacity to terminate on, and a brick the transfer function makes transparent can still hold
-// the ray's maximum), so they are turned off here, in one place for both back ends.
+// pre-integration, shading, early termination, empty-space skipping or adaptive step (a
+// projection has no opacity to terminate on or to estimate an error from, and a brick the
+// transfer function makes transparent can still hold the ray's maximum), so they are turned
+// off here, in one place for both back ends.
 Quality compositedQuality(const Quality &quality);
 
 // The step in world units for quality.step (in smallest spacings): raised, with a warning,
-// when a ray across the whole volume would take more than kMaxSamplesPerRay segments, so
-// that rays are never cut off by the bound (which would drop the back of the volume) and a
-// frame costs at most rays × kMaxSamplesPerRay samples. Fills stats.stepUsed/stepRaised.
-double frameStep(const Volume &volume, const Quality &quality, RenderStats &stats);
+// when a ray across the whole volume would take more than kMaxSamplesPerRay segments (with
+// the adaptive step: of its shortest, step / kAdaptiveStepRange), so that rays are never cut
+// off by the bound (which would drop the back of the volume) and a frame costs at most
+// rays × kMaxSamplesPerRay samples. With the adaptive step, also lowered to a brick's edge
+// (`brickEdge`, world units), which a segment may not be longer than (adaptive_step.hpp).
+// Fills stats.stepUsed/stepRaised.
+double frameStep(const Volume &volume, const Quality &quality, RenderStats &stats, double brickEdge = 0);
 
 // The switches of `quality` (as composited) as the march branches on them.
 FrameFeatures frameFeatures(const Quality &quality, bool hasClipPlanes);
 
 // The switches in use by the kernel's macro names, space-separated, in one order: JITTER
 // BOUNDARY_SEGMENT EARLY_TERMINATION CLIP_PLANES CUBIC PREINTEGRATED EMPTY_SPACE_SKIPPING
-// SHADING COMPOSITING_MAX COMPOSITING_MIN.
+// SHADING ADAPTIVE_STEP COMPOSITING_MAX COMPOSITING_MIN.
 std::string featureNames(const FrameFeatures &use);
 inline std::string featureNames(const Quality &quality, bool hasClipPlanes) {
     return featureNames(frameFeatures(quality, hasClipPlanes));

@@ -295,12 +295,16 @@ void preintegratedSegment(const FrameParams &P, VF sf, VF sb, VF out[4]) {
 // recomputing the brick and its exit per segment. A point reached within float rounding of a
 // wall may be put in either brick: harmless, as each brick's value range covers half a voxel
 // beyond its box (minmax_bricks.hpp, border). The kernel walks one ray with the same formulas.
+//
+// With the adaptive step the walk reads the brick's step (FrameParams::brickStep) instead: its
+// segment length in `step`, visible where it is positive.
 struct BrickWalk {
     VI b[3];
     VF wall[3]; // t where the ray leaves the brick across its wall on each axis (inf if parallel)
     MF visible;
+    VF step;    // the adaptive step: the brick's segment length
 
-    BrickWalk() : visible(hn::FirstN(DF(), 0)) {
+    BrickWalk() : visible(hn::FirstN(DF(), 0)), step(hn::Zero(DF())) {
         for (int a = 0; a < 3; ++a) {
             b[a] = hn::Zero(DI());
             wall[a] = hn::Set(DF(), kInf);
@@ -317,8 +321,15 @@ struct BrickWalk {
         for (int a = 0; a < 3; ++a) c[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
         const VI brick =
             hn::Add(hn::Mul(hn::Add(hn::Mul(c[2], hn::Set(di, P.bricks[1])), c[1]), hn::Set(di, P.bricks[0])), c[0]);
-        const VI flag = hn::GatherIndex(di, P.brickVisible, brick); // clamped: valid in every lane
-        const MF now = hn::RebindMask(DF(), hn::Ne(flag, hn::Zero(di)));
+        MF now;
+        if (P.brickStep) {
+            const VF here = hn::GatherIndex(DF(), P.brickStep, brick); // clamped: valid in every lane
+            step = hn::IfThenElse(lanes, here, step);
+            now = hn::Gt(here, hn::Zero(DF()));
+        } else {
+            const VI flag = hn::GatherIndex(di, P.brickVisible, brick);
+            now = hn::RebindMask(DF(), hn::Ne(flag, hn::Zero(di)));
+        }
         visible = hn::Or(hn::And(lanes, now), hn::AndNot(lanes, visible));
     }
     // The brick of q(t) for the ray entering at t.
@@ -484,7 +495,8 @@ HWY_INLINE void preintegratedContribution(const FrameParams &P, PacketMarch &m, 
     s.segDepth = vcDepthFromOpacity(seg[3]); // +inf behind opaque material: T becomes 0
     s.alpha = seg[3];
     for (int a = 0; a < 3; ++a) s.segColor[a] = seg[a];
-    const MF partialHere = hn::And(s.take, s.partial);
+    // With the adaptive step every segment is scaled from the table's (the longest) step.
+    const MF partialHere = P.features.adaptiveStep ? s.take : hn::And(s.take, s.partial);
     if (!hn::AllFalse(df, partialHere)) {
         const VF fraction = hn::Div(s.len, d);
         const MF holds = hn::And(partialHere, hn::Le(seg[3], hn::Set(df, VC_ALPHA_HOLDS_DEPTH)));
@@ -510,6 +522,34 @@ HWY_INLINE void preintegratedContribution(const FrameParams &P, PacketMarch &m, 
     }
 }
 
+// The adaptive step's segment bounds (adaptive_step.hpp), in place of the uniform lattice
+// t0 + (k + j)·d: a segment starts where the last ended and is as long as the step of the
+// brick it starts in (the first, k = 0, j times that under jitter), cut at t1. A lane whose
+// brick is skipped takes nothing and starts again at the brick's exit (marchStep's last
+// phase): the part of the ray inside a transparent brick adds exactly nothing.
+template <int N>
+HWY_INLINE void adaptiveSegments(const FrameParams &P, PacketMarch *ms, StepState *st) {
+    const DF df;
+    const VF zero = hn::Zero(df), half = hn::Set(df, 0.5f);
+    for (int p = 0; p < N; ++p) ms[p].walk.advance(P, ms[p].q0, ms[p].dq, ms[p].segStart, ms[p].alive);
+    for (int p = 0; p < N; ++p) {
+        PacketMarch &m = ms[p];
+        StepState &s = st[p];
+        const MF first = hn::Eq(m.k, zero);
+        const VF nominal = hn::IfThenElse(first, hn::Mul(m.j, m.walk.step), m.walk.step);
+        s.skipped = hn::AndNot(m.walk.visible, m.alive);
+        s.anySkipped = !hn::AllFalse(df, s.skipped);
+        s.boundary = hn::IfThenElse(s.skipped, m.segStart, hn::Add(m.segStart, nominal));
+        s.segEnd = hn::Min(s.boundary, m.t1);
+        s.len = hn::Sub(s.segEnd, m.segStart);
+        s.tMid = hn::MulAdd(half, s.len, m.segStart);
+        s.take = hn::AndNot(s.skipped, hn::And(m.alive, hn::Gt(s.len, zero)));
+        s.partial = hn::Or(hn::Gt(s.boundary, m.t1), first);
+        if (!P.features.boundarySegment) s.take = hn::AndNot(s.partial, s.take);
+        s.jumpTo = zero;
+    }
+}
+
 // One segment further in every lane still marching, for N packets side by side. Each phase
 // (the segment's bounds and skipping, the sample, its classification, the opacity, the sums)
 // is done for every packet before the next phase starts: the packets' chains are
@@ -525,6 +565,9 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
     const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step), half = hn::Set(df, 0.5f);
     StepState st[N];
 
+    if (F.adaptiveStep) {
+        adaptiveSegments<N>(P, ms, st);
+    } else
     for (int p = 0; p < N; ++p) {
         PacketMarch &m = ms[p];
         StepState &s = st[p];
@@ -546,7 +589,7 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
     // nothing. A pre-integrated one reads the values at both ends and everything between, so
     // it is skipped only when the whole segment lies in the empty brick (both ends before the
     // brick's exit).
-    if (F.emptySpaceSkipping) {
+    if (F.emptySpaceSkipping && !F.adaptiveStep) {
         for (int p = 0; p < N; ++p)
             ms[p].walk.advance(P, ms[p].q0, ms[p].dq, F.preintegrated ? ms[p].segStart : st[p].tMid, st[p].take);
         for (int p = 0; p < N; ++p) {
@@ -650,6 +693,20 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
         m.alive = hn::AndNot(hn::Ge(s.boundary, m.t1), m.alive);
         m.segStart = hn::IfThenElse(m.alive, s.segEnd, m.segStart);
         m.k = hn::IfThenElse(m.alive, hn::Add(m.k, one), m.k);
+        if (F.adaptiveStep) {
+            if (s.anySkipped) {
+                // A skipped lane starts again at its brick's exit, its first segment there
+                // jittered again (k = 0) so that segments do not line up on the brick's wall.
+                const VF exit = m.walk.exit();
+                totals.skipped += hn::CountTrue(df, s.skipped);
+                m.alive = hn::AndNot(hn::And(s.skipped, hn::Ge(exit, m.t1)), m.alive);
+                const MF restart = hn::And(s.skipped, m.alive);
+                m.segStart = hn::IfThenElse(restart, exit, m.segStart);
+                m.k = hn::IfThenElse(restart, hn::IfThenElse(hn::Gt(m.j, zero), zero, one), m.k);
+                if (F.preintegrated) m.sfStale = hn::Or(m.sfStale, restart);
+            }
+            continue;
+        }
         if (F.emptySpaceSkipping && s.anySkipped) {
             // Segments k … jumpTo are skipped; the next to look at is jumpTo + 1.
             const MF jump = hn::And(m.alive, hn::Ge(s.jumpTo, m.k));
@@ -701,7 +758,8 @@ HWY_INLINE bool startPacket(const FrameParams &P, int bx, int by, int x1, int y1
     m.k = hn::IfThenElse(hn::Gt(m.j, zero), zero, one); // the first boundary past t0
     m.segStart = m.t0;
     m.walk = BrickWalk();
-    if (F.emptySpaceSkipping && F.intensityProjection == 0) m.walk.start(P, m.q0, m.dq, m.t0, m.alive);
+    if ((F.emptySpaceSkipping || F.adaptiveStep) && F.intensityProjection == 0)
+        m.walk.start(P, m.q0, m.dq, m.t0, m.alive);
     m.sfStale = hn::Not(m.alive); // pre-integration: sf must be sampled at segStart first
     m.depth = m.depthCarry = zero;
     m.T = one;

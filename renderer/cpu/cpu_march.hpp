@@ -34,7 +34,7 @@ struct FrameParams {
     int outX = 0, outY = 0, outWidth = 0;
     bool orthographic = false;
     float levelScale = 1;           // 2^-mip_level
-    float step = 1;                 // world units
+    float step = 1;                 // world units; the longest with the adaptive step
     float opacityUnit = 1;          // world units
     float terminationDepth = 0;     // optical depth of the early-termination opacity
     uint32_t seed = 0, pass = 0;
@@ -72,6 +72,9 @@ struct FrameParams {
     const int32_t *brickVisible = nullptr;
     int bricks[3] = {0, 0, 0};
     int brickSize = 8;
+    // The adaptive step: per brick its segment length, world units, or −1 where the brick is
+    // skipped (adaptive_step.hpp). Set: the brick walk reads it instead of brickVisible.
+    const float *brickStep = nullptr;
 };
 
 // Sums over a frame, added to by every tile.

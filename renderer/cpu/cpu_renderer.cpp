@@ -144,13 +144,14 @@ uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options
         if (level > 0) bytes += count(d, 0) * sizeof(float);                  // the mip level
         bytes += count(d, 3) * sizeof(float);                                 // cubic copy
         const Vec3i bricks{(d.x + b - 1) / b, (d.y + b - 1) / b, (d.z + b - 1) / b};
-        bytes += 2 * count(bricks, 0) * (2 * sizeof(float) + sizeof(int32_t)); // min-max and visible, both
+        // Min-max, visible, and the adaptive step's gradient bounds and steps; trilinear and cubic.
+        bytes += 2 * count(bricks, 0) * (2 * sizeof(float) + sizeof(int32_t) + 4 * sizeof(float));
         if (d.x == 1 && d.y == 1 && d.z == 1) break;
     }
     return bytes;
 }
 
-void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st) {
+const MinMaxBricks &CpuRenderer::bricks(DataSet &data, int level, RenderStats &st) {
     if (!data.bricks) {
         const auto t = Clock::now();
         // Spline values are bounded by the coefficients around a brick, two on each side
@@ -163,10 +164,36 @@ void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf,
         st.brickGridSeconds = secondsSince(t);
         counts_.add(&PreprocessCounts::brickGrids);
     }
-    if (!data.classification.update(*data.bricks, tf, st)) return;
+    return *data.bricks;
+}
+
+void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st) {
+    if (!data.classification.update(bricks(data, level, st), tf, st)) return;
     // As int32, so that the march's lanes gather it.
     data.brickVisible.assign(data.classification.visible.begin(), data.classification.visible.end());
     counts_.add(&PreprocessCounts::brickClassifications);
+}
+
+void CpuRenderer::adaptSteps(DataSet &data, int level, const TransferFunction &tf, const FrameSetup &setup,
+                             RenderStats &st) {
+    const MinMaxBricks &grid = bricks(data, level, st);
+    if (!data.gradients) {
+        const auto t = Clock::now();
+        // The differences a reconstruction's derivative blends: neighbouring samples
+        // (trilinear) or coefficients (cubic), as the min-max grid reads them.
+        if (data.cubic) {
+            const std::vector<float> coefficients = unpadMirror(data.padded, data.dims);
+            data.gradients = buildBrickGradients(SampleGrid::ofFloats(data.dims, coefficients.data()),
+                                                 options_.brickSize, kCubicBSplineBorder, threads_);
+        } else {
+            data.gradients = buildBrickGradients(pyramid_.level(level), options_.brickSize, kTrilinearBorder, threads_);
+        }
+        // Held: the gradient bounds and the steps, per brick.
+        heldBytes_ += uint64_t(grid.brickCount()) * 4 * sizeof(float);
+        st.adaptiveStepSeconds = secondsSince(t);
+    }
+    data.adaptive.update(grid, *data.gradients, tf, tables_.tfTable(), setup,
+                         setup.use.emptySpaceSkipping ? &data.classification.visible : nullptr, st);
 }
 
 Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
@@ -180,6 +207,7 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     DataSet &data = dataSet(quality.mipLevel, setup.use.cubic, st);
     if (quality.emptySpaceSkipping) classify(data, quality.mipLevel, tf, st);
     const FrameTables::Rebuilt rebuilt = tables_.update(tf, setup, st);
+    if (quality.adaptiveStep) adaptSteps(data, quality.mipLevel, tf, setup, st);
     counts_.add(&PreprocessCounts::tfTables, rebuilt.tfTable);
     counts_.add(&PreprocessCounts::preintegrationTables, rebuilt.preintegration);
 
@@ -214,6 +242,7 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     p.tfScale = float(tfTable.scale);
     p.tfEntries = tfTable.entries();
     p.brickVisible = quality.emptySpaceSkipping ? data.brickVisible.data() : nullptr;
+    p.brickStep = quality.adaptiveStep ? data.adaptive.steps.step.data() : nullptr;
     // A window casts only its own rays, tiled from its corner; each ray is cast as in the
     // whole grid (its lanes do not depend on the other rays of its packet).
     const RayWindow &win = setup.cast;

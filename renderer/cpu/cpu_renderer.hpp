@@ -72,10 +72,16 @@ class CpuRenderer : public FrameRenderer {
         std::optional<MinMaxBricks> bricks;
         BrickClassification classification;
         std::vector<int32_t> brickVisible; // classification.visible as int32, for gathers
+        std::optional<BrickGradients> gradients; // the adaptive step's, on first need
+        AdaptiveStepTable adaptive;
     };
 
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st);
+    // The bricks' min-max grid over the data set, built on first need.
+    const MinMaxBricks &bricks(DataSet &data, int level, RenderStats &st);
+    // The adaptive step's per-brick steps for this frame (gradients built on first need).
+    void adaptSteps(DataSet &data, int level, const TransferFunction &tf, const FrameSetup &setup, RenderStats &st);
 
     std::shared_ptr<const Volume> volume_;
     CpuRendererOptions options_;

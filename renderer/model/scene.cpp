@@ -237,11 +237,12 @@ ProjectionWindow parseProjectionWindow(const json &j, const std::string &path) {
 
 Quality parseQuality(const json &j) {
     const Fields f(j, "quality",
-                   {"step", "jitter", "preintegrated", "interpolation", "boundary_segment",
+                   {"step", "adaptive_step", "jitter", "preintegrated", "interpolation", "boundary_segment",
                     "early_termination", "empty_space_skipping", "mip_level", "image_scale",
                     "shading", "seed", "compositing", "projection_window", "crop", "orientation_correction"});
     Quality q;
     f.optional("step", q.step, number);
+    f.optional("adaptive_step", q.adaptiveStep, boolean);
     f.optional("jitter", q.jitter, boolean);
     f.optional("preintegrated", q.preintegrated, boolean);
     f.optional("interpolation", q.interpolation,
@@ -370,6 +371,7 @@ ojson qualityJson(const Quality &q) {
             {"seed", q.seed}};
     // Written only where they differ from the default, so that scenes and frame headers
     // without them read as before.
+    if (q.adaptiveStep) out["adaptive_step"] = true;
     if (q.compositing != Compositing::EmissionAbsorption) out["compositing"] = nameOf(q.compositing, kCompositings);
     if (q.projectionWindow)
         out["projection_window"] = {{"window", q.projectionWindow->window}, {"level", q.projectionWindow->level}};

@@ -46,6 +46,9 @@ struct CropBox {
 // The quality switches of docs/design.md's table, each measurable alone.
 struct Quality {
     double step = 0.5;                 // segment length in units of the smallest spacing
+    // Segment lengths from a per-brick error estimate, between step / 8 and step
+    // (renderer/common/adaptive_step.hpp); step is then the longest.
+    bool adaptiveStep = false;
     bool jitter = false;
     bool preintegrated = false;
     Interpolation interpolation = Interpolation::Linear;

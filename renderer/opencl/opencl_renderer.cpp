@@ -154,13 +154,13 @@ std::vector<float> OpenClRenderer::readBackCoefficients(const DataSet &data) {
     return c;
 }
 
-void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderStats &st) {
+const MinMaxBricks &OpenClRenderer::bricks(DataSet &data, RenderStats &st) {
     if (!data.bricks) {
-        // Built the first time skipping is asked for: trilinear values are bounded by the
-        // voxels around a brick, spline values by the coefficients (minmax_bricks.hpp), which
-        // live on the device only, so they are read back once for this: one transfer of the
-        // volume, and the brick grid stays the one host code both back ends build
-        // (buildMinMaxBricks's footprint rules are not written twice).
+        // Built the first time skipping or the adaptive step is asked for: trilinear values are
+        // bounded by the voxels around a brick, spline values by the coefficients
+        // (minmax_bricks.hpp), which live on the device only, so they are read back once for
+        // this: one transfer of the volume, and the brick grid stays the one host code both back
+        // ends build (buildMinMaxBricks's footprint rules are not written twice).
         const auto t = Clock::now();
         if (data.cubic)
             data.bricks = buildMinMaxBricks(readBackCoefficients(data).data(), data.dims, options_.brickSize, 2);
@@ -169,9 +169,33 @@ void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderS
         st.brickGridSeconds = secondsSince(t);
         counts_.add(&PreprocessCounts::brickGrids);
     }
-    if (!data.classification.update(*data.bricks, tf, st)) return;
+    return *data.bricks;
+}
+
+void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderStats &st) {
+    if (!data.classification.update(bricks(data, st), tf, st)) return;
     data.brickVisible = upload(*cl_, data.classification.visible, "the brick classification");
     counts_.add(&PreprocessCounts::brickClassifications);
+}
+
+void OpenClRenderer::adaptSteps(DataSet &data, const TransferFunction &tf, const FrameSetup &setup, RenderStats &st) {
+    const MinMaxBricks &grid = bricks(data, st);
+    if (!data.gradients) {
+        // The differences a reconstruction's derivative blends: neighbouring samples
+        // (trilinear) or coefficients (cubic, read back once as for the min-max grid).
+        const auto t = Clock::now();
+        if (data.cubic) {
+            const std::vector<float> coefficients = readBackCoefficients(data);
+            data.gradients = buildBrickGradients(SampleGrid::ofFloats(data.dims, coefficients.data()),
+                                                 options_.brickSize, kCubicBSplineBorder);
+        } else {
+            data.gradients = buildBrickGradients(pyramid_.level(data.level), options_.brickSize, kTrilinearBorder);
+        }
+        st.adaptiveStepSeconds = secondsSince(t);
+    }
+    if (data.adaptive.update(grid, *data.gradients, tf, tables_.tfTable(), setup,
+                             setup.use.emptySpaceSkipping ? &data.classification.visible : nullptr, st))
+        data.brickStep = upload(*cl_, data.adaptive.steps.step, "the adaptive step's bricks");
 }
 
 Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
@@ -264,6 +288,7 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
     }
     counts_.add(&PreprocessCounts::tfTables, rebuilt.tfTable);
     counts_.add(&PreprocessCounts::preintegrationTables, rebuilt.preintegration);
+    if (quality.adaptiveStep) adaptSteps(data, tf, setup, st);
 
     // The set-up as the kernel reads it; kept in the renderer until the frame's commands end
     // (the write is not blocking).
@@ -311,7 +336,10 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
             setMemoryArg(k.raycast, k.raycastArgs, arg++, preNodes_);
             setMemoryArg(k.raycast, k.raycastArgs, arg++, preLocator_);
         }
-        if (quality.emptySpaceSkipping) setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickVisible);
+        // The adaptive step's walk reads the steps, which mark the skipped bricks too.
+        if (quality.emptySpaceSkipping && !quality.adaptiveStep)
+            setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickVisible);
+        if (quality.adaptiveStep) setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickStep);
         setMemoryArg(k.raycast, k.raycastArgs, arg++, params_);
         const cl_int4 window{{win.x, win.y, win.width, win.height}};
         k.raycast.setArg(arg++, window);

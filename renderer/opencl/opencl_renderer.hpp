@@ -84,11 +84,18 @@ class OpenClRenderer : public FrameRenderer {
         std::optional<MinMaxBricks> bricks;
         BrickClassification classification;
         cl::Buffer brickVisible;           // classification.visible on the device
+        std::optional<BrickGradients> gradients; // the adaptive step's, on first need
+        AdaptiveStepTable adaptive;
+        cl::Buffer brickStep;              // adaptive.steps.step on the device
     };
 
     bool cubicFromImage() const;
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
+    // The bricks' min-max grid over the data set, built on first need.
+    const MinMaxBricks &bricks(DataSet &data, RenderStats &st);
+    // The adaptive step's per-brick steps for this frame, uploaded when they change.
+    void adaptSteps(DataSet &data, const TransferFunction &tf, const FrameSetup &setup, RenderStats &st);
     std::vector<float> readBackCoefficients(const DataSet &data);
     // Casts setup.cast's rays on the device and reads them into `floats` (float RGBA) or,
     // converted there, into `bytes` (Rgba8Image's); fills st's device times. Returns when the

@@ -180,6 +180,7 @@ Scene richScene() {
     s.width = 640;
     s.height = 480;
     s.quality.step = 0.125;
+    s.quality.adaptiveStep = true;
     s.quality.jitter = true;
     s.quality.preintegrated = true;
     s.quality.interpolation = Interpolation::Cubic;
@@ -278,6 +279,7 @@ TEST(SceneRefuses, ValueOfTheWrongTypeIsNamedByItsPath) {
         {"/quality", "quality", 1},
         {"/quality/step", "quality.step", "0.5"},
         {"/quality/jitter", "quality.jitter", 1},
+        {"/quality/adaptive_step", "quality.adaptive_step", "yes"},
         {"/quality/preintegrated", "quality.preintegrated", "true"},
         {"/quality/boundary_segment", "quality.boundary_segment", 0},
         {"/quality/early_termination", "quality.early_termination", false},

@@ -155,15 +155,20 @@ Quality with(Quality q, bool jitter, bool preintegrated, bool defaults = false) 
     q.preintegrated = preintegrated;
     return q;
 }
-// plain, jittered, pre-integrated, and with empty-space skipping and early termination (at
-// 1 − 1e-7, so that what it leaves out, at most the transmittance left, is below the bounds).
+// plain, jittered, pre-integrated, with empty-space skipping and early termination (at
+// 1 − 1e-7, so that what it leaves out, at most the transmittance left, is below the bounds),
+// and the adaptive step (step the longest) with those and jitter: every segment length
+// between step / 8 and step, restarts after skips.
 std::vector<std::pair<std::string, Quality>> variants(double step) {
     Quality skipping = with(plain(step), false, false, true);
     skipping.earlyTermination = 1 - 1e-7;
+    Quality adaptive = with(skipping, true, false);
+    adaptive.adaptiveStep = true;
     return {{"plain", plain(step)},
             {"jitter", with(plain(step), true, false)},
             {"pre-integrated", with(plain(step), false, true)},
-            {"skipping + early termination", skipping}};
+            {"skipping + early termination", skipping},
+            {"adaptive step + jitter + skipping + early termination", adaptive}};
 }
 
 } // namespace
@@ -417,7 +422,7 @@ std::vector<Row> opaqueMedia(const Backend &be) {
         // to ~2e-7 relative, T to 16 roundings between its exact refreshes).
         const double bound = a == 1 ? 0 : 2e-6;
         const std::string against = "closed form, |ΔA|, |Δrgb| (rgb = c·A)";
-        Check ocl(name, be.name + " (plain, jitter, pre-integrated, skipping + early termination)", against, bound),
+        Check ocl(name, be.name + " (plain, jitter, pre-integrated, skipping + early termination, adaptive step)", against, bound),
             ref(name, "reference", against, bound);
         for (double step : {0.01, 0.1, 1.0, 10.0})
             for (const auto &[label, q] : variants(step))
@@ -912,7 +917,7 @@ std::vector<Row> camerasAndRays(const Backend &be) {
          {std::pair{std::string("camera inside the volume, on a face, on an edge"), &placements},
           std::pair{std::string("rays parallel to faces, along edges, through corners; orthographic along an axis"), &rays},
           std::pair{std::string("clip plane through the camera; clip plane that removes everything"), &clipped}}) {
-        Check ocl(name, be.name + " (plain, pre-integrated, skipping + early termination)", against, bound),
+        Check ocl(name, be.name + " (plain, pre-integrated, skipping + early termination, adaptive step)", against, bound),
             ref(name, "reference", against, bound);
         for (const View &v : *views) {
             FrameRenderer &r = v.volume == &box ? renderer : renderer7;
@@ -962,7 +967,7 @@ std::vector<Row> steps(const Backend &be) {
         const auto rendererPtr = be.make(box);
         FrameRenderer &renderer = *rendererPtr;
         Check ocl("step larger than the whole volume: 50, 1e3, 1e6, 1e30 voxels",
-                  be.name + " (plain, jitter, pre-integrated, skipping + early termination)", "closed form, |ΔA|, |Δrgb|",
+                  be.name + " (plain, jitter, pre-integrated, skipping + early termination, adaptive step)", "closed form, |ΔA|, |Δrgb|",
                   2e-6); // the compositing's, as for the opaque media
         for (double step : {50.0, 1e3, 1e6, 1e30})
             for (const auto &[label, q] : variants(step))
@@ -992,7 +997,8 @@ std::vector<Row> steps(const Backend &be) {
         // which would not end at all: 10 s tells the two apart on any machine that runs CI.
         Check time("step of 1e-4 voxels: render time of a 2×1 frame", be.name, "seconds against the frame's budget", 10);
         std::vector<std::pair<std::string, Quality>> qualities = variants(1e-4);
-        qualities.pop_back(); // early termination would stop these rays early
+        // Early termination would stop these rays early.
+        std::erase_if(qualities, [](const auto &v) { return v.first.find("early termination") != std::string::npos; });
         for (const auto &[label, q] : qualities)
             ocl.attempt(label, [&] {
                 RenderStats st;
@@ -1026,7 +1032,7 @@ std::vector<Row> images(const Backend &be) {
     FrameRenderer &renderer = *rendererPtr;
     std::vector<Row> rows;
     const std::string against = "closed form, |ΔA|, |Δrgb|";
-    Check ocl("images of 1×1, 1×64 and 64×1 pixels", be.name + " (plain, jitter, pre-integrated, skipping + early termination)",
+    Check ocl("images of 1×1, 1×64 and 64×1 pixels", be.name + " (plain, jitter, pre-integrated, skipping + early termination, adaptive step)",
               against, 2e-6),
         ref("images of 1×1, 1×64 and 64×1 pixels", "reference", against, 2e-6);
     for (const auto &[w, h] : {std::pair{1, 1}, std::pair{1, 64}, std::pair{64, 1}}) {

@@ -12,6 +12,9 @@
  *   EMPTY_SPACE_SKIPPING skip the segments whose sample lies in a brick the transfer function makes
  *                        transparent (pre-integrated: that lie wholly in one), found by a brick walk
  *   SHADING              gradient Phong lighting with a headlight
+ *   ADAPTIVE_STEP        each segment as long as the step of the brick it starts in (adaptive_step.hpp),
+ *                        found by the brick walk; with EMPTY_SPACE_SKIPPING a transparent brick
+ *                        (step −1) is crossed without a sample
  *   COMPOSITING_MAX      maximum intensity projection instead of emission–absorption
  *   COMPOSITING_MIN      minimum intensity projection (the host builds neither skipping,
  *                        early termination, pre-integration nor shading with these two)
@@ -149,8 +152,11 @@ typedef struct {
     __global const float *preNodes;
     __global const int *preLocator;
 #endif
-#ifdef EMPTY_SPACE_SKIPPING
+#if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
     __global const uchar *brickVisible;
+#endif
+#ifdef ADAPTIVE_STEP
+    __global const float *brickStep;
 #endif
     __global volatile uint *stats;
     int4 n; /* samples per axis of the level sampled */
@@ -384,24 +390,33 @@ float4 projectIntensity(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint 
 
 /* ---- emission–absorption ------------------------------------------------------------------- */
 
-#ifdef EMPTY_SPACE_SKIPPING
+#if defined(EMPTY_SPACE_SKIPPING) || defined(ADAPTIVE_STEP)
 /* The incremental brick walk (DDA) over the brick grid: the brick holding the point the ray has
  * reached, whether the transfer function leaves it visible, and the t at which the ray crosses
  * each of its walls (vcBrickOf, vcBrickWall, vcBrickExit). Moving on costs a comparison per
  * segment and a division per wall crossed. A point within float rounding of a wall may be put
  * in either brick: harmless, as each brick's value range covers half a voxel beyond its box
- * (minmax_bricks.hpp). The native path walks a packet of rays with the same formulas. */
+ * (minmax_bricks.hpp). The native path walks a packet of rays with the same formulas.
+ * ADAPTIVE_STEP: the walk reads the brick's step instead, visible where it is positive. */
 typedef struct {
     float q0[3], dq[3]; /* the ray in level coordinates */
     int b[3];
     float wall[3];
     bool visible;
+    float step; /* ADAPTIVE_STEP: the brick's segment length */
 } BrickWalk;
 
-void brickLookUp(__global const uchar *visible, __global const RayCastParams *P, BrickWalk *w) {
+void brickLookUp(const Frame *f, BrickWalk *w) {
+    __global const RayCastParams *P = f->P;
     const int bx = clamp(w->b[0], 0, P->bricks[0] - 1), by = clamp(w->b[1], 0, P->bricks[1] - 1),
               bz = clamp(w->b[2], 0, P->bricks[2] - 1);
-    w->visible = visible[((size_t)bz * P->bricks[1] + by) * P->bricks[0] + bx] != 0;
+    const size_t brick = ((size_t)bz * P->bricks[1] + by) * P->bricks[0] + bx;
+#ifdef ADAPTIVE_STEP
+    w->step = f->brickStep[brick];
+    w->visible = w->step > 0.0f;
+#else
+    w->visible = f->brickVisible[brick] != 0;
+#endif
 }
 
 float brickWalkExit(const BrickWalk *w) { return vcBrickExit(w->wall[0], w->wall[1], w->wall[2]); }
@@ -417,7 +432,7 @@ void brickWalkStart(const Frame *f, const Ray *r, BrickWalk *w) {
         w->b[a] = clamp((int)vcBrickOf(q, inverseB), 0, P->bricks[a] - 1);
         w->wall[a] = vcBrickWall((float)w->b[a], (float)P->brickSize, w->q0[a], w->dq[a]);
     }
-    brickLookUp(f->brickVisible, P, w);
+    brickLookUp(f, w);
 }
 
 /* Moves on to the brick holding q(t), t not before where the walk is. */
@@ -431,9 +446,10 @@ void brickWalkTo(const Frame *f, float t, BrickWalk *w) {
         w->b[a] += w->dq[a] > 0.0f ? 1 : -1;
         w->wall[a] = vcBrickWall((float)w->b[a], (float)f->P->brickSize, w->q0[a], w->dq[a]);
     }
-    if (moved) brickLookUp(f->brickVisible, f->P, w);
+    if (moved) brickLookUp(f, w);
 }
 
+#if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
 #ifdef PREINTEGRATED
 /* A pre-integrated segment reads the values at both ends and between: it is empty when it lies
  * wholly in a brick the transfer function makes transparent. A later full segment k' is
@@ -453,6 +469,7 @@ bool emptySegment(const Frame *f, const Segments *s, Segment g, BrickWalk *w) {
 }
 #endif
 #endif
+#endif
 
 /* One ray's emission–absorption march: the compensated sums, the transmittance, counters. */
 typedef struct {
@@ -465,7 +482,7 @@ typedef struct {
     float sf;     /* the value at the segment's front */
     bool sfStale; /* after a skip: sf must be sampled at the segment's start first */
 #endif
-#ifdef EMPTY_SPACE_SKIPPING
+#if defined(EMPTY_SPACE_SKIPPING) || defined(ADAPTIVE_STEP)
     BrickWalk walk;
 #endif
 } March;
@@ -481,7 +498,7 @@ March startMarch(VOLUME_ARG, const Frame *f, const Ray *r) {
     m.sf = sampleVolume(VOLUME, f->n, r->q0 + r->t0 * r->dqL);
     m.sfStale = false;
 #endif
-#ifdef EMPTY_SPACE_SKIPPING
+#if defined(EMPTY_SPACE_SKIPPING) || defined(ADAPTIVE_STEP)
     brickWalkStart(f, r, &m.walk);
 #endif
     return m;
@@ -491,7 +508,7 @@ March startMarch(VOLUME_ARG, const Frame *f, const Ray *r) {
  * and *jumpTo, the last later full segment k' that is empty too: its deciding point before the
  * brick's exit (one fewer for rounding), ending before t1. */
 bool inEmptySpace(const Frame *f, const Segments *s, Segment g, March *m, float *jumpTo) {
-#ifdef EMPTY_SPACE_SKIPPING
+#if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
     if (!emptySegment(f, s, g, &m->walk)) return false;
     *jumpTo = fmin(floor((brickWalkExit(&m->walk) - s->t0) / s->d - s->j + SKIP_DECIDING_POINT) - 1.0f,
                    floor((s->t1 - s->t0) / s->d - s->j) - 1.0f);
@@ -576,12 +593,17 @@ SegmentColour preintegratedColour(VOLUME_ARG, const Frame *f, const Ray *r, cons
     c.alpha = seg.w;
     c.rgb = seg.xyz;
     c.weight = 1.0f;
-    if (g.partial && seg.w <= VC_ALPHA_HOLDS_DEPTH) {
+#ifdef ADAPTIVE_STEP
+    const bool scaled = true; /* every segment is scaled from the table's (the longest) step */
+#else
+    const bool scaled = g.partial;
+#endif
+    if (scaled && seg.w <= VC_ALPHA_HOLDS_DEPTH) {
         const float fraction = g.len / s->d;
         c.depth *= fraction;
         c.alpha = vcOpacityFromDepth(c.depth);
         c.rgb *= vcPartialColourScale(seg.w, c.alpha, fraction);
-    } else if (g.partial) {
+    } else if (scaled) {
         const float4 rgba = classify(f->tfTable, f->P, sampleVolume(VOLUME, f->n, r->q0 + (s->start + 0.5f * g.len) * r->dqL));
         c.depth = vcSegmentDepth(rgba.w, g.len, f->P->opacityUnit);
         c.alpha = vcOpacityFromDepth(c.depth);
@@ -624,25 +646,65 @@ bool terminatesEarly(const Frame *f, March *m) {
     return false;
 }
 
-float4 emissionAbsorption(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint *samples) {
+#ifdef ADAPTIVE_STEP
+/* The segments of the adaptive step: each starts where the last ended and is as long as the
+ * step of the brick it starts in (the first, k = 0, j times that under jitter), cut at t1. A
+ * transparent brick (EMPTY_SPACE_SKIPPING) adds exactly nothing: the ray starts again at its
+ * exit, its first segment there jittered again so that segments do not line up on the wall. */
+void marchSegments(VOLUME_ARG, const Frame *f, const Ray *r, float j, March *m) {
     Segments s = firstSegment(r, f->P->step, j);
-    March m = startMarch(VOLUME, f, r);
+    for (;;) {
+        brickWalkTo(f, s.start, &m->walk);
+        if (!m->walk.visible) {
+            ++m->skipped;
+            const float exit = brickWalkExit(&m->walk);
+            if (exit >= s.t1) break;
+            s.start = exit;
+            s.k = s.j > 0.0f ? 0 : 1;
+#ifdef PREINTEGRATED
+            m->sfStale = true;
+#endif
+            continue;
+        }
+        Segment g;
+        g.boundary = s.start + (s.k == 0 ? s.j * m->walk.step : m->walk.step);
+        g.end = fmin(g.boundary, s.t1);
+        g.len = g.end - s.start;
+        g.partial = g.boundary > s.t1 || s.k == 0;
+        if (segmentTaken(g)) {
+            if (!countSample(f, &m->samples)) break;
+            composite(m, segmentColour(VOLUME, f, r, &s, g, m));
+            if (terminatesEarly(f, m)) break;
+        }
+        if (!nextSegment(&s, g)) break;
+    }
+}
+#else
+/* The segments at t0 + (k + j)·step; EMPTY_SPACE_SKIPPING jumps over the empty ones. */
+void marchSegments(VOLUME_ARG, const Frame *f, const Ray *r, float j, March *m) {
+    Segments s = firstSegment(r, f->P->step, j);
     for (;;) {
         const Segment g = segmentAt(&s);
         if (segmentTaken(g)) {
             float jumpTo;
-            if (inEmptySpace(f, &s, g, &m, &jumpTo)) {
-                ++m.skipped;
+            if (inEmptySpace(f, &s, g, m, &jumpTo)) {
+                ++m->skipped;
                 if (!nextSegment(&s, g)) break;
-                m.skipped += skipSegmentsTo(&s, jumpTo);
+                m->skipped += skipSegmentsTo(&s, jumpTo);
                 continue;
             }
-            if (!countSample(f, &m.samples)) break;
-            composite(&m, segmentColour(VOLUME, f, r, &s, g, &m));
-            if (terminatesEarly(f, &m)) break;
+            if (!countSample(f, &m->samples)) break;
+            composite(m, segmentColour(VOLUME, f, r, &s, g, m));
+            if (terminatesEarly(f, m)) break;
         }
         if (!nextSegment(&s, g)) break;
     }
+}
+#endif
+
+float4 emissionAbsorption(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint *samples) {
+    March m = startMarch(VOLUME, f, r);
+    marchSegments(VOLUME, f, r, j, &m);
     __global volatile uint *stats = f->stats;
     if (m.terminated) atomic_inc(&stats[VC_STAT_TERMINATED_EARLY]);
     if (m.skipped && atomic_add(&stats[VC_STAT_SEGMENTS_SKIPPED], m.skipped) > UINT_MAX - m.skipped)
@@ -683,8 +745,11 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #ifdef PREINTEGRATED
                       __global const float4 *preTable, __global const float *preNodes, __global const int *preLocator,
 #endif
-#ifdef EMPTY_SPACE_SKIPPING
+#if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
                       __global const uchar *brickVisible,
+#endif
+#ifdef ADAPTIVE_STEP
+                      __global const float *brickStep,
 #endif
                       __global const RayCastParams *P, const int4 window, __global float4 *image,
                       __global volatile uint *stats) {
@@ -704,8 +769,11 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
     f.preNodes = preNodes;
     f.preLocator = preLocator;
 #endif
-#ifdef EMPTY_SPACE_SKIPPING
+#if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
     f.brickVisible = brickVisible;
+#endif
+#ifdef ADAPTIVE_STEP
+    f.brickStep = brickStep;
 #endif
     f.stats = stats;
     f.n = (int4)(P->levelDims[0], P->levelDims[1], P->levelDims[2], 0);
