@@ -29,6 +29,8 @@ const QUALITY_FIELDS = {
   boundary_segment: { id: "q-boundary", kind: "checkbox" },
   empty_space_skipping: { id: "q-skipping", kind: "checkbox" },
   shading: { id: "q-shading", kind: "checkbox" },
+  // The server writes it only when on: absent from its state means off.
+  adaptive_step: { id: "q-adaptive", kind: "checkbox", absentMeans: false },
 };
 
 export class QualityPanel {
@@ -112,9 +114,10 @@ export class QualityPanel {
     if (q) {
       this.seed = q.seed ?? 0;
       for (const [key, f] of Object.entries(QUALITY_FIELDS)) {
-        if (!(key in q)) continue;
+        if (!(key in q) && !("absentMeans" in f)) continue;
+        const value = key in q ? q[key] : f.absentMeans;
         const el = this.$(f.id);
-        if (f.kind === "checkbox") el.checked = !!q[key]; else el.value = q[key];
+        if (f.kind === "checkbox") el.checked = !!value; else el.value = value;
       }
     }
     const p = state.quality_policy;
