@@ -5,6 +5,7 @@
 #include <cmath>
 #include <ctime>
 #include <fstream>
+#include <limits>
 #include <numbers>
 #include <sstream>
 #include <stdexcept>
@@ -51,6 +52,30 @@ Timing repeat(const RepeatOptions &options, const std::function<void(int)> &once
         if (spent > options.maxSeconds) break;
     }
     return summarize(std::move(ms));
+}
+
+std::vector<Timing> repeatInterleaved(const RepeatOptions &options, const std::vector<std::function<void()>> &variants) {
+    using Clock = std::chrono::steady_clock;
+    const size_t n = variants.size();
+    const auto order = [n](int round, size_t i) { return round % 2 ? n - 1 - i : i; };
+    for (int r = 0; r < options.warmup; ++r)
+        for (size_t i = 0; i < n; ++i) variants[order(r, i)]();
+    std::vector<std::vector<double>> ms(n);
+    double spent = 0;
+    for (int r = 0; r < std::max(1, options.repeats); ++r) {
+        for (size_t i = 0; i < n; ++i) {
+            const size_t v = order(r, i);
+            const auto t0 = Clock::now();
+            variants[v]();
+            const double dt = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+            ms[v].push_back(dt);
+            spent += dt / 1e3;
+        }
+        if (spent > options.maxSeconds) break;
+    }
+    std::vector<Timing> out;
+    for (auto &m : ms) out.push_back(summarize(std::move(m)));
+    return out;
 }
 
 namespace {
@@ -152,6 +177,45 @@ std::vector<bool> paretoFront(const std::vector<double> &time, const std::vector
             if (j != i && time[j] <= time[i] && error[j] <= error[i] && (time[j] < time[i] || error[j] < error[i]))
                 front[i] = false;
     return front;
+}
+
+std::vector<bool> paretoFrontWithin(const std::vector<double> &cost, const std::vector<double> &error,
+                                    const std::vector<std::string> &group) {
+    if (cost.size() != error.size() || cost.size() != group.size())
+        throw std::invalid_argument("paretoFrontWithin: sizes differ");
+    std::vector<bool> front(cost.size(), false);
+    std::vector<std::string> seen;
+    for (const std::string &g : group) {
+        if (std::find(seen.begin(), seen.end(), g) != seen.end()) continue;
+        seen.push_back(g);
+        std::vector<size_t> members;
+        std::vector<double> c, e;
+        for (size_t i = 0; i < group.size(); ++i)
+            if (group[i] == g) {
+                members.push_back(i);
+                c.push_back(cost[i]);
+                e.push_back(error[i]);
+            }
+        const std::vector<bool> f = paretoFront(c, e);
+        for (size_t k = 0; k < members.size(); ++k) front[members[k]] = f[k];
+    }
+    return front;
+}
+
+double costAtError(std::vector<double> cost, std::vector<double> error, double target) {
+    if (cost.size() != error.size()) throw std::invalid_argument("costAtError: sizes differ");
+    std::vector<size_t> idx(cost.size());
+    for (size_t i = 0; i < idx.size(); ++i) idx[i] = i;
+    std::sort(idx.begin(), idx.end(), [&](size_t a, size_t b) { return cost[a] < cost[b]; });
+    for (size_t k = 0; k + 1 < idx.size(); ++k) {
+        const double c0 = cost[idx[k]], c1 = cost[idx[k + 1]], e0 = error[idx[k]], e1 = error[idx[k + 1]];
+        if (!(c0 > 0 && c1 > 0 && e0 > 0 && e1 > 0 && target > 0)) continue;
+        if (target > e0 || target < e1) continue; // not bracketed by this pair (or error rose)
+        if (e0 == e1) return c0;
+        const double f = (std::log(target) - std::log(e0)) / (std::log(e1) - std::log(e0));
+        return std::exp(std::log(c0) + f * (std::log(c1) - std::log(c0)));
+    }
+    return std::numeric_limits<double>::quiet_NaN();
 }
 
 StudyOutput::StudyOutput(std::filesystem::path dir, std::string study) : dir_(std::move(dir)), study_(std::move(study)) {

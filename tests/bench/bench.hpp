@@ -37,6 +37,13 @@ struct RepeatOptions {
 Timing repeat(const RepeatOptions &options, const std::function<void(int k)> &once,
               const std::function<void()> &prepare = {});
 
+// Times several variants of one cell side by side: each round runs every variant once, in the
+// given order on even rounds and reversed on odd ones (so that neither always runs right after
+// the other, whose caches and clock it would inherit); options.warmup untimed rounds first.
+// Stops after options.repeats timed rounds, or after the round in which the timed runs passed
+// options.maxSeconds, so every variant has the same number of runs. One Timing per variant.
+std::vector<Timing> repeatInterleaved(const RepeatOptions &options, const std::vector<std::function<void()>> &variants);
+
 // The machine and OpenCL device, written into every study's JSON.
 nlohmann::json machineInfo(const OpenClContext *cl);
 
@@ -58,6 +65,15 @@ ValueRange nominalRange(const Volume &volume);
 // Points no other point beats in both time and error (ties count as beaten only when the
 // other is strictly better in one): the Pareto front, as flags in input order.
 std::vector<bool> paretoFront(const std::vector<double> &time, const std::vector<double> &error);
+// paretoFront within each group alone (e.g. uniform and adaptive stepping): a point is flagged
+// when no point of its own group beats it, whatever the other groups hold.
+std::vector<bool> paretoFrontWithin(const std::vector<double> &cost, const std::vector<double> &error,
+                                    const std::vector<std::string> &group);
+// Where a curve of (cost, error) points reaches `error`: between the two neighbouring points
+// (by cost) whose errors bracket it, interpolated linearly in log cost against log error (exact
+// for error ∝ cost^−p, as a step's error against samples). NaN when no pair brackets it: the
+// target lies above the cheapest point's error or below every error reached.
+double costAtError(std::vector<double> cost, std::vector<double> error, double target);
 
 // A study's output folder: JSON (with the machine), CSV and SVG side by side.
 class StudyOutput {

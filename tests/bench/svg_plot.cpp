@@ -116,7 +116,7 @@ std::string renderSvg(const Plot &plot) {
 
     for (size_t si = 0; si < plot.series.size(); ++si) {
         const Series &s = plot.series[si];
-        const char *colour = kColours[si % std::size(kColours)];
+        const char *colour = kColours[size_t(s.colour >= 0 ? size_t(s.colour) : si) % std::size(kColours)];
         std::ostringstream path;
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i)
             if (usable(s.x[i], plot.logX) && usable(s.y[i], plot.logY)) path << px(s.x[i]) << "," << py(s.y[i]) << " ";

@@ -17,6 +17,9 @@ struct Series {
     bool lines = true;     // join the points in order
     bool markers = true;
     bool dashed = false;
+    // The palette's colour by index, so that series of one kind share it (e.g. a configuration
+    // drawn twice, solid and dashed); −1: the series' own position.
+    int colour = -1;
 };
 
 struct Plot {

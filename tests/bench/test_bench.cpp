@@ -54,6 +54,52 @@ TEST(Bench, ParetoFrontKeepsExactlyTheUndominatedPoints) {
     EXPECT_EQ(paretoFront(time, error), (std::vector<bool>{true, true, true, false, false, true}));
 }
 
+// The error studies' uniform and adaptive stepping each have their own front: a point beaten
+// only by the other stepping's points stays on its own front.
+TEST(Bench, ParetoFrontWithinAGroupIgnoresTheOtherGroups) {
+    //                                     0    1    2    3    4
+    const std::vector<double> time = {1, 2, 3, 1.5, 2.5};
+    const std::vector<double> error = {8, 4, 2, 3, 1};
+    const std::vector<std::string> group = {"uniform", "uniform", "uniform", "adaptive", "adaptive"};
+    // Over all points, 1 and 2 are beaten by 3 and 4 (faster and more accurate).
+    EXPECT_EQ(paretoFront(time, error), (std::vector<bool>{true, false, false, true, true}));
+    EXPECT_EQ(paretoFrontWithin(time, error, group), (std::vector<bool>{true, true, true, true, true}));
+    // Within a group the usual rule holds: 5 (uniform) is beaten by 1.
+    const std::vector<double> time6 = {1, 2, 3, 1.5, 2.5, 2.2};
+    const std::vector<double> error6 = {8, 4, 2, 3, 1, 4.5};
+    const std::vector<std::string> group6 = {"uniform", "uniform", "uniform", "adaptive", "adaptive", "uniform"};
+    EXPECT_EQ(paretoFrontWithin(time6, error6, group6), (std::vector<bool>{true, true, true, true, true, false}));
+    EXPECT_THROW(paretoFrontWithin(time, error, {"uniform"}), std::invalid_argument);
+}
+
+// Uniform's samples per ray at an adaptive point's error: on a curve error ∝ samples⁻², the
+// log–log interpolation is exact (to rounding: 1e-12 relative), in any input order.
+TEST(Bench, CostAtErrorInterpolatesInLogLogAndNamesWhatItCannotReach) {
+    const std::vector<double> samples = {40, 10, 20};
+    const std::vector<double> error = {6.25e-4, 1e-2, 2.5e-3};
+    EXPECT_NEAR(costAtError(samples, error, 5e-3), 10 * std::sqrt(2.0), 1e-12 * 10 * std::sqrt(2.0));
+    EXPECT_NEAR(costAtError(samples, error, 2.5e-3), 20, 1e-12 * 20);
+    EXPECT_NEAR(costAtError(samples, error, 1e-3), 20 * std::pow(2.5, 0.5), 1e-12 * 40);
+    EXPECT_TRUE(std::isnan(costAtError(samples, error, 2e-2)));  // above the cheapest point's error
+    EXPECT_TRUE(std::isnan(costAtError(samples, error, 1e-4)));  // below every error reached
+    EXPECT_TRUE(std::isnan(costAtError({}, {}, 1e-3)));
+}
+
+// Side by side: one run of each variant per round, the order reversed every other round,
+// every variant timed as often as the others even when the time budget cuts the rounds short.
+TEST(Bench, RepeatInterleavedAlternatesTheOrderAndTimesEveryVariantAlike) {
+    std::string order;
+    const auto variants = std::vector<std::function<void()>>{[&] { order += 'a'; }, [&] { order += 'b'; }, [&] { order += 'c'; }};
+    const std::vector<Timing> t = repeatInterleaved({1, 3, 30}, variants);
+    EXPECT_EQ(order, "abc" "abc" "cba" "abc"); // one warm-up round, then three timed
+    ASSERT_EQ(t.size(), 3u);
+    for (const Timing &ti : t) EXPECT_EQ(ti.n, 3);
+    order.clear();
+    const std::vector<Timing> cut = repeatInterleaved({0, 100, 1e-9}, variants);
+    EXPECT_EQ(order, "abc");
+    for (const Timing &ti : cut) EXPECT_EQ(ti.n, 1);
+}
+
 TEST(Bench, PeerCameraFitsTheBoundingSphereOfTheSamplePoints) {
     Volume v;
     v.dims = {129, 65, 33};
@@ -149,6 +195,24 @@ TEST(Bench, SvgLeavesOutPointsALogAxisCannotShow) {
     EXPECT_EQ(svg.find("nan"), std::string::npos);
     EXPECT_EQ(svg.find("inf"), std::string::npos);
     EXPECT_NE(svg.find("<polyline"), std::string::npos);
+}
+
+// A configuration drawn twice (uniform solid, adaptive dashed) keeps its colour.
+TEST(Bench, SvgSeriesWithAColourIndexShareIt) {
+    Plot p;
+    p.series.push_back({"A", {1, 2}, {1, 2}});
+    p.series.push_back({"B", {1, 2}, {2, 3}});
+    p.series.push_back({"A, adaptive", {1, 2}, {3, 4}});
+    p.series.back().colour = 0;
+    const std::string svg = renderSvg(p);
+    const auto strokeOf = [&](size_t polyline) {
+        size_t at = 0;
+        for (size_t k = 0; k <= polyline; ++k) at = svg.find("<polyline", at + (k ? 1 : 0));
+        const size_t s = svg.find("stroke=\"", at) + 8;
+        return svg.substr(s, svg.find('"', s) - s);
+    };
+    EXPECT_EQ(strokeOf(2), strokeOf(0));
+    EXPECT_NE(strokeOf(1), strokeOf(0));
 }
 
 } // namespace
