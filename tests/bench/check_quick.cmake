@@ -8,7 +8,9 @@ endif()
 foreach(f table1.json table1.csv table1.md table1.svg
           table2_prefilter.json table2_prefilter.csv table2_prefilter.md table2_prefilter.svg
           figure5.json figure5.csv figure5.md figure5_paper.svg figure5_accelerated.svg
-          error_vs_time.json error_vs_time.csv error_vs_time.md error_vs_time_bonsai.svg)
+          error_vs_time.json error_vs_time.csv error_vs_time.md error_vs_time_bonsai.svg
+          error_vs_time_bonsai_samples.svg
+          error_synthetic.json error_synthetic.csv error_synthetic.md error_synthetic_narrow_on_wide.svg)
   if(NOT EXISTS "${OUT}/${f}")
     message(FATAL_ERROR "volcast-bench all --quick wrote no ${f}")
   endif()

@@ -26,12 +26,20 @@ struct StudyOptions {
     std::string backEnd = "auto";
     // Figure 5's and the error study's ray casters, timed in turn cell by cell (interleaved).
     std::vector<std::string> backEnds = {"auto"};
+    // The error studies' stepping, each cell drawn with each side by side: uniform (quality.step
+    // everywhere) and adaptive (quality.adaptive_step, step the longest).
+    std::vector<std::string> steppings = {"uniform", "adaptive"};
 };
 
 void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options);
 void prefilter(OpenClContext &cl, const StudyOptions &options);
 void figure5(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport);
 void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport, const std::vector<std::string> &scans);
+// Uniform against adaptive stepping where the answer is known in advance: synthetic volumes
+// (side³) whose transfer functions are steep in few bricks, in every brick, or in none,
+// configuration A against the reference of the same trilinear field, error against samples
+// per ray and time.
+void errorSynthetic(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport, int side);
 
 // run_table.py's --extra interface: one JSON line per size on stdout.
 struct PeerModeOptions {

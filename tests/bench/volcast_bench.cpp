@@ -45,8 +45,10 @@ int main(int argc, char **argv) {
     auto *t2 = app.add_subcommand("prefilter", "Table 2: B-spline prefilter, simple / multithreaded / OpenCL, 256³ and 512³");
     auto *f5 = app.add_subcommand("figure5", "Figure 5: frame rate against samples per voxel, configurations A–F");
     auto *ev = app.add_subcommand("error", "Error against run time on real scans, with the Pareto front");
+    auto *es = app.add_subcommand("error-synthetic", "Uniform against adaptive stepping on synthetic volumes: error "
+                                                     "against samples per ray and time");
     auto *all = app.add_subcommand("all", "Every study above, in turn");
-    for (auto *sub : {t1, t2, f5, ev, all}) common(sub);
+    for (auto *sub : {t1, t2, f5, ev, es, all}) common(sub);
     for (auto *sub : {t1, all}) {
         sub->add_option("--volumes", options.volumes, "Table 1's volumes: small, tooth, large")
             ->delimiter(',')
@@ -59,16 +61,27 @@ int main(int argc, char **argv) {
     }
     for (auto *sub : {f5, all})
         sub->add_option("--viewport", viewportFigure5, "Figure 5's square viewport")->capture_default_str();
-    for (auto *sub : {f5, ev, all})
+    for (auto *sub : {f5, ev, es, all})
         sub->add_option("--backends", options.backEnds,
                         "Figure 5's and the error study's ray casters, timed in turn cell by cell: auto, opencl, cpu")
             ->delimiter(',')
             ->check(CLI::IsMember({"auto", "opencl", "cpu"}))
             ->capture_default_str();
-    for (auto *sub : {ev, all}) {
-        sub->add_option("--error-viewport", viewportError, "The error study's square viewport")->capture_default_str();
-        sub->add_option("--scans", scans, "Scans of the error study")->delimiter(',')->capture_default_str();
+    int syntheticSide = 128;
+    for (auto *sub : {ev, es, all}) {
+        sub->add_option("--error-viewport", viewportError, "The error studies' square viewport")->capture_default_str();
+        sub->add_option("--steppings", options.steppings,
+                        "The error studies' stepping, each cell timed with each side by side: uniform, adaptive")
+            ->delimiter(',')
+            ->check(CLI::IsMember({"uniform", "adaptive"}))
+            ->capture_default_str();
     }
+    for (auto *sub : {ev, all})
+        sub->add_option("--scans", scans, "Scans of the error study")->delimiter(',')->capture_default_str();
+    for (auto *sub : {es, all})
+        sub->add_option("--side", syntheticSide, "The synthetic volumes' side in voxels")
+            ->check(CLI::Range(8, 1024))
+            ->capture_default_str();
 
     // The quality ladder's choice while dragging, on this device (ladder_choice.hpp).
     std::string ladderSizes = "512x512,1920x1080";
@@ -192,12 +205,13 @@ int main(int argc, char **argv) {
         options.backEnd = resolveBackEnd(options.backEnd);
         for (std::string &b : options.backEnds) b = resolveBackEnd(b);
         if (t1->parsed() || all->parsed() || ladder->parsed()) announce(options.backEnd);
-        if (f5->parsed() || ev->parsed() || all->parsed())
+        if (f5->parsed() || ev->parsed() || es->parsed() || all->parsed())
             for (const std::string &b : options.backEnds) announce(b);
         if (t1->parsed() || all->parsed()) table1(cl, options);
         if (t2->parsed() || all->parsed()) prefilter(*cl, options);
         if (f5->parsed() || all->parsed()) figure5(cl, options, viewportFigure5);
         if (ev->parsed() || all->parsed()) errorVsTime(cl, options, viewportError, scans);
+        if (es->parsed() || all->parsed()) errorSynthetic(cl, options, viewportError, syntheticSide);
         if (ladder->parsed()) ladderChoice(cl, options, parseSizes(options.quick ? "48x40" : ladderSizes), ladderSessions);
         std::cerr << "volcast-bench: results in " << options.out << "\n";
         return 0;
