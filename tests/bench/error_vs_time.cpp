@@ -44,6 +44,13 @@ constexpr double kReferenceTolerance = 1e-5;
 
 bool isAdaptive(const std::string &stepping) { return stepping == "adaptive"; }
 
+// A step as written in the tables: 0.0625, 0.25, 1 (fmt's fixed decimals would cut 1/16).
+std::string number(double v) {
+    std::ostringstream o;
+    o << v;
+    return o.str();
+}
+
 // Each stepping's fronts, over all back ends: what a server holding either could choose.
 void markFronts(std::vector<Point> &points) {
     std::vector<double> t, s, e;
@@ -189,7 +196,12 @@ std::string steppingNames(const std::vector<std::string> &steppings) {
 } // namespace
 
 void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &options, int viewport, const std::vector<std::string> &scans) {
-    const std::vector<double> steps = options.quick ? std::vector<double>{1, 2} : std::vector<double>{0.25, 0.5, 1, 2, 4};
+    // Uniform also at 1/8 and 1/16 voxel (adaptive stepping's shortest segments at steps 1 and
+    // 0.5), so that its front reaches the errors adaptive stepping reaches and the two fronts
+    // can be compared there; adaptive from 0.25, where its shortest is 1/32.
+    const std::vector<double> steps = options.quick ? std::vector<double>{0.5, 1, 2}
+                                                    : std::vector<double>{0.0625, 0.125, 0.25, 0.5, 1, 2, 4};
+    const double adaptiveFrom = options.quick ? 1 : 0.25;
     if (options.quick) viewport = std::min(viewport, 24);
     // D is A on more voxels: the same image, so it adds nothing to error against time.
     std::vector<Configuration> configs;
@@ -258,8 +270,11 @@ void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &o
                 proto.config = c.key;
                 proto.label = c.label;
                 proto.step = step;
+                std::vector<std::string> steppings;
+                for (const std::string &st : options.steppings)
+                    if (!isAdaptive(st) || step >= adaptiveFrom) steppings.push_back(st);
                 const auto cell = timeCell(options, renderers, tf, camera, viewport, q, reference(c.cubic, c.shading), proto,
-                                           options.steppings);
+                                           steppings);
                 points.insert(points.end(), cell.begin(), cell.end());
             }
         markFronts(points);
@@ -276,6 +291,8 @@ void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &o
             md << "\n";
             for (const double step : steps)
                 for (const std::string &st : options.steppings) {
+                    if (std::none_of(points.begin(), points.end(), [&](const Point &p) { return p.step == step && p.stepping == st; }))
+                        continue;
                     md << "| " << step << " | " << st << " |";
                     for (const auto &c : configs)
                         for (const Point &p : points)
@@ -305,7 +322,7 @@ void errorVsTime(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &o
     std::vector<std::vector<std::string>> rows;
     for (const Point &p : all) {
         j["points"].push_back(pointJson(p));
-        rows.push_back({p.scan, p.backEnd, p.config, fmt(p.step, 2), fmt(p.timing.median, 2), fmt(p.timing.min, 2),
+        rows.push_back({p.scan, p.backEnd, p.config, number(p.step), fmt(p.timing.median, 2), fmt(p.timing.min, 2),
                         fmt(p.timing.max, 2), fmt(p.error.rmse, 6), fmt(p.error.psnr, 2), p.pareto ? "1" : "0",
                         p.stepping, fmt(p.samplesPerRay, 2), isAdaptive(p.stepping) ? fmt(p.adaptiveMeanStep, 3) : "",
                         p.paretoSamples ? "1" : "0"});
@@ -505,7 +522,7 @@ void errorSynthetic(const std::shared_ptr<OpenClContext> &cl, const StudyOptions
         pj["uniform_samples_at_this_error"] =
             isAdaptive(p.stepping) && std::isfinite(p.uniformSamplesAtError) ? nlohmann::json(p.uniformSamplesAtError) : nlohmann::json(nullptr);
         j["points"].push_back(pj);
-        rows.push_back({p.scan, p.backEnd, p.stepping, fmt(p.step, 5), fmt(p.samplesPerRay, 2),
+        rows.push_back({p.scan, p.backEnd, p.stepping, number(p.step), fmt(p.samplesPerRay, 2),
                         isAdaptive(p.stepping) ? fmt(p.adaptiveMeanStep, 3) : "", fmt(p.timing.median, 2),
                         fmt(p.timing.min, 2), fmt(p.timing.max, 2), fmt(p.error.rmse, 8), fmt(p.error.psnr, 2),
                         isAdaptive(p.stepping) && std::isfinite(p.uniformSamplesAtError) ? fmt(p.uniformSamplesAtError, 2) : "",
