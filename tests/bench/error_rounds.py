@@ -6,8 +6,11 @@ those medians, and where adaptive stepping reaches an error faster or in fewer s
 uniform stepping does.
 
     python3 tests/bench/error_rounds.py out/adaptive/round1 out/adaptive/round2 out/adaptive/round3
+    python3 tests/bench/error_rounds.py --backend=opencl out/adaptive-opencl/round1 ...
 
 Prints Markdown; reads ROUND/error_vs_time.json and ROUND/error_synthetic.json where present.
+With --backend=NAME only that back end's points (rounds run with --backends opencl,cpu hold
+both; without it, fronts and comparisons are over every back end's points together).
 """
 
 import json
@@ -165,13 +168,16 @@ def synthetic_report(points, nrounds):
 
 
 def main():
-    rounds = sys.argv[1:]
+    args = sys.argv[1:]
+    backend = next((a.split("=", 1)[1] for a in args if a.startswith("--backend=")), None)
+    rounds = [a for a in args if not a.startswith("--backend=")]
     if not rounds:
         sys.exit(__doc__)
-    scans = merge(rounds, "error_vs_time")
+    keep = lambda points: [p for p in points if backend is None or p["backend"] == backend]
+    scans = keep(merge(rounds, "error_vs_time"))
     if scans:
         scans_report(scans, len(rounds))
-    synthetic = merge(rounds, "error_synthetic")
+    synthetic = keep(merge(rounds, "error_synthetic"))
     if synthetic:
         synthetic_report(synthetic, len(rounds))
 
