@@ -16,6 +16,7 @@ using detail::Fields;
 namespace {
 
 constexpr int kMaxFrameSide = 1 << 16;   // pixels; JPEG's own limit is 65535
+constexpr int kMaxRestPass = 64;         // passes at rest; the server makes at most a few
 
 constexpr std::array<std::pair<Codec, std::string_view>, 2> kCodecs{{
     {Codec::Jpeg, "jpeg"},
@@ -35,6 +36,8 @@ json headerToJson(const FrameHeader &h, size_t imageBytes) {
     if (viewWidth < h.width || viewHeight < h.height || viewWidth > kMaxFrameSide || viewHeight > kMaxFrameSide)
         throw std::invalid_argument("frame header: view_width and view_height must be in [width, 65536] and [height, 65536]");
     if (h.level < 0) throw std::invalid_argument("frame header: level must not be negative");
+    if (h.restPass < 0 || h.restPass > kMaxRestPass)
+        throw std::invalid_argument("frame header: rest_pass must be in [0, " + std::to_string(kMaxRestPass) + "]");
     requireFinite(h.renderMs, "render_ms");
     requireFinite(h.encodeMs, "encode_ms");
     json error = nullptr;
@@ -61,6 +64,8 @@ json headerToJson(const FrameHeader &h, size_t imageBytes) {
     if (h.viewHeight != 0) header["view_height"] = viewHeight;
     // Only on a level the server lowered to stay within its limits: older headers lack it.
     if (!h.limited.empty()) header["limited"] = h.limited;
+    // Only on a pass at rest: older headers lack it.
+    if (h.restPass != 0) header["rest_pass"] = h.restPass;
     return header;
 }
 
@@ -124,6 +129,8 @@ FrameHeader readHeader(const json &root, uint64_t &imageBytes) {
     h.final = detail::boolean(f.require("final"), "final");
     if (const json *c = f.find("camera"); c && !c->is_null()) h.camera = detail::object(*c, "camera");
     if (const json *l = f.find("limited"); l && !l->is_null()) h.limited = detail::string(*l, "limited", 1024);
+    if (const json *r = f.find("rest_pass"); r && !r->is_null())
+        h.restPass = int(detail::integer(*r, "rest_pass", 0, kMaxRestPass));
     imageBytes = detail::unsignedInteger(f.require("image_bytes"), "image_bytes");
     return h;
 }

@@ -58,7 +58,9 @@ struct FrameHeader {
     double renderMs = 0;       // ms, from render start to pixels on the host
     double encodeMs = 0;       // ms, image encoding
     std::optional<ErrorEstimate> error;   // nullopt: not estimated
-    bool final = false;        // the last frame for this view: nothing more comes until it changes
+    bool final = false;        // the view's final level: the last of its ladder (passes at rest may follow)
+    int restPass = 0;          // n ≥ 1: the n-th pass of refinement at rest after the final frame,
+                               //   toward the exact integral; 0: not one
     nlohmann::json camera;     // scene-file "camera" this frame shows; null when not sent
     std::string limited;       // what the automatic policy lowered to stay within the server's
                                //   limits ("image scale 0.5 to stay within …"); empty: nothing

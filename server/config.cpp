@@ -131,6 +131,11 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     app.add_option("--idle-ms", c.idleMs, "ms without input before refinement starts")
         ->envname("VOLCAST_IDLE_MS")
         ->check(CLI::Range(0.0, 60000.0));
+    app.add_option("--rest-refinement-s", c.restRefinementS,
+                   "Render time (s) a view at rest may get beyond its final frame, toward the exact integral, "
+                   "when the server has nothing else to render (0: none)")
+        ->envname("VOLCAST_REST_REFINEMENT_S")
+        ->check(CLI::Range(0.0, 600.0));
     app.add_option("--target-frame-ms", c.defaultTargetFrameMs, "Default frame-time target while interacting, ms")
         ->envname("VOLCAST_TARGET_FRAME_MS")
         ->check(CLI::Range(1.0, 10000.0));

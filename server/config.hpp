@@ -32,6 +32,7 @@ struct ServerConfig {
     std::string token;                        // empty: no token needed in hello
     int ioThreads = 2;                        // threads running the network
     double idleMs = 150;                      // ms without input before refinement starts
+    double restRefinementS = 10;              // render time a resting view may get beyond its final frame
     double defaultTargetFrameMs = 40;         // ms, the automatic policy's target
     int jitterPasses = 4;                     // passes accumulated by a jittered final level
     bool errorCalibration = true;             // calibrate error estimates against the reference

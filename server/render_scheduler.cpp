@@ -79,11 +79,20 @@ constexpr SlotTransition kSlotTransitions[] = {
     {S::LevelShown, E::StartLevel, S::LevelUnderWay, "plan the next refinement level's frame"},
     {S::FinalShown, E::NewView, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
     {S::FinalShown, E::NewStill, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
+    {S::FinalShown, E::StartRest, S::RestUnderWay,
+     "plan a pass at rest: the final's step halved once more, when the server has nothing else to render"},
+    {S::RestUnderWay, E::NewView, S::ViewWaiting, "drop the pass at the end of its unit (cancellation)"},
+    {S::RestUnderWay, E::NewStill, S::ViewWaiting, "drop the pass at the end of its unit (cancellation)"},
+    {S::RestUnderWay, E::FrameRendered, S::WithSession, "deliver it: its 8-bit image differs from the frame shown"},
+    {S::RestUnderWay, E::RestUnchanged, S::FinalShown, "no 8-bit pixel changed: nothing sent, refine on"},
+    {S::RestUnderWay, E::RenderFailed, S::FinalShown, "stop refining at rest: the final frame stays shown"},
     {S::Failed, E::NewView, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
     {S::Failed, E::NewStill, S::ViewWaiting, "keep the view; no render-time credit for the rest"},
 };
 
-bool underWayState(SlotState s) { return s == S::InteractiveUnderWay || s == S::LevelUnderWay; }
+bool underWayState(SlotState s) {
+    return s == S::InteractiveUnderWay || s == S::LevelUnderWay || s == S::RestUnderWay;
+}
 } // namespace
 
 std::span<const SlotTransition> slotTransitions() { return kSlotTransitions; }
@@ -105,6 +114,7 @@ const char *toString(SlotState state) {
     case S::WithSession: return "WithSession";
     case S::LevelShown: return "LevelShown";
     case S::FinalShown: return "FinalShown";
+    case S::RestUnderWay: return "RestUnderWay";
     case S::Failed: return "Failed";
     }
     return "?";
@@ -119,6 +129,8 @@ const char *toString(SlotEvent event) {
     case E::FrameRendered: return "FrameRendered";
     case E::RenderFailed: return "RenderFailed";
     case E::FrameWritten: return "FrameWritten";
+    case E::StartRest: return "StartRest";
+    case E::RestUnchanged: return "RestUnchanged";
     }
     return "?";
 }
@@ -139,7 +151,7 @@ bool RenderScheduler::moveTo(Slot &s, SlotEvent event, SlotState to) {
 }
 
 bool RenderScheduler::viewDone(const Slot &s) {
-    return s.state == S::FinalShown || s.state == S::Failed ||
+    return s.state == S::FinalShown || s.state == S::RestUnderWay || s.state == S::Failed ||
            (s.state == S::WithSession && s.delivery.final && s.delivery.generation == s.generation);
 }
 
@@ -276,6 +288,7 @@ void RenderScheduler::submit(SlotId slot, std::shared_ptr<const ViewJob> job) {
         s.levelsShown.clear();
         s.substituteSent = -1;
         s.levelImages.clear();
+        s.rest = Rest();
         s.lastInput = Clock::now();
     }
     wake_.notify_all();
@@ -389,6 +402,7 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     // Only a slot waiting for its view's first frame, resting between levels or with a frame
     // under way has work; a frame with the session, a final frame shown or a failure has none.
     if (s.state != SlotState::ViewWaiting && s.state != SlotState::LevelShown && !underWayState(s.state)) return false;
+    if (s.state == SlotState::RestUnderWay) return false;   // nextRestWork's
     const ViewJob &job = *s.job;
     // The renderer of the frame under way: an older view's while its interactive frame finishes.
     const ViewJob &underWay = s.underWay ? *s.underWay->job : job;
@@ -479,7 +493,17 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
             return false;
         s.underWay = std::move(f);
     }
+    planCells(s, work);
+    return true;
+}
+
+namespace {
+constexpr double kRestUnitShare = 0.25;
+} // namespace
+
+void RenderScheduler::planCells(Slot &s, Work &work) {
     const FrameUnderWay &u = *s.underWay;
+    const ViewJob &underWay = *u.job;
     work.job = u.job;
     work.generation = u.generation;
     const TiledFrame &frame = *u.frame;
@@ -497,7 +521,9 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     // part of a frame cheaply renders each pass whole.
     const double rays = double(frame.gridWidth()) * frame.gridHeight();
     double msPerRay = frame.msPerRayEstimate();
-    double budgetMs = options_.unitMs;
+    // A pass at rest is the server's spare time: its units are a quarter of the others', so
+    // that another session's interactive frame waits for less of one.
+    double budgetMs = work.kind == Kind::Rest ? options_.unitMs * kRestUnitShare : options_.unitMs;
     if (msPerRay == 0 && s.timer.known(size_t(work.level)) && !work.substitute) {
         msPerRay = s.timer.predictMs(size_t(work.level), predictedSamples(underWay.renderer->volume(), frame.quality(),
                                                                            underWay.width, underWay.height)) /
@@ -509,6 +535,39 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
     else
         work.cells = std::min(frame.cellsLeftInPass(),
                               cellsForBudget(budgetMs, msPerRay, frame.cellRays(), frame.lastUnitCells()));
+}
+
+bool RenderScheduler::nextRestWork(SlotId id, Slot &s, Work &work) {
+    if (options_.restRefinementMs <= 0 || !s.job) return false;
+    if (s.state == SlotState::FinalShown) {
+        const ViewJob &job = *s.job;
+        if (s.rest.done || s.interacting || s.rest.previous.rgba.empty() || preparing_.count(job.renderer.get()))
+            return false;
+        // The final's quality with its step halved once more per pass, and early termination
+        // moved to where what it leaves out is below the target.
+        const Level &l = job.ladder.back();
+        Quality q = l.quality;
+        q.step = std::ldexp(l.quality.step, -(s.rest.passes + 1));
+        q.earlyTermination = std::max(q.earlyTermination, kRestEarlyTermination);
+        bool substitute = false;
+        renderable(id, s, q, substitute);
+        if (substitute) return false;   // its preparation runs first (a pre-integration table per step); it wakes us
+        FrameUnderWay f;
+        f.frame = std::make_shared<TiledFrame>(FrameRequest{job.transferFunction, job.camera, job.width, job.height, q,
+                                                            job.clipPlanes},
+                                               l.passes, job.renderer->bandRows(), false);
+        f.job = s.job;
+        f.generation = s.generation;
+        f.level = int(job.ladder.size()) - 1;
+        f.final = true;
+        if (!moveTo(s, SlotEvent::StartRest, SlotState::RestUnderWay)) return false;
+        s.underWay = std::move(f);
+    } else if (s.state != SlotState::RestUnderWay) {
+        return false;
+    }
+    work.kind = Kind::Rest;
+    work.slot = id;
+    planCells(s, work);
     return true;
 }
 
@@ -535,8 +594,10 @@ bool RenderScheduler::pickWork(Kind kind, Clock::time_point now, Work &work, Clo
     double least = 0;
     const auto consider = [&](SlotId id, Slot &s) {
         Work candidate;
-        if (!nextWork(kind, id, s, now, candidate, wakeAt)) return;
-        const double service = kind == Kind::Interactive ? s.interactiveFrames : s.serviceMs;
+        if (kind == Kind::Rest ? !nextRestWork(id, s, candidate) : !nextWork(kind, id, s, now, candidate, wakeAt)) return;
+        const double service = kind == Kind::Interactive ? s.interactiveFrames
+                               : kind == Kind::Rest      ? s.rest.spentMs
+                                                         : s.serviceMs;
         if (found && service >= least) return;
         found = true;
         least = service;
@@ -567,8 +628,10 @@ void RenderScheduler::workerLoop() {
         const auto now = Clock::now();
         Work work;
         auto wakeAt = Clock::time_point::max();
-        // Every session's interactive frame before anyone's refinement.
-        const bool found = pickWork(Kind::Interactive, now, work, wakeAt) || pickWork(Kind::Refine, now, work, wakeAt);
+        // Every session's interactive frame before anyone's refinement, and refinement at rest
+        // only when there is nothing else.
+        const bool found = pickWork(Kind::Interactive, now, work, wakeAt) || pickWork(Kind::Refine, now, work, wakeAt) ||
+                           pickWork(Kind::Rest, now, work, wakeAt);
         if (found) {
             lastServed_ = work.slot;
             rendering_ = work.job->renderer.get();
@@ -605,11 +668,14 @@ void RenderScheduler::runUnit(Work &work) {
     {
         std::lock_guard lock(mutex_);
         longestUnitMs_ = std::max(longestUnitMs_, ms);
-        if (auto it = slots_.find(work.slot); it != slots_.end()) it->second.serviceMs += ms;
+        // Time at rest is the server's spare time: no debt against the session's next views.
+        if (auto it = slots_.find(work.slot); it != slots_.end())
+            (work.kind == Kind::Rest ? it->second.rest.spentMs : it->second.serviceMs) += ms;
         observer = unitObserver_;
     }
     if (observer) observer(ms);
     if (!frame.done()) return;
+    if (work.kind == Kind::Rest) return finishRest(work);
 
     const Level &level = job.ladder[size_t(work.level)];
     const double samples = predictedSamples(job.renderer->volume(), frame.quality(), job.width, job.height);
@@ -696,6 +762,10 @@ void RenderScheduler::runUnit(Work &work) {
                 if (s.levelsShown.size() <= size_t(work.level)) s.levelsShown.resize(size_t(work.level) + 1);
                 s.levelsShown[size_t(work.level)] = true;
             }
+            if (work.final && !work.substitute && options_.restRefinementMs > 0) {
+                s.rest.previous = image;   // what the first pass at rest is compared with
+                s.rest.shown = rgba8FromImage(image).rgba;
+            }
             if (options_.errorCalibration && !work.substitute) {
                 if (work.final) {
                     calibration = s.calibration;
@@ -713,6 +783,89 @@ void RenderScheduler::runUnit(Work &work) {
     deliver(std::move(out));
 }
 
+namespace {
+// RMSE over RGB (premultiplied, clamped to [0, 1], as the frames show it over black) between
+// two images of one size.
+double rgbRmse(const Image &a, const Image &b) {
+    double sum = 0;
+    for (size_t i = 0; i < a.rgba.size(); i += 4)
+        for (size_t c = 0; c < 3; ++c) {
+            const double d = double(clampUnit(a.rgba[i + c])) - double(clampUnit(b.rgba[i + c]));
+            sum += d * d;
+        }
+    return std::sqrt(sum / double(std::max<size_t>(a.rgba.size() / 4 * 3, 1)));
+}
+} // namespace
+
+void RenderScheduler::finishRest(Work &work) {
+    const ViewJob &job = *work.job;
+    TiledFrame &frame = *work.frame;
+    Image image = frame.finish();
+    protocol::ErrorEstimate estimate;
+    int restPass = 0;
+    std::vector<uint8_t> bytes = rgba8FromImage(image).rgba;
+    {
+        std::lock_guard lock(mutex_);
+        auto it = slots_.find(work.slot);
+        if (it == slots_.end()) return;
+        Slot &s = it->second;
+        if (s.generation != work.generation || s.state != SlotState::RestUnderWay) {
+            metrics_.frameDroppedStale();   // a new view took the slot
+            return;
+        }
+        // The midpoint rule is second order: the error of a pass at half the step is a quarter
+        // of the last one's, so the difference of the two is three times the new error
+        // (Richardson). Its RMSE / 3 is the new frame's estimate.
+        estimate.value = rgbRmse(image, s.rest.previous) / 3;
+        estimate.method = "rmse_vs_previous_pass_over_3";
+        restPass = ++s.rest.passes;
+        s.rest.previous = image;
+        s.rest.done = estimate.value <= kRestTargetError || s.rest.spentMs >= options_.restRefinementMs ||
+                      s.rest.passes >= kMaxRestPasses;
+        if (bytes == s.rest.shown) {
+            moveTo(s, SlotEvent::RestUnchanged, SlotState::FinalShown);
+            return;
+        }
+        s.rest.shown = bytes;
+    }
+    RenderedFrame out;
+    const auto t1 = Clock::now();
+    try {
+        out.image = encodePng(image);
+    } catch (const std::exception &e) {
+        spdlog::error("encoding a frame at rest failed: {}", e.what());
+        fail(work, std::string("encoding the frame failed: ") + e.what());
+        return;
+    }
+    protocol::FrameHeader &h = out.header;
+    h.request = job.request;
+    h.level = work.level;
+    h.quality = qualityToJson(frame.quality());
+    if (frame.passes() > 1) h.quality["jitter"] = true;
+    h.width = image.width;
+    h.height = image.height;
+    h.viewWidth = job.width;
+    h.viewHeight = job.height;
+    h.codec = protocol::Codec::Png;
+    h.renderMs = frame.renderMs();
+    h.encodeMs = Ms(Clock::now() - t1).count();
+    h.final = false;   // the final level's frame came before; clients waiting for it are not fooled
+    h.restPass = restPass;
+    h.camera = job.cameraJson;
+    h.error = estimate;
+    Deliver deliver;
+    {
+        std::lock_guard lock(mutex_);
+        auto it = slots_.find(work.slot);
+        if (it == slots_.end()) return;
+        Slot &s = it->second;
+        if (!moveTo(s, SlotEvent::FrameRendered, SlotState::WithSession)) return;
+        s.delivery = {work.frame.get(), work.generation, true};
+        deliver = s.deliver;
+    }
+    deliver(std::move(out));
+}
+
 void RenderScheduler::fail(const Work &work, const std::string &message) {
     Failed failed;
     {
@@ -725,6 +878,12 @@ void RenderScheduler::fail(const Work &work, const std::string &message) {
         const bool underWay = s.underWay && s.underWay->frame == work.frame;
         const bool withSession = s.state == SlotState::WithSession && s.delivery.frame == work.frame.get();
         if (!underWay && !withSession) return;
+        // A pass at rest that fails ends refinement at rest; the final frame stays shown.
+        if (work.kind == Kind::Rest && s.state == SlotState::RestUnderWay) {
+            s.rest.done = true;
+            moveTo(s, SlotEvent::RenderFailed, SlotState::FinalShown);
+            return;
+        }
         // A newer view replaced it: no use telling, its first frame comes next. Else do not
         // retry the same view in a loop.
         const bool current = s.generation == work.generation;

@@ -83,7 +83,20 @@ struct SchedulerOptions {
     double idleMs = 150;             // ms without input before refinement starts
     bool errorCalibration = true;    // measure error estimates (background)
     double unitMs = 40;              // the longest a refinement unit is planned to take
+    // Refinement at rest: after a view's final frame, while the server has nothing else to
+    // render, passes toward the exact integral (the final's step halved per pass), each sent
+    // only when its 8-bit image changes, until its estimated error is ≤ kRestTargetError or
+    // the view has had this much render time at rest. 0: none.
+    double restRefinementMs = 0;
 };
+
+// Refinement at rest stops at this estimated error (RMSE, RGB in [0, 1]): half a grey level.
+inline constexpr double kRestTargetError = 0.5 / 255;
+// and after this many passes (the final's step / 64).
+inline constexpr int kMaxRestPasses = 6;
+// Early termination of a pass at rest: what it leaves out (≤ 1 − this of the colour) stays
+// below a quarter of the target.
+inline constexpr double kRestEarlyTermination = 1 - 0.25 / 255;
 
 // Where a session's slot is in the life of its views. One frame at most is under way or with
 // the session at a time, so these are exclusive.
@@ -94,7 +107,8 @@ enum class SlotState {
     LevelUnderWay,        // a refinement level, a still's or a one-level ladder's final, unit by unit
     WithSession,          // a frame delivered, until the session has written it (frameDone)
     LevelShown,           // a level below the final shown: refinement waits for the idle time
-    FinalShown,           // the view's final frame shown: nothing to do until a new view
+    FinalShown,           // the view's final frame shown: refined at rest while the server is idle
+    RestUnderWay,         // a pass of refinement at rest, unit by unit
     Failed,               // rendering the view failed (told once): nothing until a new view
 };
 // What happens to a slot.
@@ -106,6 +120,8 @@ enum class SlotEvent {
     FrameRendered,     // a frame's last unit is done and encoded: it goes to the session
     RenderFailed,      // rendering, encoding or delivering a frame threw
     FrameWritten,      // frameDone(): the session has written the frame
+    StartRest,         // the worker starts a pass of refinement at rest
+    RestUnchanged,     // a pass at rest changed no 8-bit pixel: nothing is sent
 };
 struct SlotTransition {
     SlotState from;
@@ -173,6 +189,14 @@ class RenderScheduler {
         uint64_t generation = 0;              // of the view it belongs to
         bool final = false;                   // that view's final frame
     };
+    // Refinement at rest of the slot's view (SchedulerOptions::restRefinementMs).
+    struct Rest {
+        int passes = 0;                  // passes rendered at rest
+        double spentMs = 0;              // their render time
+        bool done = false;               // target reached, time or passes used up, or failed
+        Image previous;                  // the float image rendered last (the final's, then each pass's)
+        std::vector<uint8_t> shown;      // the 8-bit RGBA of the frame shown last
+    };
     struct Slot {
         Deliver deliver;
         Failed failed;
@@ -197,8 +221,10 @@ class RenderScheduler {
         uint64_t timerVolumeId = 0;
         std::vector<std::pair<int, std::vector<uint8_t>>> levelImages;   // this generation's JPEGs, for calibration
         std::map<std::string, std::string> announced;   // preparations this slot was told of: key, task
+        Rest rest;                    // of this generation's view
     };
-    enum class Kind { Interactive, Refine };
+    // Interactive frames first, then refinement to the final, then refinement at rest.
+    enum class Kind { Interactive, Refine, Rest };
     struct Work {
         Kind kind = Kind::Interactive;
         SlotId slot = 0;
@@ -220,6 +246,12 @@ class RenderScheduler {
     bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
     // What slot s should do now of this kind; false with wakeAt set when it waits for its idle time.
     bool nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
+    // A pass of refinement at rest for slot s, or its next unit; false when it has none.
+    bool nextRestWork(SlotId id, Slot &s, Work &work);
+    // The cells of the frame under way that the unit renders (into work). Under the lock.
+    void planCells(Slot &s, Work &work);
+    // Finishes a pass at rest: its estimate, and delivery when its 8-bit image changed.
+    void finishRest(Work &work);
     // The quality to render for a level now: the level's if prepared, else a substitute
     // (and the preparation asked for). Under the lock.
     Quality renderable(SlotId id, Slot &s, const Quality &q, bool &substitute);

@@ -61,7 +61,8 @@ SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
                                                        config_.dicomWebCacheBytes);
         registry_->addProvider(dicomWeb_);
     }
-    scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration, config_.defaultTargetFrameMs});
+    scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration, config_.defaultTargetFrameMs,
+                                                                            config_.restRefinementS * 1000});
     slices_ = std::make_unique<SliceService>(config_.maxStillPixels);
 }
 

@@ -216,6 +216,9 @@ TEST(Frame, HeaderFieldsAreChecked) {
     EXPECT_EQ(withField("view_width", 1), "frame header: view_width: must be an integer in [2, 65536], got 1");
     EXPECT_EQ(withField("view_height", 65537), "frame header: view_height: must be an integer in [2, 65536], got 65537");
     EXPECT_EQ(withField("view_width", "wide"), "frame header: view_width: must be an integer in [2, 65536], got a string");
+    EXPECT_EQ(withField("rest_pass", -1), "frame header: rest_pass: must be an integer in [0, 64], got -1");
+    EXPECT_EQ(withField("rest_pass", 65), "frame header: rest_pass: must be an integer in [0, 64], got 65");
+    EXPECT_EQ(withField("rest_pass", 1.5), "frame header: rest_pass: must be an integer in [0, 64], got a fractional number");
     EXPECT_EQ(decodeErrorOf(frameWith(json::array())), "frame header: must be a JSON object, got an array");
 }
 
@@ -239,6 +242,18 @@ TEST(Frame, TheViewsSizeTravelsBesideTheImagesAndDefaultsToIt) {
     const Bytes bytes = encodeFrame(exampleHeader(), kExampleImage);
     const json sent = json::parse(std::string(bytes.begin() + 8, bytes.end() - std::ptrdiff_t(kExampleImage.size())));
     EXPECT_EQ(sent.count("view_width"), 0u) << "a header without a view sends none";
+}
+
+// A pass of refinement at rest says which; other frames send no rest_pass at all.
+TEST(Frame, APassAtRestSaysItsNumberAndOtherFramesSendNone) {
+    FrameHeader h = exampleHeader();
+    h.restPass = 3;
+    EXPECT_EQ(decodeFrame(encodeFrame(h, kExampleImage)).header, h);
+    const Bytes bytes = encodeFrame(exampleHeader(), kExampleImage);
+    const json sent = json::parse(std::string(bytes.begin() + 8, bytes.end() - std::ptrdiff_t(kExampleImage.size())));
+    EXPECT_EQ(sent.count("rest_pass"), 0u);
+    h.restPass = -1;
+    EXPECT_THROW(encodeFrame(h, kExampleImage), std::invalid_argument);
 }
 
 TEST(Frame, EncoderRefusesHeadersThatCouldNotBeDecoded) {

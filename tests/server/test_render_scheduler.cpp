@@ -5,6 +5,7 @@
 // frame, preparation in the background, a fair share between dragging sessions, and the
 // slot's state table (every transition reachable, none other taken).
 
+#include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/model/synthetic.hpp"
 #include "server/frame_encoder.hpp"
@@ -738,6 +739,11 @@ class GateRenderer : public SlowRenderer {
     std::deque<bool> tickets_;
 };
 
+// The rows of refinement at rest (taken only with SchedulerOptions::restRefinementMs > 0).
+bool restRow(const SlotTransition &t) {
+    return t.from == SlotState::RestUnderWay || t.to == SlotState::RestUnderWay;
+}
+
 bool waitForState(const RenderScheduler &scheduler, RenderScheduler::SlotId slot, SlotState state) {
     for (const auto until = Clock::now() + std::chrono::seconds(10); Clock::now() < until;) {
         if (scheduler.slotState(slot) == state) return true;
@@ -918,9 +924,157 @@ TEST(RenderSchedulerSlot, EveryTransitionInTheTableIsReachable) {
     const auto counts = scheduler.transitionCounts();
     const auto table = slotTransitions();
     ASSERT_EQ(counts.size(), table.size());
-    for (size_t i = 0; i < table.size(); ++i)
+    for (size_t i = 0; i < table.size(); ++i) {
+        if (restRow(table[i])) continue;   // taken by the RenderSchedulerRest tests, with refinement at rest on
         EXPECT_GT(counts[i], 0u) << "never taken: " << toString(table[i].from) << " --" << toString(table[i].event)
                                  << "--> " << toString(table[i].to);
+    }
+    EXPECT_EQ(scheduler.refusedTransitions(), 0u);
+}
+
+// ---- Refinement at rest --------------------------------------------------------------------
+
+// Expects each of the table's rows (from, event, to) to have been taken.
+void expectTaken(const RenderScheduler &scheduler, std::initializer_list<std::tuple<SlotState, SlotEvent, SlotState>> rows) {
+    const auto counts = scheduler.transitionCounts();
+    for (const auto &[from, event, to] : rows) {
+        const int row = slotTransitionRow(from, event, to);
+        ASSERT_GE(row, 0) << "not in the table: " << toString(from) << " --" << toString(event) << "--> " << toString(to);
+        EXPECT_GT(counts[size_t(row)], 0u) << "never taken: " << toString(from) << " --" << toString(event) << "--> "
+                                           << toString(to);
+    }
+}
+
+// A still whose final level has a coarse step, on the real CPU renderer: passes at rest
+// follow the final frame, each at half the last one's step, each sent with an estimate, the
+// estimates falling, until one is at most half a grey level (or the passes run out).
+TEST(RenderSchedulerRest, RefinesTheFinalFrameUntilHalfAGreyLevel) {
+    Metrics metrics;
+    SchedulerOptions o = options(40);
+    o.restRefinementMs = 20000;
+    RenderScheduler scheduler(metrics, o);
+    Session s(scheduler, std::make_shared<CpuRenderer>(smallVolume()), 1);
+    auto job = s.view(1, 0.4, 48, ladderFor(2));
+    job->stillOnly = true;
+    scheduler.submit(s.slot, job);
+    const auto done = [&](const protocol::FrameHeader &h) {
+        return h.restPass > 0 && (h.error->value <= kRestTargetError || h.restPass == kMaxRestPasses);
+    };
+    ASSERT_TRUE(s.waitFor(0, done, 20000)) << "no pass at rest reached the target";
+    ASSERT_TRUE(waitForState(scheduler, s.slot, SlotState::FinalShown));
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));   // nothing more comes
+    std::lock_guard lock(s.mutex);
+    ASSERT_GE(s.frames.size(), 2u);
+    EXPECT_TRUE(s.frames[0].header.final);
+    EXPECT_EQ(s.frames[0].header.restPass, 0);
+    double previous = 1;
+    int pass = 0;
+    for (size_t i = 1; i < s.frames.size(); ++i) {
+        const protocol::FrameHeader &h = s.frames[i].header;
+        EXPECT_FALSE(h.final) << "a pass at rest is not the final level's frame";
+        EXPECT_GT(h.restPass, pass) << "passes come in order (unchanged ones are not sent)";
+        pass = h.restPass;
+        EXPECT_EQ(h.quality["step"].get<double>(), std::ldexp(2.0, -h.restPass));
+        ASSERT_TRUE(h.error.has_value());
+        EXPECT_EQ(h.error->method, "rmse_vs_previous_pass_over_3");
+        // Second order: each halving divides the error by about 4; allow rounding to 8 bits
+        // and the blob's few voxels to make one step fall less, never rise.
+        EXPECT_LT(h.error->value, previous) << "pass " << h.restPass;
+        previous = h.error->value;
+    }
+    EXPECT_TRUE(done(s.frames.back().header));
+    expectTaken(scheduler, {{SlotState::FinalShown, SlotEvent::StartRest, SlotState::RestUnderWay},
+                            {SlotState::RestUnderWay, SlotEvent::FrameRendered, SlotState::WithSession}});
+}
+
+// Input cancels a pass at rest at the end of its unit: the new view's frames come, the old
+// pass is never sent.
+TEST(RenderSchedulerRest, NewInputCancelsItAndItsFrameIsNeverSent) {
+    Metrics metrics;
+    SchedulerOptions o = options(5);   // short units: the passes take many
+    o.restRefinementMs = 60000;
+    RenderScheduler scheduler(metrics, o);
+    Session s(scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), 1);
+    for (const bool still : {false, true}) {
+        const size_t from = s.count();
+        auto job = s.view(still ? 3 : 2, still ? 0.9 : 0.5, 64, ladderFor(1));
+        job->stillOnly = true;
+        scheduler.submit(s.slot, job);
+        ASSERT_TRUE(s.waitFor(from, [](const protocol::FrameHeader &h) { return h.final; }, 10000));
+        ASSERT_TRUE(waitForState(scheduler, s.slot, SlotState::RestUnderWay)) << "no pass at rest started";
+        auto next = s.view(10 + int(still), 1.3, 64, ladderFor(1));
+        next->stillOnly = still;
+        scheduler.submit(s.slot, next);   // RestUnderWay --NewView / NewStill--> ViewWaiting
+        ASSERT_TRUE(s.waitFor(from, [&](const protocol::FrameHeader &h) { return h.request == next->request && h.final; },
+                              10000));
+        std::lock_guard lock(s.mutex);
+        for (size_t i = from; i < s.frames.size(); ++i)
+            EXPECT_EQ(s.frames[i].header.restPass, 0) << "a pass at rest of a view already left was sent";
+    }
+    expectTaken(scheduler, {{SlotState::RestUnderWay, SlotEvent::NewView, SlotState::ViewWaiting},
+                            {SlotState::RestUnderWay, SlotEvent::NewStill, SlotState::ViewWaiting}});
+}
+
+// A pass that changes no 8-bit pixel is not sent (the reference renderer draws the same
+// image at any step); a pass that fails ends refinement at rest, and the final frame stays.
+TEST(RenderSchedulerRest, AnUnchangedPassIsNotSentAndAFailedOneEndsIt) {
+    Metrics metrics;
+    SchedulerOptions o = options(20);
+    o.restRefinementMs = 60000;
+    RenderScheduler scheduler(metrics, o);
+    auto gate = std::make_shared<GateRenderer>(smallVolume());
+    struct OpenAtEnd {
+        RenderScheduler &scheduler;
+        GateRenderer &gate;
+        ~OpenAtEnd() {
+            gate.setOpen(true);
+            scheduler.stop();
+        }
+    } openAtEnd{scheduler, *gate};
+    std::atomic<int> frames{0}, failures{0};
+    std::atomic<RenderScheduler::SlotId> slot{0};
+    const auto x = scheduler.addSession(
+        [&](RenderedFrame) {
+            ++frames;
+            scheduler.frameDone(slot.load());
+        },
+        [&](const std::string &, const nlohmann::json &) { ++failures; });
+    slot = x;
+    int arrivals = 0;
+    const auto held = [&] { return gate->waitArrival(++arrivals); };
+    const auto still = [&](int id) {
+        auto job = std::make_shared<ViewJob>();
+        job->renderer = gate;
+        job->volumeId = 1;
+        job->volumeName = "blob";
+        job->transferFunction = rampTf();
+        job->camera = orbitCamera(0.1 * id);
+        job->width = job->height = 16;
+        job->ladder = ladderFor(1);
+        job->request = id;
+        job->stillOnly = true;
+        return job;
+    };
+    scheduler.submit(x, still(1));
+    ASSERT_TRUE(held());
+    gate->release();                                   // the final frame
+    ASSERT_TRUE(held());                               // FinalShown --StartRest--> RestUnderWay
+    gate->release();                                   // the same image: RestUnchanged, and done (estimate 0)
+    ASSERT_TRUE(waitForState(scheduler, x, SlotState::FinalShown));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    EXPECT_EQ(frames.load(), 1) << "an unchanged pass was sent, or passes went on after an estimate of 0";
+    scheduler.submit(x, still(2));
+    ASSERT_TRUE(held());
+    gate->release();
+    ASSERT_TRUE(held());                               // a pass at rest
+    gate->release(true);                               // RestUnderWay --RenderFailed--> FinalShown
+    ASSERT_TRUE(waitForState(scheduler, x, SlotState::FinalShown));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    EXPECT_EQ(frames.load(), 2);
+    EXPECT_EQ(failures.load(), 0) << "a failed pass at rest is not the session's failure";
+    EXPECT_EQ(scheduler.slotState(x), SlotState::FinalShown) << "no further pass after a failed one";
+    expectTaken(scheduler, {{SlotState::RestUnderWay, SlotEvent::RestUnchanged, SlotState::FinalShown},
+                            {SlotState::RestUnderWay, SlotEvent::RenderFailed, SlotState::FinalShown}});
     EXPECT_EQ(scheduler.refusedTransitions(), 0u);
 }
 

@@ -118,7 +118,8 @@ TEST_F(VolumeRegistryTest, ASixteenBitVolumeCountsEveryByteItsRendererBuilds) {
     const uint64_t openedBytes = cpu->memoryBytes();
     EXPECT_EQ(openedBytes, 0) << "level 0 is sampled in place: opening copies nothing";
 
-    // Every mip level, trilinear and cubic, with skipping: everything the renderer can build.
+    // Every mip level, trilinear and cubic, with skipping and the adaptive step: everything
+    // the renderer can build.
     volcast::TransferFunction tf;
     tf.points = {{-1000, 0, 0, 0, 0}, {0, 0, 0, 0, 0}, {2000, 1, 1, 1, 0.5}};
     volcast::Camera camera;
@@ -132,6 +133,7 @@ TEST_F(VolumeRegistryTest, ASixteenBitVolumeCountsEveryByteItsRendererBuilds) {
             q.mipLevel = level;
             q.interpolation = interpolation;
             q.emptySpaceSkipping = true;
+            q.adaptiveStep = true;
             entry->renderer->render({tf, camera, 16, 16, q, {}});
         }
     const uint64_t held = voxelBytes + cpu->memoryBytes();

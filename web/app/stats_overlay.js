@@ -37,7 +37,7 @@ export class StatsOverlay {
       const d = describeFrame(h);
       const level = this.$("stat-level");
       level.textContent = level.title = d.level;
-      level.classList.toggle("final", h.final);
+      level.classList.toggle("final", h.final || h.rest_pass > 0);
       this.$("stat-render").textContent = fmtMs(h.render_ms);
       this.$("stat-encode").textContent = fmtMs(h.encode_ms);
       const e = h.error;

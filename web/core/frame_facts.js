@@ -38,7 +38,9 @@ export function describeFrame(header) {
   const image = rw === vw && rh === vh ? `${rw}×${rh}`
     : rw === sw && rh === sh ? `${rw}×${rh} (${fmtScale(f.scale)} scale of ${vw}×${vh})`
       : `${rw}×${rh} (${fmtScale(f.scale)} scale, sent as ${sw}×${sh})`;
-  const parts = [`${f.level}${f.final ? " · final" : ""}`];
+  // A pass at rest comes after the final frame, toward the exact integral.
+  const rest = Number.isInteger(header.rest_pass) && header.rest_pass > 0 ? ` · at rest, pass ${header.rest_pass}` : "";
+  const parts = [`${f.level}${f.final ? " · final" : ""}${rest}`];
   if (f.mip !== null && f.mip > 0) parts.push(`mip ${f.mip}`);
   if (f.step !== null) parts.push(`step ${Number(f.step.toPrecision(3))}`);
   return { image, level: `${parts.join(" · ")} (${f.codec})` };

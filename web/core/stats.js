@@ -50,7 +50,9 @@ export class FrameStats {
       this.series = { request: header.request, startMs: start, points: [] };
     }
     if (header.error) {
-      this.series.points.push({ tMs: at - this.series.startMs, value: header.error.value, level: header.level, final: header.final });
+      // Passes at rest continue the view's series past its final frame (shown as final ones).
+      const final = header.final || header.rest_pass > 0;
+      this.series.points.push({ tMs: at - this.series.startMs, value: header.error.value, level: header.level, final });
       if (this.series.points.length > MAX_SERIES_POINTS) this.series.points.shift();
     }
     return latency;

@@ -85,6 +85,11 @@ class Frame:
         return self.header["final"]
 
     @property
+    def rest_pass(self) -> int:
+        """n >= 1 for the n-th pass of refinement at rest after the final frame; 0 otherwise."""
+        return self.header.get("rest_pass", 0)
+
+    @property
     def render_ms(self) -> float:
         return self.header["render_ms"]
 
@@ -211,6 +216,8 @@ def decode_frame(data: Union[bytes, bytearray, memoryview]) -> Frame:
     _require(header, "render_ms", (int, float), "a number")
     _require(header, "encode_ms", (int, float), "a number")
     _require(header, "final", (bool,), "true or false")
+    if "rest_pass" in header and not 0 <= _require(header, "rest_pass", (int,), "an integer") <= 64:
+        raise FrameError(f"frame header: rest_pass: must be an integer in [0, 64], got {header['rest_pass']}")
     image_bytes = _require(header, "image_bytes", (int,), "a non-negative integer")
     if image_bytes < 0:
         raise FrameError(f"frame header: image_bytes: must be a non-negative integer, got {image_bytes}")

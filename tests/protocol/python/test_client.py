@@ -104,6 +104,12 @@ class FrameTests(unittest.TestCase):
             vc.decode_frame(frame_with(dict(good, width=0)))
         with self.assertRaisesRegex(vc.FrameError, "seq: must be at least 0, got -1"):
             vc.decode_frame(frame_with(dict(good, seq=-1)))
+        # A pass of refinement at rest says its number; other frames have none (0).
+        self.assertEqual(vc.decode_frame(frame_with(dict(good, rest_pass=2))).rest_pass, 2)
+        self.assertEqual(vc.decode_frame(frame_with(good)).rest_pass, 0)
+        for bad in (-1, 65, 1.5, True):
+            with self.assertRaisesRegex(vc.FrameError, "rest_pass: must be an integer"):
+                vc.decode_frame(frame_with(dict(good, rest_pass=bad)))
 
 
 class MessageTests(unittest.TestCase):

@@ -18,6 +18,12 @@ test("an older server's frame, scaled up on the server, says it was rendered at 
   assert.equal(d.level, "0 · mip 1 · step 2 (jpeg)");
 });
 
+test("a pass at rest says so beside its level and step", () => {
+  const h = header({ step: 0.125 }, { codec: "png", level: 5, rest_pass: 2 });
+  assert.equal(describeFrame(h).level, "5 · at rest, pass 2 · step 0.125 (png)");
+  assert.equal(describeFrame(header({ step: 0.5 }, { codec: "png", level: 5, final: true })).level, "5 · final · step 0.5 (png)");
+});
+
 test("a frame sent at its ray grid's size says the view it fills", () => {
   const h = header({ step: 2, mip_level: 1, image_scale: 0.25 }, { width: 238, height: 189, view_width: 950, view_height: 755 });
   const f = frameFacts(h);

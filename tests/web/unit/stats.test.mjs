@@ -44,4 +44,9 @@ test("the error series follows one view's refinement and restarts with the next"
   assert.deepEqual(s.series.points.map((p) => p.tMs), [100], "time counts from interaction_end");
   s.noteFrame(frame(6, 2, 2, 0.001, true), 2900);
   assert.deepEqual(s.series.points.map((p) => p.tMs), [100, 400]);
+  // Passes at rest after the final frame: the same view's series goes on converging.
+  s.noteFrame({ ...frame(7, 2, 2, 0.0004), rest_pass: 1 }, 3500);
+  s.noteFrame({ ...frame(8, 2, 2, 0.0001), rest_pass: 2 }, 4500);
+  assert.deepEqual(s.series.points.map((p) => [p.tMs, p.value, p.final]),
+    [[100, 0.01, false], [400, 0.001, true], [1000, 0.0004, true], [2000, 0.0001, true]]);
 });
