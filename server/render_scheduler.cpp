@@ -571,6 +571,17 @@ bool RenderScheduler::nextRestWork(SlotId id, Slot &s, Work &work) {
     return true;
 }
 
+bool RenderScheduler::anyoneActive(Clock::time_point now, Clock::time_point &wakeAt) const {
+    const auto idle = std::chrono::duration_cast<Clock::duration>(Ms(options_.idleMs));
+    bool active = draggingCount() > 0;
+    for (const auto &[id, s] : slots_)
+        if (s.job && now < s.lastInput + idle) {
+            active = true;
+            wakeAt = std::min(wakeAt, s.lastInput + idle);
+        }
+    return active;
+}
+
 size_t RenderScheduler::sessionsDragging() const { return std::max<size_t>(draggingCount(), 1); }
 
 size_t RenderScheduler::draggingCount() const {
@@ -629,9 +640,9 @@ void RenderScheduler::workerLoop() {
         Work work;
         auto wakeAt = Clock::time_point::max();
         // Every session's interactive frame before anyone's refinement, and refinement at rest
-        // only when there is nothing else.
+        // only when there is nothing else and no session has had input within the idle time.
         const bool found = pickWork(Kind::Interactive, now, work, wakeAt) || pickWork(Kind::Refine, now, work, wakeAt) ||
-                           pickWork(Kind::Rest, now, work, wakeAt);
+                           (!anyoneActive(now, wakeAt) && pickWork(Kind::Rest, now, work, wakeAt));
         if (found) {
             lastServed_ = work.slot;
             rendering_ = work.job->renderer.get();

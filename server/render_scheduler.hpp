@@ -243,6 +243,9 @@ class RenderScheduler {
     double leastInteractiveFrames() const;
     size_t draggingCount() const;      // sessions interacting or awaiting an interactive frame; under the lock
     size_t sessionsDragging() const;   // the same, at least 1
+    // Some session dragging or with input within the idle time (then wakeAt is when that
+    // time ends): refinement at rest waits. Under the lock.
+    bool anyoneActive(Clock::time_point now, Clock::time_point &wakeAt) const;
     bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
     // What slot s should do now of this kind; false with wakeAt set when it waits for its idle time.
     bool nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
