@@ -671,6 +671,39 @@ void RenderScheduler::workerLoop() {
     }
 }
 
+namespace {
+// What every frame of a view's tiled frame says of itself.
+protocol::FrameHeader headerOf(const ViewJob &job, int level, const TiledFrame &frame, int width, int height,
+                               protocol::Codec codec, double encodeMs) {
+    protocol::FrameHeader h;
+    h.request = job.request;
+    h.level = level;
+    h.quality = qualityToJson(frame.quality());
+    if (frame.passes() > 1) h.quality["jitter"] = true;
+    h.width = width;
+    h.height = height;
+    h.viewWidth = job.width;
+    h.viewHeight = job.height;
+    h.codec = codec;
+    h.renderMs = frame.renderMs();
+    h.encodeMs = encodeMs;
+    h.camera = job.cameraJson;
+    return h;
+}
+
+// RMSE over RGB (premultiplied, clamped to [0, 1], as the frames show it over black) between
+// two images of one size.
+double rgbRmse(const Image &a, const Image &b) {
+    double sum = 0;
+    for (size_t i = 0; i < a.rgba.size(); i += 4)
+        for (size_t c = 0; c < 3; ++c) {
+            const double d = double(clampUnit(a.rgba[i + c])) - double(clampUnit(b.rgba[i + c]));
+            sum += d * d;
+        }
+    return std::sqrt(sum / double(std::max<size_t>(a.rgba.size() / 4 * 3, 1)));
+}
+} // namespace
+
 void RenderScheduler::runUnit(Work &work) {
     const ViewJob &job = *work.job;
     TiledFrame &frame = *work.frame;
@@ -732,20 +765,11 @@ void RenderScheduler::runUnit(Work &work) {
         fail(work, std::string("encoding the frame failed: ") + e.what());
         return;
     }
+    out.header = headerOf(job, work.level, frame, frame.rgba8() ? bytes.width : image.width,
+                          frame.rgba8() ? bytes.height : image.height,
+                          work.final ? protocol::Codec::Png : protocol::Codec::Jpeg, Ms(Clock::now() - t1).count());
     protocol::FrameHeader &h = out.header;
-    h.request = job.request;
-    h.level = work.level;
-    h.quality = qualityToJson(frame.quality());
-    if (frame.passes() > 1) h.quality["jitter"] = true;
-    h.width = frame.rgba8() ? bytes.width : image.width;
-    h.height = frame.rgba8() ? bytes.height : image.height;
-    h.viewWidth = job.width;
-    h.viewHeight = job.height;
-    h.codec = work.final ? protocol::Codec::Png : protocol::Codec::Jpeg;
-    h.renderMs = frame.renderMs();
-    h.encodeMs = Ms(Clock::now() - t1).count();
     h.final = work.final;
-    h.camera = job.cameraJson;
     h.limited = level.limited;
 
     Deliver deliver;
@@ -794,19 +818,6 @@ void RenderScheduler::runUnit(Work &work) {
     deliver(std::move(out));
 }
 
-namespace {
-// RMSE over RGB (premultiplied, clamped to [0, 1], as the frames show it over black) between
-// two images of one size.
-double rgbRmse(const Image &a, const Image &b) {
-    double sum = 0;
-    for (size_t i = 0; i < a.rgba.size(); i += 4)
-        for (size_t c = 0; c < 3; ++c) {
-            const double d = double(clampUnit(a.rgba[i + c])) - double(clampUnit(b.rgba[i + c]));
-            sum += d * d;
-        }
-    return std::sqrt(sum / double(std::max<size_t>(a.rgba.size() / 4 * 3, 1)));
-}
-} // namespace
 
 void RenderScheduler::finishRest(Work &work) {
     const ViewJob &job = *work.job;
@@ -848,21 +859,11 @@ void RenderScheduler::finishRest(Work &work) {
         fail(work, std::string("encoding the frame failed: ") + e.what());
         return;
     }
+    out.header = headerOf(job, work.level, frame, image.width, image.height, protocol::Codec::Png,
+                          Ms(Clock::now() - t1).count());
     protocol::FrameHeader &h = out.header;
-    h.request = job.request;
-    h.level = work.level;
-    h.quality = qualityToJson(frame.quality());
-    if (frame.passes() > 1) h.quality["jitter"] = true;
-    h.width = image.width;
-    h.height = image.height;
-    h.viewWidth = job.width;
-    h.viewHeight = job.height;
-    h.codec = protocol::Codec::Png;
-    h.renderMs = frame.renderMs();
-    h.encodeMs = Ms(Clock::now() - t1).count();
     h.final = false;   // the final level's frame came before; clients waiting for it are not fooled
     h.restPass = restPass;
-    h.camera = job.cameraJson;
     h.error = estimate;
     Deliver deliver;
     {

@@ -8,6 +8,8 @@
 #include "renderer/model/synthetic.hpp"
 #include "renderer/reference/reconstruction.hpp"
 
+#include "test_scenes.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -19,17 +21,7 @@
 namespace volcast {
 namespace {
 
-Volume noiseVolume(Vec3i dims, unsigned seed) {
-    Volume v;
-    v.name = "noise";
-    v.dims = dims;
-    v.voxels.resize(v.voxelCount());
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<float> u(-100, 100);
-    for (float &x : v.voxels) x = u(rng);
-    computeStatistics(v);
-    return v;
-}
+using test::noiseVolume;
 
 // Largest amount by which |∂f/∂axis| (central differences in double) passes the brick's bound,
 // over random points in every brick's box.

@@ -2,6 +2,8 @@
 #include "renderer/reference/reconstruction.hpp"
 #include "renderer/model/synthetic.hpp"
 
+#include "test_scenes.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -15,17 +17,7 @@
 namespace volcast {
 namespace {
 
-Volume noiseVolume(Vec3i dims, unsigned seed) {
-    Volume v;
-    v.name = "noise";
-    v.dims = dims;
-    v.voxels.resize(v.voxelCount());
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<float> u(-100, 100);
-    for (float &x : v.voxels) x = u(rng);
-    computeStatistics(v);
-    return v;
-}
+using test::noiseVolume;
 
 // The volumes the bound is checked on: dims not multiples of 8 or 4, axes of 1, 2 and 3
 // samples, smooth fields and white noise (the worst case for the cubic's over- and undershoot).

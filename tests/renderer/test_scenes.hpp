@@ -7,6 +7,8 @@
 #include "renderer/model/transfer_function.hpp"
 #include "renderer/model/volume.hpp"
 
+#include <random>
+
 namespace volcast::test {
 
 // Every quality switch off but the partial boundary segment, at `step`: a test turns on
@@ -45,6 +47,19 @@ inline TransferFunction blobTf() {
     tf.points = {{0, 0, 0, 0, 0}, {40, 0, 0, 0, 0}, {90, 1, 0.4, 0.1, 0.15}, {150, 0.3, 0.7, 1, 0.4},
                  {220, 1, 1, 1, 0.7}};
     return tf;
+}
+
+// White noise in [−100, 100]: the worst case for bounds on a reconstruction's values and slopes.
+inline Volume noiseVolume(Vec3i dims, unsigned seed) {
+    Volume v;
+    v.name = "noise";
+    v.dims = dims;
+    v.voxels.resize(v.voxelCount());
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(-100, 100);
+    for (float &x : v.voxels) x = u(rng);
+    computeStatistics(v);
+    return v;
 }
 
 inline const SyntheticVolume &blob() {
