@@ -72,12 +72,15 @@ export function freePort() {
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 // Start volcast-server on `port` (0: a free one) and wait until /readyz answers 200.
-// extraArgs: more command-line arguments (another --data folder).
+// extraArgs: more command-line arguments (another --data folder). The suites check the final
+// frame as the page shows it, so refinement at rest, whose passes would follow it, is off
+// unless a test asks for it (restRefinement: true).
 let serverRuns = 0;
-export async function startServer(port = 0, { extraArgs = [] } = {}) {
+export async function startServer(port = 0, { extraArgs = [], restRefinement = false } = {}) {
   const dir = mkdtempSync(path.join(os.tmpdir(), "volcast-web-test-"));
   const portFile = path.join(dir, "port");
   const args = ["--port", String(port), "--port-file", portFile, "--web-root", path.join(REPO, "web"), "--log-level", process.env.VOLCAST_LOG_LEVEL || "info"];
+  if (!restRefinement) args.push("--rest-refinement-s", "0");
   if (DATA_DIR && existsSync(DATA_DIR)) args.push("--data", DATA_DIR);
   args.push(...extraArgs);
   const log = createWriteStream(artifact(`${SUITE}-server-${++serverRuns}.log`));
