@@ -772,6 +772,14 @@ void RenderScheduler::runUnit(Work &work) {
     h.final = work.final;
     h.limited = level.limited;
 
+    // The final frame's image and bytes, which refinement at rest starts from: copied and
+    // converted here, not under the lock.
+    std::optional<Image> restBase;
+    std::vector<uint8_t> restShown;
+    if (work.final && !work.substitute && options_.restRefinementMs > 0) {
+        restBase = image;
+        restShown = rgba8FromImage(image).rgba;
+    }
     Deliver deliver;
     std::shared_ptr<const CalibrationView> calibration;
     std::vector<std::pair<int, std::vector<uint8_t>>> levelImages;
@@ -797,9 +805,9 @@ void RenderScheduler::runUnit(Work &work) {
                 if (s.levelsShown.size() <= size_t(work.level)) s.levelsShown.resize(size_t(work.level) + 1);
                 s.levelsShown[size_t(work.level)] = true;
             }
-            if (work.final && !work.substitute && options_.restRefinementMs > 0) {
-                s.rest.previous = image;   // what the first pass at rest is compared with
-                s.rest.shown = rgba8FromImage(image).rgba;
+            if (restBase) {
+                s.rest.previous = std::move(*restBase);   // what the first pass at rest is compared with
+                s.rest.shown = std::move(restShown);
             }
             if (options_.errorCalibration && !work.substitute) {
                 if (work.final) {

@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
-"""Refinement at rest on a real server: one session opens a scan at a viewport, rests, and
+"""Refinement at rest on a real server: one client opens a scan at a viewport, rests, and
 records every frame of the view: the final frame, then each pass at rest (rest_pass) with
 its estimated error and when it came, until the server stops sending (its target of half a
-grey level, or --rest-refinement-s). With --drag, a second session drags meanwhile, and
-its motion-to-frame latency is printed for the time before the rest began and during it:
-refinement at rest must not delay it.
+grey level, or --rest-refinement-s). With --drag, a second client drags meanwhile, and
+its motion-to-frame latency is printed for the --window-s after the resting view's final
+frame and for the time after that: refinement at rest must not delay it (compare with
+--rest-s 0).
 
     python3 tests/bench/rest_refinement.py [--server build/server/volcast-server]
         [--volume bonsai.nhdr] [--size 512] [--quiet-s 20] [--drag]
@@ -39,7 +40,7 @@ def rgb_rmse(a, b) -> float:
     return float(numpy.sqrt(numpy.mean(d * d)))
 
 
-async def rest_session(url: str, volume: str, size: int, quiet_s: float, check_step: float) -> list:
+async def resting_client(url: str, volume: str, size: int, quiet_s: float, check_step: float) -> list:
     rows = []
     images = []
     async with await vc.Client.connect(url) as c:
@@ -80,7 +81,7 @@ async def rest_session(url: str, volume: str, size: int, quiet_s: float, check_s
     return rows
 
 
-async def drag_session(url: str, volume: str, stop: asyncio.Event, latencies: list) -> None:
+async def dragging_client(url: str, volume: str, stop: asyncio.Event, latencies: list) -> None:
     async with await vc.Client.connect(url) as c:
         await c.open_volume(volume)
         await c.send(vc.viewport(512, 512))
@@ -100,16 +101,15 @@ async def drag_session(url: str, volume: str, stop: asyncio.Event, latencies: li
             await asyncio.sleep(0.02)
 
 
-async def run(args) -> int:  # noqa: C901
+async def run(args) -> int:
     server = serverproc.Server(args.server, ["--data", args.data, "--rest-refinement-s", str(args.rest_s)])
     try:
         url = f"ws://{server.host}:{server.port}/ws"
         stop, latencies = asyncio.Event(), []
-        drag = asyncio.create_task(drag_session(url, args.volume, stop, latencies)) if args.drag else None
+        drag = asyncio.create_task(dragging_client(url, args.volume, stop, latencies)) if args.drag else None
         if drag:
             await asyncio.sleep(5)   # the drag's own frames before the rest begins
-        rest_start = time.monotonic()
-        rows = await rest_session(url, args.volume, args.size, args.quiet_s, args.check_step)
+        rows = await resting_client(url, args.volume, args.size, args.quiet_s, args.check_step)
         stop.set()
         if drag:
             await drag
@@ -150,7 +150,7 @@ def main() -> int:
     p.add_argument("--size", type=int, default=512)
     p.add_argument("--rest-s", type=float, default=10, help="the server's --rest-refinement-s")
     p.add_argument("--quiet-s", type=float, default=20, help="seconds without a frame that end the record")
-    p.add_argument("--drag", action="store_true", help="a second session drags meanwhile")
+    p.add_argument("--drag", action="store_true", help="a second client drags meanwhile")
     p.add_argument("--window-s", type=float, default=2, help="--drag: the window after the final frame")
     p.add_argument("--check-step", type=float, default=0.0625,
                    help="after the rest, render the view at this step without early termination and measure "
