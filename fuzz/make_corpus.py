@@ -75,6 +75,10 @@ def frames():
     # than its image (refused).
     write("fuzz_frame", "scaled_view.bin", frame(dict(base, width=2, height=1, view_width=4, view_height=2), image))
     write("fuzz_frame", "view_smaller_than_image.bin", frame(dict(base, view_width=3, view_height=2), image))
+    # A pass of refinement at rest after the final frame; a pass number past the limit (refused).
+    write("fuzz_frame", "rest_pass.bin", frame(dict(base, codec="png", rest_pass=2,
+                                                    error={"value": 5.6e-4, "method": "rmse_vs_previous_pass_over_3"}), image))
+    write("fuzz_frame", "rest_pass_too_large.bin", frame(dict(base, rest_pass=65), image))
 
 
 def volume_names():
