@@ -3,12 +3,13 @@
 slowloris alongside; prints one table.
 
 Each session opens a scan, then repeats: interaction_start, camera messages every 40–50 ms
-for 1–2 s, interaction_end, rest 1–2 s. The slow client opens a session, asks for frames and
+for 1–2 s, interaction_end, rest 1–2 s (`--rest`). The slow client opens a session, asks for frames and
 replies, and never reads; the slowloris trickles an HTTP upgrade request one byte at a time.
 Neither may hurt the others: their figures are the table's.
 
     /usr/bin/python3 tests/soak/load.py                      # 32 sessions × 60 s
     /usr/bin/python3 tests/soak/load.py --sessions 4 --duration 10 --volume builtin:demo
+    /usr/bin/python3 tests/soak/load.py --no-slow-clients --rest 3,4   # final frames within 3 s of a rest?
 
 Exit status 0 only if no well-behaved session got an error and the server survived and
 exited 0 on SIGTERM.
@@ -135,7 +136,7 @@ async def load(args) -> int:
         stop_at = start + args.duration
         rng = random.Random(args.seed)
         sessions = [DragSession(f"s{i + 1:02d}", host, port, volumes[i % len(volumes)],
-                                random.Random(rng.getrandbits(32)), drag_s=(1.0, 2.0), rest_s=(1.0, 2.0),
+                                random.Random(rng.getrandbits(32)), drag_s=(1.0, 2.0), rest_s=args.rest,
                                 camera_ms=(40.0, 50.0), wait_final=False, viewport=(512, 512))
                     for i in range(args.sessions)]
         tasks = [asyncio.create_task(s.run(stop_at)) for s in sessions]
@@ -181,6 +182,24 @@ async def load(args) -> int:
               f"max {p50s[-1]:.0f} ms")
     print(f"reached a final frame    {reached} of {len(results)} sessions "
           f"({sum(st.final_frames for st in results)} final frames in all)")
+    # A rest shorter than the bound that ended without its final frame says nothing about the bound.
+    judged = [(t, n, f) for st in results for t, n, f in st.rests if f is not None or n >= args.final_within]
+    late = sorted((t - start, f) for t, _, f in judged if f is None or f > args.final_within)
+    waits = [f for _, _, f in judged if f is not None]
+    every = sum(1 for st in results
+                if all(f is not None and f <= args.final_within for _, n, f in st.rests
+                       if f is not None or n >= args.final_within))
+    print(f"final within {args.final_within:g} s of rest {len(judged) - len(late)} of {len(judged)} rests; "
+          f"{every} of {len(results)} sessions every time" +
+          (f"; rest to final p50 {serverproc.percentile(waits, 50) * 1000:.0f} ms, "
+           f"p95 {serverproc.percentile(waits, 95) * 1000:.0f} ms, max {max(waits) * 1000:.0f} ms" if waits else ""))
+    if late:
+        print("late rests (s into the run: s to the final frame, - for none) " +
+              ", ".join(f"{t:.1f}: {'-' if f is None else f'{f:.1f}'}" for t, f in late))
+    dragging_s = sum(st.render_ms_dragging for st in results) / 1000.0
+    resting_s = sum(st.render_ms_resting for st in results) / 1000.0
+    print(f"render time of the frames shown: {dragging_s:.1f} s while dragging, {resting_s:.1f} s while resting, "
+          f"in {elapsed:.1f} s")
     print(f"errors                   {errors}")
     if server:
         print(f"server RSS               ready {rss_ready / 1024:.1f} MiB, after warm-up (start) "
@@ -212,6 +231,14 @@ async def load(args) -> int:
     return 0
 
 
+def seconds_range(text: str) -> tuple:
+    low, _, high = text.partition(",")
+    low, high = float(low), float(high or low)
+    if not 0 <= low <= high:
+        raise argparse.ArgumentTypeError(f"{text!r}: want MIN,MAX seconds with 0 <= MIN <= MAX")
+    return low, high
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--server", default=serverproc.DEFAULT_SERVER)
@@ -223,6 +250,11 @@ def main() -> int:
     p.add_argument("--sessions", type=int, default=32)
     p.add_argument("--duration", type=float, default=60.0)
     p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--rest", type=seconds_range, default=(1.0, 2.0), metavar="MIN,MAX",
+                   help="seconds each rest lasts, drawn between MIN and MAX (default 1,2)")
+    p.add_argument("--final-within", type=float, default=3.0, metavar="S",
+                   help="the bound a rest's final frame is judged by: rests at least this long, or "
+                        "whose final frame came, count (default 3)")
     p.add_argument("--no-slow-clients", dest="slow_clients", action="store_false",
                    help="leave out the slow client and the slowloris")
     p.add_argument("--slowloris-interval", type=float, default=0.5, help="seconds between its bytes")

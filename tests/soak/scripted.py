@@ -15,7 +15,7 @@ import random
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "client", "python"))
 import volcast as vc  # noqa: E402
@@ -37,6 +37,12 @@ class DragStats:
     longest_gap_s: float = 0.0        # longest time without a frame while the session wanted one
     opened: bool = False
     unshown: int = 0                  # cameras no frame showed by the end
+    # Per rest: (its start, time.monotonic(); its length; seconds from interaction_end to the
+    # final frame of the view it rested on, or None where the rest ended, or the run stopped,
+    # before that frame came).
+    rests: List[Tuple[float, float, Optional[float]]] = field(default_factory=list)
+    render_ms_dragging: float = 0.0   # the headers' render_ms of the frames that came while dragging
+    render_ms_resting: float = 0.0    # … and while resting
 
 
 class DragSession:
@@ -62,6 +68,8 @@ class DragSession:
         self.ws: Optional[RawWebSocket] = None
         self.next_id = 1
         self.closed_by_us = False
+        self.rest_open: Optional[tuple] = None   # (last camera id, interaction_end time) of the rest under way
+        self.rest_final_s: Optional[float] = None
 
     def _id(self) -> int:
         self.next_id += 1
@@ -83,6 +91,10 @@ class DragSession:
                         continue
                     self.stats.frames += 1
                     self.last_frame_at = now
+                    if self.rest_open:
+                        self.stats.render_ms_resting += frame.header.get("render_ms", 0.0)
+                    else:
+                        self.stats.render_ms_dragging += frame.header.get("render_ms", 0.0)
                     request = frame.header.get("request")
                     if isinstance(request, int):
                         for cid in [c for c in self.pending if c <= request]:
@@ -91,6 +103,9 @@ class DragSession:
                         self.stats.final_frames += 1
                         self.final_for = request
                         self.final_event.set()
+                        if (self.rest_open and self.rest_final_s is None and isinstance(request, int)
+                                and request >= self.rest_open[0]):
+                            self.rest_final_s = now - self.rest_open[1]
                     continue
                 message = json.loads(data.decode("utf-8"))
                 if message.get("type") == "error":
@@ -159,9 +174,10 @@ class DragSession:
                 await asyncio.sleep(self.rng.uniform(*self.camera_ms) / 1000.0)
             last_camera = self.next_id
             self.final_event.clear()
+            rest_start = time.monotonic()
+            self.rest_open, self.rest_final_s = (last_camera, rest_start), None
             await self._send(vc.interaction_end(id=self._id()))
             rest = self.rng.uniform(*self.rest_s)
-            rest_start = time.monotonic()
             if self.wait_final:
                 await self._wait_final(last_camera, self.final_timeout_s)
                 await asyncio.sleep(max(0.0, rest - (time.monotonic() - rest_start)))
@@ -169,6 +185,8 @@ class DragSession:
                 await asyncio.sleep(min(rest, max(0.0, self.stop_at - time.monotonic())))
             if not (self.final_for is not None and self.final_for >= last_camera):
                 self.stats.rests_without_final += 1
+            self.stats.rests.append((rest_start, time.monotonic() - rest_start, self.rest_final_s))
+            self.rest_open = None
             self.stats.longest_gap_s = max(self.stats.longest_gap_s, self._gap())
 
     def _gap(self) -> float:
