@@ -443,7 +443,7 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
             }
             return levels;
         };
-        const auto refineAt = s.lastInput + std::chrono::duration_cast<Clock::duration>(Ms(options_.idleMs));
+        const auto refineAt = stillSince(s);
         const bool still = now >= refineAt;
         int level = 0;
         if (job.stillOnly) {
@@ -454,8 +454,10 @@ bool RenderScheduler::nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point 
             } else {
                 // The interactive level: the lowest error predicted to fit the render budget
                 // (interactiveBudgetMs, quality_ladder.hpp).
+                // While a view is overdue, refinement takes kOverdueShare of the render time.
+                const double targetMs = job.targetFrameMs * (overdueWaiting_ ? 1 - kOverdueShare : 1.0);
                 const double renderBudgetMs =
-                    interactiveBudgetMs(job.targetFrameMs, sessionsDragging(), s.encodeMs, s.timer.deviationMs());
+                    interactiveBudgetMs(targetMs, sessionsDragging(), s.encodeMs, s.timer.deviationMs());
                 level = last == 0 ? 0 : int(chooseInteractiveLevel(outlook(), renderBudgetMs));
             }
         } else {
@@ -594,29 +596,47 @@ size_t RenderScheduler::draggingCount() const {
     return n;
 }
 
-bool RenderScheduler::pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt) {
+bool RenderScheduler::pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt,
+                               bool overdueOnly) {
     // The session with work that has had the least render time; ties in round-robin order
     // (the sessions after the one served last, then from the start). Least service rather
     // than plain turns: a session whose client answered a moment late gets the next unit
     // instead of losing its turn for a round.
     // Interactive frames are shared by count (dragging sessions get as many frames each,
-    // whatever level each one's measured cost allows), refinement by render time.
+    // whatever level each one's measured cost allows), refinement by render time, except that
+    // overdue views come first, the one still the longest first: under load, least service
+    // alone let views that came to rest later go ahead of an older one again and again (a
+    // rest's final frame came after up to 3.9 s with 32 sessions, tests/soak/load.py).
     bool found = false;
-    double least = 0;
+    std::pair<int, double> least{0, 0.0};
     const auto consider = [&](SlotId id, Slot &s) {
+        const bool overdue = kind == Kind::Refine && this->overdue(s, now);
+        if (overdueOnly && !overdue) return;
         Work candidate;
         if (kind == Kind::Rest ? !nextRestWork(id, s, candidate) : !nextWork(kind, id, s, now, candidate, wakeAt)) return;
-        const double service = kind == Kind::Interactive ? s.interactiveFrames
-                               : kind == Kind::Rest      ? s.rest.spentMs
-                                                         : s.serviceMs;
-        if (found && service >= least) return;
+        const std::pair<int, double> key =
+            overdue ? std::pair{0, Ms(stillSince(s).time_since_epoch()).count()}
+                    : std::pair{1, kind == Kind::Interactive ? s.interactiveFrames
+                                   : kind == Kind::Rest      ? s.rest.spentMs
+                                                             : s.serviceMs};
+        if (found && key >= least) return;
         found = true;
-        least = service;
+        least = key;
         work = std::move(candidate);
     };
     for (auto it = slots_.upper_bound(lastServed_); it != slots_.end(); ++it) consider(it->first, it->second);
     for (auto it = slots_.begin(); it != slots_.end() && it->first <= lastServed_; ++it) consider(it->first, it->second);
     return found;
+}
+
+RenderScheduler::Clock::time_point RenderScheduler::stillSince(const Slot &s) const {
+    return s.lastInput + std::chrono::duration_cast<Clock::duration>(Ms(options_.idleMs));
+}
+
+bool RenderScheduler::overdue(const Slot &s, Clock::time_point now) const {
+    const bool refining = s.state == SlotState::LevelShown || s.state == SlotState::LevelUnderWay ||
+                          (s.state == SlotState::ViewWaiting && s.job && s.job->stillOnly);
+    return refining && now >= stillSince(s) + std::chrono::duration_cast<Clock::duration>(Ms(options_.refineWaitMs));
 }
 
 double RenderScheduler::leastServiceMs() const {
@@ -639,9 +659,18 @@ void RenderScheduler::workerLoop() {
         const auto now = Clock::now();
         Work work;
         auto wakeAt = Clock::time_point::max();
-        // Every session's interactive frame before anyone's refinement, and refinement at rest
-        // only when there is nothing else and no session has had input within the idle time.
-        const bool found = pickWork(Kind::Interactive, now, work, wakeAt) || pickWork(Kind::Refine, now, work, wakeAt) ||
+        // Every session's interactive frame before anyone's refinement, except that overdue
+        // refinement takes kOverdueShare of the render time ahead of them: with others dragging
+        // an interactive frame nearly always waits, and a resting view would stay blurry for as
+        // long as they drag. A dragging frame then waits for at most one refinement unit, as it
+        // may for a still's. Refinement at rest only when there is nothing else and no session
+        // has had input within the idle time.
+        overdueWaiting_ = std::any_of(slots_.begin(), slots_.end(), [&](const auto &e) { return overdue(e.second, now); });
+        if (!overdueWaiting_) overdueCreditMs_ = 0;
+        const bool overdueFirst = overdueCreditMs_ > 0 && pickWork(Kind::Refine, now, work, wakeAt, true);
+        work.aheadOfInteractive = overdueFirst;
+        const bool found = overdueFirst || pickWork(Kind::Interactive, now, work, wakeAt) ||
+                           pickWork(Kind::Refine, now, work, wakeAt) ||
                            (!anyoneActive(now, wakeAt) && pickWork(Kind::Rest, now, work, wakeAt));
         if (found) {
             lastServed_ = work.slot;
@@ -712,6 +741,10 @@ void RenderScheduler::runUnit(Work &work) {
     {
         std::lock_guard lock(mutex_);
         longestUnitMs_ = std::max(longestUnitMs_, ms);
+        if (work.aheadOfInteractive)
+            overdueCreditMs_ -= ms;
+        else if (work.kind == Kind::Interactive && overdueWaiting_)
+            overdueCreditMs_ = std::min(overdueCreditMs_ + ms * kOverdueShare / (1 - kOverdueShare), options_.unitMs);
         // Time at rest is the server's spare time: no debt against the session's next views.
         if (auto it = slots_.find(work.slot); it != slots_.end())
             (work.kind == Kind::Rest ? it->second.rest.spentMs : it->second.serviceMs) += ms;

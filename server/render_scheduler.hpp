@@ -88,7 +88,16 @@ struct SchedulerOptions {
     // only when its 8-bit image changes, until its estimated error is ≤ kRestTargetError or
     // the view has had this much render time at rest. 0: none.
     double restRefinementMs = 0;
+    // A view still for this long without its final frame is overdue: overdue refinement gets
+    // kOverdueShare of the render time ahead of interactive frames, the oldest overdue view
+    // first, so a resting view's wait is bounded however many others drag (docs/service.md,
+    // "Scheduling").
+    double refineWaitMs = 1000;
 };
+
+// The share of render time overdue refinement takes ahead of interactive frames; dragging
+// sessions choose their levels from the rest of the frame-time target meanwhile.
+inline constexpr double kOverdueShare = 0.5;
 
 // Refinement at rest stops at this estimated error (RMSE, RGB in [0, 1]): half a grey level.
 inline constexpr double kRestTargetError = 0.5 / 255;
@@ -235,6 +244,7 @@ class RenderScheduler {
         Quality quality;              // what is rendered: the level's, or its substitute
         bool substitute = false;
         std::shared_ptr<TiledFrame> frame;   // Refine: the frame the unit belongs to
+        bool aheadOfInteractive = false;     // an overdue refinement's unit, taken before interactive frames
         int cells = 0;                       // the unit's cells (TiledFrame)
     };
 
@@ -246,7 +256,15 @@ class RenderScheduler {
     // Some session dragging or with input within the idle time (then wakeAt is when that
     // time ends): refinement at rest waits. Under the lock.
     bool anyoneActive(Clock::time_point now, Clock::time_point &wakeAt) const;
-    bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
+    // The next unit of this kind: the least served session's (ties round-robin); for
+    // refinement, overdue views first, the one still the longest first. overdueOnly: only an
+    // overdue view's refinement.
+    bool pickWork(Kind kind, Clock::time_point now, Work &work, Clock::time_point &wakeAt, bool overdueOnly = false);
+    // When the slot's view could start refining (its last input + the idle time).
+    Clock::time_point stillSince(const Slot &s) const;
+    // The slot's view waits for refinement (a level or the final) and has been still for
+    // SchedulerOptions::refineWaitMs. Under the lock.
+    bool overdue(const Slot &s, Clock::time_point now) const;
     // What slot s should do now of this kind; false with wakeAt set when it waits for its idle time.
     bool nextWork(Kind kind, SlotId id, Slot &s, Clock::time_point now, Work &work, Clock::time_point &wakeAt);
     // A pass of refinement at rest for slot s, or its next unit; false when it has none.
@@ -278,6 +296,10 @@ class RenderScheduler {
     SlotId nextId_ = 1;
     SlotId lastServed_ = 0;
     uint64_t viewSerial_ = 0;
+    // Render time overdue refinement may still take ahead of interactive frames: interactive
+    // units add to it while a view is overdue (at most one unit's worth), those it takes spend it.
+    double overdueCreditMs_ = 0;
+    bool overdueWaiting_ = false;   // some view overdue, as of the worker's last pick
     bool stopping_ = false;
     double longestUnitMs_ = 0;
     std::vector<uint64_t> transitionCounts_;
