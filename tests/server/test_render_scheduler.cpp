@@ -368,6 +368,86 @@ TEST(RenderScheduler, EachDraggingSessionChoosesItsLevelFromItsShareOfTheTarget)
     EXPECT_LT(percentile(fourWaits, 0.5), 45) << "four sessions waited as long as for four half-size frames";
 }
 
+// While others drag without a pause (a new camera as soon as each frame arrives, so an
+// interactive frame nearly always waits), a resting session's view still reaches its final
+// frame: once it has been still for refineWaitMs it is overdue, and its refinement takes
+// kOverdueShare of the render time ahead of the interactive frames. With interactive frames
+// always first, the resting view waited for as long as the others dragged.
+TEST(RenderScheduler, AnOverdueRestingViewReachesItsFinalFrameWhileOthersDragWithoutAPause) {
+    Metrics metrics;
+    const SchedulerOptions o = options(20);
+    RenderScheduler scheduler(metrics, o);
+    std::vector<std::unique_ptr<Session>> draggers;
+    for (int i = 0; i < 3; ++i)
+        draggers.push_back(std::make_unique<Session>(
+            scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), uint64_t(i + 1)));
+    Session resting(scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), 9);
+    const auto begin = Clock::now();
+    const auto dragUntil = begin + std::chrono::milliseconds(6000);
+    std::mutex mutex;
+    std::vector<double> waits;
+    std::thread drag([&] {
+        dragClosedLoop(draggers, dragUntil, [&](int, Clock::time_point sent, const Session::Got &got) {
+            std::lock_guard lock(mutex);
+            waits.push_back(Ms(got.at - sent).count());
+        });
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));   // the draggers' levels measured
+    const auto rested = Clock::now();
+    // 96² at 0.02 ms a ray: its final level alone is 184 ms of rays, about nine units.
+    scheduler.submit(resting.slot, resting.view(1, 0, 96, ladderFor(1)));
+    const auto final = resting.waitFor(0, [](const protocol::FrameHeader &h) { return h.final; }, 5000);
+    const bool stillDragging = Clock::now() < dragUntil;
+    drag.join();
+    ASSERT_TRUE(final) << "the resting view got no final frame in 5 s while three sessions dragged";
+    EXPECT_TRUE(stillDragging) << "the others had stopped dragging: the test did not load the scheduler";
+    // Overdue after the idle time and refineWaitMs; then its levels' rays (184 ms for the final,
+    // less for the others) at kOverdueShare of the time, each unit perhaps waiting for one
+    // interactive frame: about 1.9 s. 3 s is the bound a resting view is held to under load
+    // (docs/service.md, "Scheduling").
+    const double restToFinalMs = Ms(final->at - rested).count();
+    EXPECT_LT(restToFinalMs, 3000);
+    EXPECT_GT(restToFinalMs, o.refineWaitMs) << "the view came to its final frame before it was overdue: the "
+                                                "draggers left it time, and the test did not load the scheduler";
+    // The draggers still get their frames, each waiting at most one refinement unit more.
+    std::lock_guard lock(mutex);
+    ASSERT_GT(waits.size(), 30u);
+    EXPECT_LT(percentile(waits, 0.5), 40 + o.unitMs + 60) << "dragging frames waited too long behind the refinement";
+}
+
+// Among overdue views the one still the longest refines first, whatever render time its
+// session has had: with the least served first, a session that had rendered much waited
+// behind every view that came to rest after its own.
+TEST(RenderScheduler, OverdueViewsRefineOldestFirstWhateverTheirSessionsService) {
+    Metrics metrics;
+    SchedulerOptions o = options(20);
+    o.refineWaitMs = 50;
+    RenderScheduler scheduler(metrics, o);
+    Session served(scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), 1);
+    Session fresh(scheduler, std::make_shared<SlowRenderer>(smallVolume(), 0.02), 2);
+    const auto isFinal = [](const protocol::FrameHeader &h) { return h.final; };
+    // `fresh` first has a 16² view rendered (about 5 ms), `served` three 128² views (about
+    // 1 s): `fresh` is the less served from then on.
+    scheduler.submit(fresh.slot, fresh.view(0, 0.0, 16, ladderFor(1)));
+    ASSERT_TRUE(fresh.waitFor(0, isFinal, 10000));
+    for (int i = 0; i < 3; ++i) {
+        const size_t from = served.count();
+        scheduler.submit(served.slot, served.view(i, 0.3 * i, 128, ladderFor(1)));
+        ASSERT_TRUE(served.waitFor(from, isFinal, 10000));
+    }
+    // Then `served` comes to rest on a view, and `fresh` 50 ms later: each a final of 328 ms of rays.
+    const size_t servedFrom = served.count(), freshFrom = fresh.count();
+    scheduler.submit(served.slot, served.view(10, 1.0, 128, ladderFor(1)));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    scheduler.submit(fresh.slot, fresh.view(20, 2.0, 128, ladderFor(1)));
+    const auto servedFinal = served.waitFor(servedFrom, isFinal, 10000);
+    const auto freshFinal = fresh.waitFor(freshFrom, isFinal, 10000);
+    ASSERT_TRUE(servedFinal && freshFinal) << "a final frame did not come within 10 s";
+    EXPECT_LT(servedFinal->at, freshFinal->at)
+        << "the view that came to rest first got its final frame "
+        << Ms(servedFinal->at - freshFinal->at).count() << " ms after the later one's";
+}
+
 TEST(RenderScheduler, PreparationRunsInTheBackgroundWithProgressAndOtherSessionsCarryOn) {
     Metrics metrics;
     RenderScheduler scheduler(metrics, options(20));
