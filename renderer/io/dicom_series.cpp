@@ -3,6 +3,7 @@
 #include "renderer/io/dicom_series.hpp"
 #include "renderer/io/itk_reading.hpp"
 #include "renderer/io/zip_extract.hpp"
+#include "renderer/common/narrow_samples.hpp"
 
 #include <itkGDCMSeriesFileNames.h>
 #include <itkImage.h>
@@ -293,8 +294,19 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     v.direction = checkedGeometry(dir, v.spacing, v.origin, direction);
     v.sourceType = type;
     readPatientSpace(*io, v);
+    // A series of integers (every stored type but float, rescaled by integer slopes and
+    // intercepts) goes from ITK's buffer straight to the narrow store (holdNarrow's test and
+    // packing), without a float copy of the whole volume first.
     const float *buffer = image->GetBufferPointer();
-    v.voxels.assign(buffer, buffer + v.voxelCount());
+    const size_t count = v.voxelCount();
+    const NarrowWidth w = narrowWidth(buffer, count);
+    if (w.bytes < 4) {
+        v.narrowVoxels.resize(count * size_t(w.bytes) + kNarrowSlack);
+        packNarrow(buffer, count, w, v.narrowVoxels.data());
+        v.narrow = w;
+    } else {
+        v.voxels.assign(buffer, buffer + count);
+    }
     return v;
 }
 
