@@ -162,7 +162,9 @@ struct CheckedHeader {
     uint32_t orientationKnown = 0;
     uint32_t modalityBytes = 0;
     uint32_t modalityFieldBytes = 0;
+    uint32_t zero = 0;   // what would be padding: written as zeros, not as the stack's bytes
 };
+static_assert(sizeof(CheckedHeader) == 200, "no padding left in the hand-back's header");
 constexpr uint32_t kMaxCheckedModalityBytes = 64;
 
 void writeCheckedVolume(const Volume &v, const fs::path &to) {

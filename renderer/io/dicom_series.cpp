@@ -17,6 +17,7 @@
 #include <stdlib.h>
 
 #include <algorithm>
+#include <type_traits>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -220,6 +221,74 @@ uint64_t storedDicomSize(itk::GDCMImageIO &io) {
     }
 }
 
+// Reads the series' samples as T into v (its dims already set from the first slice), with
+// the geometry ITK computed from the slice positions.
+template <class T>
+void readSeriesSamples(const fs::path &dir, itk::GDCMImageIO *io, const std::vector<std::string> &files,
+                       LoadProgress &progress, Volume &v) {
+    using Image = itk::Image<T, 3>;
+    auto reader = itk::ImageSeriesReader<Image>::New();
+    reader->SetImageIO(io);
+    reader->SetFileNames(files);
+    auto observer = ItkProgress::New();
+    observer->progress = &progress;
+    observer->from = 0.02;
+    observer->to = 0.9;
+    observer->task = "reading slices";
+    reader->AddObserver(itk::ProgressEvent(), observer);
+    progress(0.02, "reading slices");
+    try {
+        reader->Update();
+    } catch (const itk::ExceptionObject &e) {
+        if (observer->stopped) std::rethrow_exception(observer->stopped);
+        fail(dir, "cannot read the DICOM series: " + cleanItkMessage(e));
+    }
+    if (observer->stopped) std::rethrow_exception(observer->stopped);
+    const Image *image = reader->GetOutput();
+    const auto size = image->GetLargestPossibleRegion().GetSize();
+    if (int64_t(size[0]) != v.dims.x || int64_t(size[1]) != v.dims.y || int64_t(size[2]) != v.dims.z)
+        fail(dir, fmt::format("DICOM series came out {} x {} x {}, but its first slice and file count say {} x {} x {}",
+                              size[0], size[1], size[2], v.dims.x, v.dims.y, v.dims.z));
+    Mat3d direction;
+    for (int a = 0; a < 3; ++a) {
+        v.spacing[a] = image->GetSpacing()[unsigned(a)];
+        v.origin[a] = image->GetOrigin()[unsigned(a)];
+        for (int r = 0; r < 3; ++r) direction(r, a) = image->GetDirection()(unsigned(r), unsigned(a));
+    }
+    v.direction = checkedGeometry(dir, v.spacing, v.origin, direction);
+    const T *buffer = image->GetBufferPointer();
+    const size_t count = v.voxelCount();
+    if constexpr (std::is_same_v<T, float>) {
+        // Floats whose values are integers (a rescale by integer slope and intercept that GDCM
+        // gives as float) are narrowed as holdNarrow does, without a float copy first.
+        const NarrowWidth w = narrowWidth(buffer, count);
+        if (w.bytes < 4) {
+            v.narrowVoxels.resize(count * size_t(w.bytes) + kNarrowSlack);
+            packNarrow(buffer, count, w, v.narrowVoxels.data());
+            v.narrow = w;
+        } else {
+            v.voxels.assign(buffer, buffer + count);
+        }
+    } else {
+        const auto [lo, hi] = std::minmax_element(buffer, buffer + count);
+        const int low = int(*lo);
+        const unsigned span = unsigned(int(*hi) - low);   // < 2^16
+        const int bytes = span < 256 ? 1 : 2;
+        v.narrowVoxels.resize(count * size_t(bytes) + kNarrowSlack);
+        unsigned char *out = v.narrowVoxels.data();
+        if (bytes == 1) {
+            for (size_t i = 0; i < count; ++i) out[i] = (unsigned char)(int(buffer[i]) - low);
+        } else {
+            for (size_t i = 0; i < count; ++i) {
+                const unsigned u = unsigned(int(buffer[i]) - low);
+                out[2 * i] = (unsigned char)(u & 0xff);
+                out[2 * i + 1] = (unsigned char)(u >> 8);
+            }
+        }
+        v.narrow = {bytes, float(low)};
+    }
+}
+
 Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
     checkDicomFolderEntries(dir);
     auto names = itk::GDCMSeriesFileNames::New();
@@ -262,51 +331,20 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     for (const auto &file : files) geometry.push_back(checkDicomSlice(dir, fs::path(file), sliceBytes));
     checkSeriesGeometry(dir, geometry);
 
-    using Image = itk::Image<float, 3>;
-    auto reader = itk::ImageSeriesReader<Image>::New();
-    reader->SetImageIO(io);
-    reader->SetFileNames(files);
-    auto observer = ItkProgress::New();
-    observer->progress = &progress;
-    observer->from = 0.02;
-    observer->to = 0.9;
-    observer->task = "reading slices";
-    reader->AddObserver(itk::ProgressEvent(), observer);
-    progress(0.02, "reading slices");
-    try {
-        reader->Update();
-    } catch (const itk::ExceptionObject &e) {
-        if (observer->stopped) std::rethrow_exception(observer->stopped);
-        fail(dir, "cannot read the DICOM series: " + cleanItkMessage(e));
+    // Read as the type GDCM gives after rescaling: asking ITK for floats made it convert every
+    // sample (half the checker's time on a 16-bit series), and a float copy had to be narrowed
+    // again. Integers of 8 or 16 bits go straight to the narrow store, as holdNarrow would
+    // store them (the lowest sample as the offset); anything else as float.
+    using C = itk::IOComponentEnum;
+    switch (io->GetComponentType()) {
+    case C::CHAR: readSeriesSamples<int8_t>(dir, io, files, progress, v); break;
+    case C::UCHAR: readSeriesSamples<uint8_t>(dir, io, files, progress, v); break;
+    case C::SHORT: readSeriesSamples<int16_t>(dir, io, files, progress, v); break;
+    case C::USHORT: readSeriesSamples<uint16_t>(dir, io, files, progress, v); break;
+    default: readSeriesSamples<float>(dir, io, files, progress, v); break;
     }
-    if (observer->stopped) std::rethrow_exception(observer->stopped);
-    const Image *image = reader->GetOutput();
-    const auto size = image->GetLargestPossibleRegion().GetSize();
-    if (int64_t(size[0]) != v.dims.x || int64_t(size[1]) != v.dims.y || int64_t(size[2]) != v.dims.z)
-        fail(dir, fmt::format("DICOM series came out {} x {} x {}, but its first slice and file count say {} x {} x {}",
-                              size[0], size[1], size[2], v.dims.x, v.dims.y, v.dims.z));
-    Mat3d direction;
-    for (int a = 0; a < 3; ++a) {
-        v.spacing[a] = image->GetSpacing()[unsigned(a)];
-        v.origin[a] = image->GetOrigin()[unsigned(a)];
-        for (int r = 0; r < 3; ++r) direction(r, a) = image->GetDirection()(unsigned(r), unsigned(a));
-    }
-    v.direction = checkedGeometry(dir, v.spacing, v.origin, direction);
     v.sourceType = type;
     readPatientSpace(*io, v);
-    // A series of integers (every stored type but float, rescaled by integer slopes and
-    // intercepts) goes from ITK's buffer straight to the narrow store (holdNarrow's test and
-    // packing), without a float copy of the whole volume first.
-    const float *buffer = image->GetBufferPointer();
-    const size_t count = v.voxelCount();
-    const NarrowWidth w = narrowWidth(buffer, count);
-    if (w.bytes < 4) {
-        v.narrowVoxels.resize(count * size_t(w.bytes) + kNarrowSlack);
-        packNarrow(buffer, count, w, v.narrowVoxels.data());
-        v.narrow = w;
-    } else {
-        v.voxels.assign(buffer, buffer + count);
-    }
     return v;
 }
 
