@@ -1,6 +1,5 @@
 // Closed-form checks of the reference integrator. Each tolerance says where it comes from.
 
-#include "renderer/model/image.hpp"
 #include "renderer/reference/reconstruction.hpp"
 #include "renderer/reference/reference_renderer.hpp"
 #include "renderer/model/synthetic.hpp"
@@ -18,25 +17,7 @@
 namespace volcast {
 namespace {
 
-// Chord of a ray through the axis-aligned cell-extent box, computed independently of the
-// renderer: the textbook slab test in world space.
-double chordLength(const Volume &v, const Ray &ray) {
-    double t0 = 0, t1 = std::numeric_limits<double>::infinity();
-    for (int a = 0; a < 3; ++a) {
-        const double lo = v.origin[a] - 0.5 * v.spacing[a];
-        const double hi = v.origin[a] + (double(v.dims[a]) - 0.5) * v.spacing[a];
-        if (ray.dir[a] == 0) {
-            if (ray.origin[a] < lo || ray.origin[a] > hi) return 0;
-            continue;
-        }
-        double ta = (lo - ray.origin[a]) / ray.dir[a], tb = (hi - ray.origin[a]) / ray.dir[a];
-        if (ta > tb) std::swap(ta, tb);
-        t0 = std::max(t0, ta);
-        t1 = std::min(t1, tb);
-    }
-    return std::max(0.0, t1 - t0);
-}
-
+using test::chordLength;
 using test::constantTf;
 Camera obliqueCamera(const Volume &v) { return test::obliqueCamera(v, 28); }
 
@@ -283,38 +264,6 @@ TEST(ReferenceRenderer, AnalyticFieldConvergesToTheSampledOneOnAFineGrid) {
     EXPECT_NEAR(a.color.a, s.color.a, 1e-2);
     EXPECT_LT(stats.analyticFitError, 1e-6); // the degree-9 fit on quarter voxels is tight
 }
-
-TEST(ReferenceRenderer, CommandLineReproducesTheClosedFormConstantBoxTo1e6) {
-    // The builtin constant box (64³, value 100) through volcast-render --reference, as a user would.
-    const auto dir = std::filesystem::temp_directory_path() / "volcast_ref_cli";
-    std::filesystem::create_directories(dir);
-    const double a = 0.05;
-    std::ofstream(dir / "box.json") << R"({
-      "volume": "builtin:constant_box",
-      "transfer_function": {"points": [[0, 0.8, 0.6, 0.4, 0.05], [255, 0.8, 0.6, 0.4, 0.05]], "opacity_unit": 1},
-      "camera": {"eye": [140, 110, 160], "target": [31.5, 31.5, 31.5], "up": [0, 1, 0],
-                 "projection": "perspective", "fov_y_deg": 35},
-      "image": {"width": 24, "height": 24}
-    })";
-    const std::string cmd = std::string(VOLCAST_RENDER_EXE) + " " + (dir / "box.json").string() + " -o " +
-                            (dir / "box.exr").string() + " --reference > " + (dir / "out.txt").string();
-    ASSERT_EQ(std::system(cmd.c_str()), 0);
-    const Image img = readImage(dir / "box.exr");
-    const SyntheticVolume box = makeConstantBox({64, 64, 64}, {1, 1, 1}, 100);
-    Camera cam;
-    cam.eye = {140, 110, 160};
-    cam.target = {31.5, 31.5, 31.5};
-    cam.fovYDeg = 35;
-    const RayGenerator rays(cam, 24, 24);
-    for (int y = 0; y < 24; ++y)
-        for (int x = 0; x < 24; ++x) {
-            const double A = -std::expm1(chordLength(box.volume, rays.pixelRay(x, y)) * std::log1p(-a));
-            // The required bound: 1e-6 (float32 EXR storage adds only ~6e-8).
-            EXPECT_NEAR(img.pixel(x, y)[3], A, 1e-6);
-            EXPECT_NEAR(img.pixel(x, y)[0], 0.8 * A, 1e-6);
-        }
-}
-
 
 // Picking on a constant box: the optical depth grows linearly along the chord, so the opacity
 // 1 − (1 − a)^(L/u) reaches one half after L* = u·ln ½ / ln(1 − a). τ is constant, so the

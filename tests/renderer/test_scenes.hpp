@@ -7,9 +7,30 @@
 #include "renderer/model/transfer_function.hpp"
 #include "renderer/model/volume.hpp"
 
+#include <algorithm>
+#include <limits>
 #include <random>
 
 namespace volcast::test {
+
+// Chord of a ray through the axis-aligned cell-extent box, computed independently of the
+// renderer: the textbook slab test in world space.
+inline double chordLength(const Volume &v, const Ray &ray) {
+    double t0 = 0, t1 = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3; ++a) {
+        const double lo = v.origin[a] - 0.5 * v.spacing[a];
+        const double hi = v.origin[a] + (double(v.dims[a]) - 0.5) * v.spacing[a];
+        if (ray.dir[a] == 0) {
+            if (ray.origin[a] < lo || ray.origin[a] > hi) return 0;
+            continue;
+        }
+        double ta = (lo - ray.origin[a]) / ray.dir[a], tb = (hi - ray.origin[a]) / ray.dir[a];
+        if (ta > tb) std::swap(ta, tb);
+        t0 = std::max(t0, ta);
+        t1 = std::min(t1, tb);
+    }
+    return std::max(0.0, t1 - t0);
+}
 
 // Every quality switch off but the partial boundary segment, at `step`: a test turns on
 // only what it measures.
