@@ -6,11 +6,12 @@
 
 namespace volcast {
 
-NarrowWidth narrowWidth(const float *samples, size_t count) {
+template <class T>
+NarrowWidth narrowWidth(const T *samples, size_t count) {
     if (count == 0) return {};
-    float lo = samples[0], hi = samples[0];
+    float lo = float(samples[0]), hi = float(samples[0]);
     for (size_t i = 0; i < count; ++i) {
-        const float v = samples[i];
+        const float v = float(samples[i]);
         // An integer of magnitude ≤ 2^24 survives float(v − offset) + offset exactly; −0
         // would come back as +0, NaN and ±inf not at all.
         if (!(std::fabs(v) <= 16777216.0f) || v != std::trunc(v) || (v == 0 && std::signbit(v))) return {};
@@ -23,13 +24,25 @@ NarrowWidth narrowWidth(const float *samples, size_t count) {
     return {};
 }
 
-void packNarrow(const float *src, size_t count, NarrowWidth w, unsigned char *dst) {
+template <class T>
+void packNarrow(const T *src, size_t count, NarrowWidth w, unsigned char *dst) {
     for (size_t i = 0; i < count; ++i) {
-        const auto u = uint32_t(src[i] - w.offset);
+        const auto u = uint32_t(float(src[i]) - w.offset);
         dst[i * size_t(w.bytes)] = uint8_t(u);
         if (w.bytes == 2) dst[i * 2 + 1] = uint8_t(u >> 8);
     }
 }
+
+template NarrowWidth narrowWidth(const float *, size_t);
+template NarrowWidth narrowWidth(const int8_t *, size_t);
+template NarrowWidth narrowWidth(const uint8_t *, size_t);
+template NarrowWidth narrowWidth(const int16_t *, size_t);
+template NarrowWidth narrowWidth(const uint16_t *, size_t);
+template void packNarrow(const float *, size_t, NarrowWidth, unsigned char *);
+template void packNarrow(const int8_t *, size_t, NarrowWidth, unsigned char *);
+template void packNarrow(const uint8_t *, size_t, NarrowWidth, unsigned char *);
+template void packNarrow(const int16_t *, size_t, NarrowWidth, unsigned char *);
+template void packNarrow(const uint16_t *, size_t, NarrowWidth, unsigned char *);
 
 void SampleGrid::read(size_t first, size_t n, float *out) const {
     if (width.bytes == 4) {

@@ -7,6 +7,7 @@
 #include "renderer/model/math.hpp"
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 namespace volcast {
@@ -22,15 +23,18 @@ constexpr size_t kNarrowSlack = 4;
 
 // 1 or 2 bytes when every sample is an integer (not −0) of magnitude ≤ 2^24 and they span at
 // most 2^8 or 2^16 values; else 4. Those are the samples float(u) + offset gives back exactly.
-NarrowWidth narrowWidth(const float *samples, size_t count);
+// T: float, or an 8- or 16-bit integer (a file's samples as read, never wider than 2 bytes).
+template <class T>
+NarrowWidth narrowWidth(const T *samples, size_t count);
 inline NarrowWidth narrowWidth(const std::vector<float> &samples) {
     return narrowWidth(samples.data(), samples.size());
 }
 
 // count samples from src into dst as sample − w.offset, w.bytes (1 or 2) bytes each,
 // little-endian: the layout a 1-D array of uint8 or uint16 has on the hosts and devices we
-// run on. dst holds count · w.bytes bytes.
-void packNarrow(const float *src, size_t count, NarrowWidth w, unsigned char *dst);
+// run on. dst holds count · w.bytes bytes. T as for narrowWidth.
+template <class T>
+void packNarrow(const T *src, size_t count, NarrowWidth w, unsigned char *dst);
 
 // One grid of samples (a volume's level 0, or a mip level) as it is held: float32, or narrow.
 // A view: the store must outlive it.

@@ -3,7 +3,6 @@
 #include "renderer/io/dicom_series.hpp"
 #include "renderer/io/itk_reading.hpp"
 #include "renderer/io/zip_extract.hpp"
-#include "renderer/common/narrow_samples.hpp"
 
 #include <itkGDCMSeriesFileNames.h>
 #include <itkImage.h>
@@ -17,7 +16,6 @@
 #include <stdlib.h>
 
 #include <algorithm>
-#include <type_traits>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -256,37 +254,9 @@ void readSeriesSamples(const fs::path &dir, itk::GDCMImageIO *io, const std::vec
         for (int r = 0; r < 3; ++r) direction(r, a) = image->GetDirection()(unsigned(r), unsigned(a));
     }
     v.direction = checkedGeometry(dir, v.spacing, v.origin, direction);
-    const T *buffer = image->GetBufferPointer();
-    const size_t count = v.voxelCount();
-    if constexpr (std::is_same_v<T, float>) {
-        // Floats whose values are integers (a rescale by integer slope and intercept that GDCM
-        // gives as float) are narrowed as holdNarrow does, without a float copy first.
-        const NarrowWidth w = narrowWidth(buffer, count);
-        if (w.bytes < 4) {
-            v.narrowVoxels.resize(count * size_t(w.bytes) + kNarrowSlack);
-            packNarrow(buffer, count, w, v.narrowVoxels.data());
-            v.narrow = w;
-        } else {
-            v.voxels.assign(buffer, buffer + count);
-        }
-    } else {
-        const auto [lo, hi] = std::minmax_element(buffer, buffer + count);
-        const int low = int(*lo);
-        const unsigned span = unsigned(int(*hi) - low);   // < 2^16
-        const int bytes = span < 256 ? 1 : 2;
-        v.narrowVoxels.resize(count * size_t(bytes) + kNarrowSlack);
-        unsigned char *out = v.narrowVoxels.data();
-        if (bytes == 1) {
-            for (size_t i = 0; i < count; ++i) out[i] = (unsigned char)(int(buffer[i]) - low);
-        } else {
-            for (size_t i = 0; i < count; ++i) {
-                const unsigned u = unsigned(int(buffer[i]) - low);
-                out[2 * i] = (unsigned char)(u & 0xff);
-                out[2 * i + 1] = (unsigned char)(u >> 8);
-            }
-        }
-        v.narrow = {bytes, float(low)};
-    }
+    // Narrow as holdNarrow keeps them (8- and 16-bit integers always are), without a float
+    // copy of the whole volume first.
+    storeSamples(v, image->GetBufferPointer());
 }
 
 Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
@@ -333,8 +303,7 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
 
     // Read as the type GDCM gives after rescaling: asking ITK for floats made it convert every
     // sample (half the checker's time on a 16-bit series), and a float copy had to be narrowed
-    // again. Integers of 8 or 16 bits go straight to the narrow store, as holdNarrow would
-    // store them (the lowest sample as the offset); anything else as float.
+    // again. Integers of 8 or 16 bits go straight to the narrow store; anything else as float.
     using C = itk::IOComponentEnum;
     switch (io->GetComponentType()) {
     case C::CHAR: readSeriesSamples<int8_t>(dir, io, files, progress, v); break;

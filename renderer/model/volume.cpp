@@ -65,16 +65,37 @@ void computeStatistics(Volume &v) {
     }
 }
 
+namespace {
+// Packs count samples into v's narrow store if they fit it; false (nothing stored) if not.
+template <class T>
+bool packIntoNarrow(Volume &v, const T *samples, size_t count) {
+    const NarrowWidth w = narrowWidth(samples, count);
+    if (w.bytes == 4) return false;
+    v.narrowVoxels.assign(count * size_t(w.bytes) + kNarrowSlack, 0);
+    packNarrow(samples, count, w, v.narrowVoxels.data());
+    v.narrow = w;
+    return true;
+}
+} // namespace
+
 bool holdNarrow(Volume &v) {
     if (v.narrow.bytes < 4) return true;
     if (v.voxels.size() != v.voxelCount()) return false;
-    const NarrowWidth w = narrowWidth(v.voxels);
-    if (w.bytes == 4) return false;
-    v.narrowVoxels.assign(v.voxels.size() * size_t(w.bytes) + kNarrowSlack, 0);
-    packNarrow(v.voxels.data(), v.voxels.size(), w, v.narrowVoxels.data());
-    v.narrow = w;
+    if (!packIntoNarrow(v, v.voxels.data(), v.voxels.size())) return false;
     std::vector<float>().swap(v.voxels); // give the float store's memory back
     return true;
 }
+
+template <class T>
+void storeSamples(Volume &v, const T *samples) {
+    const size_t count = v.voxelCount();
+    if (!packIntoNarrow(v, samples, count)) v.voxels.assign(samples, samples + count);
+}
+
+template void storeSamples(Volume &, const float *);
+template void storeSamples(Volume &, const int8_t *);
+template void storeSamples(Volume &, const uint8_t *);
+template void storeSamples(Volume &, const int16_t *);
+template void storeSamples(Volume &, const uint16_t *);
 
 } // namespace volcast

@@ -96,4 +96,9 @@ void computeStatistics(Volume &v);
 // whether the volume is held narrow now. Loaders call it; so may anyone building a volume.
 bool holdNarrow(Volume &v);
 
+// Stores v.voxelCount() samples held elsewhere (a reader's buffer) in v: narrow when every one
+// fits the narrow store (as holdNarrow would keep them), else as float32. T as for narrowWidth.
+template <class T>
+void storeSamples(Volume &v, const T *samples);
+
 } // namespace volcast
