@@ -658,6 +658,34 @@ TEST(NarrowSamples, WidthTakesExactlyTheIntegersEightAndSixteenBitsHold) {
     EXPECT_EQ(width({}).bytes, 4);
 }
 
+// The statistics of a narrow store (counted per stored code) are those of the same samples
+// held as float, bin for bin: the range and histogram the client's transfer-function editor
+// shows do not depend on which store the loader chose.
+TEST(NarrowSamples, StatisticsEqualThoseOfTheFloatCopy) {
+    struct Scan {
+        const char *what;
+        double scale, offset;
+        int bytes;
+    };
+    // value = round(blob / its peak · scale) + offset
+    for (const Scan &scan : {Scan{"8-bit", 255.0, 0.0, 1}, Scan{"16-bit CT-like", 4095.0, -1024.0, 2},
+                             Scan{"a few values", 7.0, 41.0, 1}, Scan{"constant", 0.0, 12.0, 1}}) {
+        Volume v = blob().volume;
+        const float peak = *std::max_element(v.voxels.begin(), v.voxels.end());
+        for (float &x : v.voxels) x = float(std::round(double(x) / peak * scan.scale) + scan.offset);
+        Volume held = v;
+        computeStatistics(v);
+        ASSERT_TRUE(holdNarrow(held)) << scan.what;
+        ASSERT_EQ(held.narrow.bytes, scan.bytes) << scan.what;
+        computeStatistics(held);
+        EXPECT_EQ(held.range.min, v.range.min) << scan.what;
+        EXPECT_EQ(held.range.max, v.range.max) << scan.what;
+        EXPECT_EQ(held.histogram.range.min, v.histogram.range.min) << scan.what;
+        EXPECT_EQ(held.histogram.range.max, v.histogram.range.max) << scan.what;
+        EXPECT_EQ(held.histogram.counts, v.histogram.counts) << scan.what;
+    }
+}
+
 // An 8- or 16-bit scan held in the narrow store and sampled there, in place, draws the image
 // of the same samples held as float bit for bit, in every switch that samples trilinearly
 // (and with the same samples), with no copy of level 0 at all. Only the widening differs,
