@@ -1,6 +1,7 @@
 // DICOM series: the folder, the slices, the stack (dicom_series.hpp).
 
 #include "renderer/io/dicom_series.hpp"
+#include "renderer/io/dicom_uncompressed.hpp"
 #include "renderer/io/itk_reading.hpp"
 #include "renderer/io/zip_extract.hpp"
 
@@ -261,6 +262,23 @@ void readSeriesSamples(const fs::path &dir, itk::GDCMImageIO *io, const std::vec
 
 Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
     checkDicomFolderEntries(dir);
+    // Uncompressed slices of one series are read straight from their files; any other
+    // series through ITK and GDCM, below.
+    std::string why;
+    if (const auto series = scanUncompressedSeries(dir, why)) {
+        const UncompressedSlice &first = series->slices.front();
+        Volume v;
+        v.dims = {first.columns, first.rows, int64_t(series->slices.size())};
+        checkShape(dir, v.dims, options);
+        progress(0.01, "checking slices");
+        std::vector<SliceGeometry> geometry;
+        for (const UncompressedSlice &s : series->slices)
+            geometry.push_back({s.file, s.position, s.orientation, s.rows, s.columns});
+        checkSeriesGeometry(dir, geometry);
+        readUncompressedSeries(dir, *series, progress, v);
+        return v;
+    }
+    spdlog::debug("{}: read through GDCM ({})", dir.string(), why);
     auto names = itk::GDCMSeriesFileNames::New();
     names->SetUseSeriesDetails(true);
     names->SetDirectory(dir.string());

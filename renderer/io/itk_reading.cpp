@@ -65,9 +65,6 @@ std::string headerText(const itk::MetaDataDictionary &dict, const std::string &k
     return {};
 }
 
-// Longest modality statement kept (a description is cut there): what the checker hands back.
-constexpr size_t kMaxStatedModalityBytes = 64;
-
 } // namespace
 
 // ITK's IO factories are registered explicitly (we do not use ITK_USE_FILE's generated
@@ -215,10 +212,7 @@ void readPatientSpace(const itk::ImageIOBase &io, Volume &v) {
     const std::string ioName = io.GetNameOfClass();
     // The modality statement, fit for a sentence and the checker's hand-back: printable, short.
     const auto state = [&](const std::string &text, const char *field) {
-        std::string said;
-        for (char c : text)
-            if (c >= 0x20 && c < 0x7f && said.size() < kMaxStatedModalityBytes) said += c;
-        while (!said.empty() && said.back() == ' ') said.pop_back();
+        const std::string said = statedText(text);
         if (said.empty() || !v.modality.empty()) return;
         v.modality = said;
         v.modalityField = field;

@@ -50,6 +50,15 @@ std::string trim(const std::string &s) {
     return s.substr(b, e - b + 1);
 }
 
+std::string statedText(const std::string &text) {
+    constexpr size_t kMaxStatedBytes = 64;
+    std::string said;
+    for (char c : text)
+        if (c >= 0x20 && c < 0x7f && said.size() < kMaxStatedBytes) said += c;
+    while (!said.empty() && said.back() == ' ') said.pop_back();
+    return said;
+}
+
 std::optional<int64_t> parseInt(const std::string &s) {
     try {
         size_t used = 0;

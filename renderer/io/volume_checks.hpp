@@ -54,6 +54,9 @@ std::string lower(std::string s);
 std::string trim(const std::string &s);
 std::optional<int64_t> parseInt(const std::string &s);
 std::string withThousands(uint64_t n);
+// Header text fit for a sentence and the checker's hand-back (a modality statement):
+// printable ASCII only, at most 64 bytes, no trailing spaces.
+std::string statedText(const std::string &text);
 std::string humanBytes(uint64_t n);
 
 // Multiplication that reports overflow instead of wrapping (sizes come from untrusted headers).

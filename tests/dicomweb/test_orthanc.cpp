@@ -8,6 +8,7 @@
 #include "dicomweb/dicomweb_client.hpp"
 #include "orthanc_fixture.hpp"
 
+#include "renderer/io/dicom_uncompressed.hpp"
 #include "renderer/io/volume_io.hpp"
 #include "renderer/model/volume.hpp"
 
@@ -315,6 +316,9 @@ TEST_F(DicomWebOrthanc, RetrievedJpegLosslessSeriesLoadsExactlyAsTheWrittenFiles
     std::ifstream in(folder / "instance_00000.dcm", std::ios::binary);
     const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
     EXPECT_NE(bytes.find("1.2.840.10008.1.2.1"), std::string::npos) << "not sent as Explicit VR Little Endian";
+    // Read straight from the files in explicit VR; the written series, in implicit VR, too.
+    std::string why;
+    EXPECT_TRUE(volcast::io::scanUncompressedSeries(folder, why)) << why;
     expectSameVolume(folder, oblique.written);
 }
 

@@ -1,8 +1,11 @@
-// Tests of DICOM series loading (renderer/io/dicom_series.*): a series written by saveDicomSeries,
-// a single slice, progress slice by slice, two series in one folder, and damaged series.
+// Tests of DICOM series loading (renderer/io/dicom_series.*, dicom_uncompressed.*): a series
+// written by saveDicomSeries, a single slice, progress slice by slice, two series in one
+// folder, damaged series, and uncompressed series read straight from their files against the
+// same series read through GDCM.
 
 #include "volume_io_test_helpers.hpp"
 
+#include "renderer/io/dicom_uncompressed.hpp"
 #include "renderer/io/volume_io.hpp"
 
 #include <gtest/gtest.h>
@@ -149,6 +152,128 @@ TEST_F(VolumeIoTest, DicomSeriesWithASliceTwiceIsRefused) {
     saveDicomSeries(obliqueSeriesVolume(), dir / "series", VoxelType::Int16);
     fs::copy_file(dir / "series" / "slice_0004.dcm", dir / "series" / "slice_0004_again.dcm");
     expectLoadError(dir / "series", {"same position"});
+}
+
+// ---------------------------------------------------------------------------------------
+// Uncompressed series read straight from their files, against GDCM
+
+// The same series through ITK and GDCM: a copy of its folder with a text file beside the
+// slices, which GDCM's series scan passes over and the direct reader does not take.
+Volume loadThroughGdcm(const fs::path &series, const fs::path &copy) {
+    fs::copy(series, copy);
+    writeFile(copy / "notes.txt", "not DICOM\n");
+    std::string why;
+    EXPECT_FALSE(io::scanUncompressedSeries(copy, why)) << "the copy must go through GDCM";
+    return loadVolume(copy);
+}
+
+// Everything a loaded volume holds but its name. Geometry to 1e-9: both come from the same
+// decimal strings, through a few double operations in a different order.
+void expectSameVolume(const Volume &direct, const Volume &gdcm, const std::string &what) {
+    EXPECT_EQ(direct.dims, gdcm.dims) << what;
+    EXPECT_EQ(direct.sourceType, gdcm.sourceType) << what;
+    EXPECT_EQ(direct.narrow.bytes, gdcm.narrow.bytes) << what;
+    EXPECT_EQ(direct.narrow.offset, gdcm.narrow.offset) << what;
+    EXPECT_TRUE(direct.narrowVoxels == gdcm.narrowVoxels) << what << ": the narrow stores differ";
+    EXPECT_EQ(direct.voxels, gdcm.voxels) << what;
+    expectGeometry(direct, gdcm.spacing, gdcm.origin, gdcm.direction, 1e-9);
+    EXPECT_EQ(direct.range.min, gdcm.range.min) << what;
+    EXPECT_EQ(direct.range.max, gdcm.range.max) << what;
+    EXPECT_EQ(direct.histogram.counts, gdcm.histogram.counts) << what;
+    EXPECT_EQ(direct.orientationKnown, gdcm.orientationKnown) << what;
+    EXPECT_EQ(direct.modality, gdcm.modality) << what;
+    EXPECT_EQ(direct.modalityField, gdcm.modalityField) << what;
+    EXPECT_EQ(direct.nonFiniteReplaced, gdcm.nonFiniteReplaced) << what;
+}
+
+TEST_F(VolumeIoTest, UncompressedSeriesReadDirectlyEqualsGdcmsRead) {
+    struct Case {
+        const char *what;
+        Volume volume;
+        VoxelType type;
+    };
+    const auto filled = [](Vec3i dims, Vec3d spacing, Mat3d direction, auto value) {
+        Volume v;
+        v.dims = dims;
+        v.spacing = spacing;
+        v.origin = {-100.25, 30, 12.5};
+        v.direction = direction;
+        v.voxels.resize(v.voxelCount());
+        for (size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(value(i));
+        return v;
+    };
+    Mat3d flipX;
+    flipX.m = {-1, 0, 0, 0, 1, 0, 0, 0, 1};
+    Mat3d flipZ;
+    flipZ.m = {1, 0, 0, 0, 1, 0, 0, 0, -1};
+    const std::vector<Case> cases = {
+        {"CT-like int16, anisotropic pixels",
+         filled({6, 5, 4}, {0.7, 0.8, 2.5}, Mat3d::identity(), [](size_t i) { return int(i) * 37 - 1024; }),
+         VoxelType::Int16},
+        {"oblique int16", obliqueSeriesVolume(), VoxelType::Int16},
+        {"rotated about a skew axis, uint16",
+         filled({7, 5, 4}, {0.5, 0.5, 1.25}, rotation({0.6, 0.0, 0.8}, 30), [](size_t i) { return int(i) * 523 % 65536; }),
+         VoxelType::UInt16},
+        {"x flipped (stacked against the normal), int16",
+         filled({6, 8, 3}, {1, 1, 2}, flipX, [](size_t i) { return int(i) * 11 - 300; }), VoxelType::Int16},
+        {"z flipped, uint8", filled({5, 4, 6}, {1, 1, 1}, flipZ, [](size_t i) { return int(i * 7) % 256; }),
+         VoxelType::UInt8},
+        {"int16 spanning fewer than 256 values: one byte held",
+         filled({6, 5, 4}, {1, 1, 3}, Mat3d::identity(), [](size_t i) { return int(i % 200) - 1000; }),
+         VoxelType::Int16},
+    };
+    int k = 0;
+    for (const Case &c : cases) {
+        const fs::path series = dir / ("series_" + std::to_string(k)), copy = dir / ("gdcm_" + std::to_string(k));
+        ++k;
+        saveDicomSeries(c.volume, series, c.type);
+        std::string why;
+        ASSERT_TRUE(io::scanUncompressedSeries(series, why)) << c.what << ": the direct reader did not take it: " << why;
+        const Volume direct = loadVolume(series);
+        const Volume gdcm = loadThroughGdcm(series, copy);
+        expectSameVolume(direct, gdcm, c.what);
+        EXPECT_EQ(direct.samples().toFloats().size(), c.volume.voxelCount()) << c.what;
+    }
+}
+
+// Gives every slice of a series written by saveDicomSeries a Rescale Intercept: ITK writes
+// it as "0" in implicit VR little-endian (tag, a 32-bit length of 2, "0 "), which is replaced.
+void setRescaleIntercept(const fs::path &series, std::string value) {
+    if (value.size() % 2) value += ' ';   // DICOM values have even lengths
+    const std::string written("\x28\x00\x52\x10\x02\x00\x00\x00\x30\x20", 10);
+    std::string replaced("\x28\x00\x52\x10", 4);
+    replaced += char(value.size());
+    replaced += std::string(3, '\0');
+    replaced += value;
+    for (const auto &entry : fs::directory_iterator(series)) {
+        std::string bytes = readFile(entry.path());
+        const size_t at = bytes.find(written);
+        ASSERT_NE(at, std::string::npos) << entry.path() << " has no Rescale Intercept of 0 where it was expected";
+        bytes.replace(at, written.size(), replaced);
+        writeFile(entry.path(), bytes);
+    }
+}
+
+// A CT's stored pixels shifted by its Rescale Intercept (-1024 in most scanners' files): the
+// values and the type after rescaling are GDCM's, from 16-bit stored pixels signed or not.
+TEST_F(VolumeIoTest, UncompressedSeriesWithAnInterceptEqualsGdcmsRead) {
+    for (const VoxelType type : {VoxelType::UInt16, VoxelType::Int16}) {
+        Volume v;
+        v.dims = {6, 5, 4};
+        v.spacing = {0.6, 0.6, 1.5};
+        v.voxels.resize(v.voxelCount());
+        for (size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(int(i) * 37 % 4096);
+        const std::string name(voxelTypeName(type));
+        saveDicomSeries(v, dir / name, type);
+        setRescaleIntercept(dir / name, "-1024");
+        std::string why;
+        ASSERT_TRUE(io::scanUncompressedSeries(dir / name, why)) << name << ": the direct reader did not take it: " << why;
+        const Volume direct = loadVolume(dir / name);
+        const Volume gdcm = loadThroughGdcm(dir / name, dir / (name + "_gdcm"));
+        expectSameVolume(direct, gdcm, name);
+        EXPECT_EQ(direct.range.min, -1024.0f) << name;
+        EXPECT_EQ(direct.sourceType, VoxelType::Int32) << name << ": 16 stored bits shifted by -1024 fit no 16-bit type";
+    }
 }
 
 } // namespace
