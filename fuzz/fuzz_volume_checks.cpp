@@ -30,6 +30,7 @@
 // check opens the FIFO (it would block: a libFuzzer timeout).
 
 #include "renderer/io/dicom_series.cpp"
+#include "renderer/io/dicom_uncompressed.cpp"
 #include "renderer/io/itk_reading.cpp"
 #include "renderer/io/metaimage.cpp"
 #include "renderer/io/nifti.cpp"
