@@ -441,13 +441,27 @@ std::vector<StudyRecord> Client::findStudies(const StudyQuery &query) {
 
 SeriesSize Client::seriesSize(const std::string &studyUid, const std::string &seriesUid) {
     checkUids(config_, studyUid, seriesUid);
-    const std::string url = base_ + "/studies/" + studyUid + "/series/" + seriesUid +
-                            "/instances?includefield=00280010&includefield=00280011&includefield=00280008";
     HttpClient http(httpOptions(config_, false));
-    const json instances = parseDatasets(config_, http.get(url, kJson, config_.maxQueryBytes), url);
+    // The size of one image from the first instance's record, the count from the series' own
+    // (Number of Series Related Instances): asking every instance for its Rows and Columns made
+    // Orthanc open all 300 files of a CT series (0.17-0.3 s) before retrieval could begin. A
+    // series whose images differ in size stays bounded all the same: retrieval stops at its
+    // byte limit, and the loader checks every slice. A source that does not give the count is
+    // asked for every instance's record.
+    const std::string seriesUrl = base_ + "/studies/" + studyUid + "/series?SeriesInstanceUID=" + seriesUid +
+                                  "&includefield=00201209";
+    const json series = parseDatasets(config_, http.get(seriesUrl, kJson, config_.maxQueryBytes), seriesUrl);
+    std::optional<int64_t> count;
+    for (const json &dataset : series)
+        if (uidOf(dataset, "0020000E") == seriesUid) count = integerOf(dataset, "00201209");
+    const std::string url = base_ + "/studies/" + studyUid + "/series/" + seriesUid + "/instances?" +
+                            (count && *count >= 1 ? "limit=1&" : "") +
+                            "includefield=00280010&includefield=00280011&includefield=00280008";
+    json instances = parseDatasets(config_, http.get(url, kJson, config_.maxQueryBytes), url);
     if (instances.empty())
         throw DicomWebError(ErrorKind::NotFound, sourceText(config_) + " has no instances of series " + seriesUid +
                                                      " in study " + studyUid);
+    if (count && *count >= 1) instances = json::array({instances.at(0)});
     SeriesSize size;
     for (const json &dataset : instances) {
         ++size.instances;
@@ -465,6 +479,14 @@ SeriesSize Client::seriesSize(const std::string &studyUid, const std::string &se
         size.float32Bytes = bytes > std::numeric_limits<uint64_t>::max() - size.float32Bytes
                                 ? std::numeric_limits<uint64_t>::max()
                                 : size.float32Bytes + bytes;
+    }
+    if (count && *count >= 1) {
+        // Every instance taken to be as large as the first; the product saturates, never wraps.
+        const uint64_t n = uint64_t(*count);
+        size.instances = *count;
+        size.float32Bytes = size.float32Bytes > std::numeric_limits<uint64_t>::max() / n
+                                ? std::numeric_limits<uint64_t>::max()
+                                : size.float32Bytes * n;
     }
     return size;
 }

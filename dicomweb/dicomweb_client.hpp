@@ -45,11 +45,12 @@ struct StudyRecord {
     std::vector<SeriesRecord> series;
 };
 
-// From the QIDO-RS metadata of the series' instances, before retrieval.
+// From QIDO-RS metadata, before retrieval: the series' instance count and its first
+// instance's size (every instance's, largest and summed, where the source gives no count).
 struct SeriesSize {
     int64_t instances = 0;
-    int64_t rows = 0, columns = 0;  // the largest of the instances'
-    uint64_t float32Bytes = 0;      // Σ frames × rows × columns × 4 over the instances
+    int64_t rows = 0, columns = 0;
+    uint64_t float32Bytes = 0;      // frames × rows × columns × 4 of an instance, times the count
 };
 
 struct RetrieveProgress {
@@ -68,8 +69,10 @@ class Client {
     // whose UID is missing or malformed are left out; other missing attributes are empty.
     std::vector<StudyRecord> findStudies(const StudyQuery &query);
 
-    // QIDO-RS of the series' instances (Rows, Columns, NumberOfFrames). NotFound when the
-    // series has no instance; BadResponse when an instance has no usable Rows or Columns.
+    // QIDO-RS of the series (Number of Series Related Instances) and of its first instance
+    // (Rows, Columns, NumberOfFrames); of every instance where the series record has no count.
+    // NotFound when the series has no instance; BadResponse when an instance asked has no
+    // usable Rows or Columns.
     SeriesSize seriesSize(const std::string &studyUid, const std::string &seriesUid);
 
     // WADO-RS multipart/related; type="application/dicom": each instance is written, as it
