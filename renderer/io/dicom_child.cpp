@@ -3,6 +3,7 @@
 
 #include "renderer/io/dicom_child.hpp"
 #include "renderer/io/dicom_check.hpp"
+#include "renderer/io/dicom_series.hpp"
 
 #include <itkMetaImageIO.h>
 #include <itkNiftiImageIO.h>
@@ -144,13 +145,17 @@ std::string quotableTask(std::string_view text) {
 }
 
 // What the checker hands back: the volume it loaded, so that the file is parsed once, in the
-// child, and never again in the caller. A fixed header, the file's modality, then the samples
-// as the volume holds them (narrow integers or float32). The caller reads it as it reads any
-// file from outside: a child that a hostile file took over could have written anything here,
-// so every field is checked and the statistics are computed again.
+// child, and never again in the caller. A fixed header, the file's modality, then either the
+// samples as the volume holds them (narrow integers or float32), or, for an uncompressed
+// DICOM series in a folder that outlives the load (planSlices > 0), a plan: the pixel format
+// and where each slice's pixels lie, which the caller copies from the files itself. A plan
+// spares a copy of the whole volume through the hand-back (the pixels need no parsing; their
+// headers were parsed here). The caller reads it as it reads any file from outside: a child
+// that a hostile file took over could have written anything here, so every field is checked,
+// every file of a plan opened as untrusted, and the statistics are computed again.
 struct CheckedHeader {
     char magic[16] = "volcast-checked";
-    uint32_t version = 2;
+    uint32_t version = 3;
     int32_t sourceType = 0;
     int64_t dims[3] = {0, 0, 0};
     double spacing[3] = {1, 1, 1};
@@ -162,12 +167,50 @@ struct CheckedHeader {
     uint32_t orientationKnown = 0;
     uint32_t modalityBytes = 0;
     uint32_t modalityFieldBytes = 0;
-    uint32_t zero = 0;   // what would be padding: written as zeros, not as the stack's bytes
+    uint32_t planSlices = 0;   // a plan's slices, one per z; 0: the samples follow
 };
 static_assert(sizeof(CheckedHeader) == 200, "no padding left in the hand-back's header");
+
+// A plan's pixel format, after the header and modality; then per slice, in stack order, the
+// pixel data's offset (uint64), its file's name length (uint32) and name (within the folder).
+struct CheckedPlanFormat {
+    int32_t bitsAllocated = 16;
+    int32_t bitsStored = 16;
+    int32_t isSigned = 0;
+    int32_t zero = 0;   // what would be padding: written as zeros
+    double intercept = 0;
+};
+static_assert(sizeof(CheckedPlanFormat) == 24, "no padding in the plan's format");
+constexpr uint32_t kMaxPlanNameBytes = 255;
 constexpr uint32_t kMaxCheckedModalityBytes = 64;
 
-void writeCheckedVolume(const Volume &v, const fs::path &to) {
+// Writes whole buffers to the result file the caller made (O_NOFOLLOW and no O_CREAT: only
+// that file is written).
+class ResultWriter {
+  public:
+    explicit ResultWriter(const fs::path &to) : fd_(::open(to.c_str(), O_WRONLY | O_TRUNC | O_NOFOLLOW | O_CLOEXEC)) {
+        if (fd_ < 0) throw std::runtime_error("cannot open the result file: " + std::string(std::strerror(errno)));
+    }
+    ~ResultWriter() { ::close(fd_); }
+    ResultWriter(const ResultWriter &) = delete;
+    ResultWriter &operator=(const ResultWriter &) = delete;
+    void put(const void *data, size_t bytes) {
+        const char *at = static_cast<const char *>(data);
+        while (bytes > 0) {
+            const ssize_t n = ::write(fd_, at, std::min<size_t>(bytes, size_t(1) << 30));
+            if (n < 0 && errno == EINTR) continue;
+            if (n <= 0) throw std::runtime_error("cannot write the result file: " + std::string(std::strerror(errno)));
+            at += n;
+            bytes -= size_t(n);
+        }
+    }
+
+  private:
+    int fd_;
+};
+
+// The header and modality of v; the samples (or a plan) follow.
+void putCheckedHeader(ResultWriter &out, const Volume &v, uint32_t planSlices) {
     CheckedHeader h;
     h.sourceType = int32_t(v.sourceType);
     for (int a = 0; a < 3; ++a) {
@@ -184,28 +227,36 @@ void writeCheckedVolume(const Volume &v, const fs::path &to) {
     h.modalityBytes = uint32_t(modality.size());
     const std::string modalityField = v.modalityField.substr(0, kMaxCheckedModalityBytes);
     h.modalityFieldBytes = uint32_t(modalityField.size());
-    // O_NOFOLLOW and no O_CREAT: the caller made the file, and only that file is written.
-    const int fd = ::open(to.c_str(), O_WRONLY | O_TRUNC | O_NOFOLLOW | O_CLOEXEC);
-    if (fd < 0) throw std::runtime_error("cannot open the result file: " + std::string(std::strerror(errno)));
-    const auto put = [&](const void *data, size_t bytes) {
-        const char *at = static_cast<const char *>(data);
-        while (bytes > 0) {
-            const ssize_t n = ::write(fd, at, std::min<size_t>(bytes, size_t(1) << 30));
-            if (n < 0 && errno == EINTR) continue;
-            if (n <= 0) {
-                ::close(fd);
-                throw std::runtime_error("cannot write the result file: " + std::string(std::strerror(errno)));
-            }
-            at += n;
-            bytes -= size_t(n);
-        }
-    };
-    put(&h, sizeof h);
-    put(modality.data(), modality.size());
-    put(modalityField.data(), modalityField.size());
-    if (v.narrow.bytes == 4) put(v.voxels.data(), v.voxels.size() * sizeof(float));
-    else put(v.narrowVoxels.data(), v.voxelCount() * size_t(v.narrow.bytes));
-    ::close(fd);
+    h.planSlices = planSlices;
+    out.put(&h, sizeof h);
+    out.put(modality.data(), modality.size());
+    out.put(modalityField.data(), modalityField.size());
+}
+
+void writeCheckedVolume(const Volume &v, const fs::path &to) {
+    ResultWriter out(to);
+    putCheckedHeader(out, v, 0);
+    if (v.narrow.bytes == 4) out.put(v.voxels.data(), v.voxels.size() * sizeof(float));
+    else out.put(v.narrowVoxels.data(), v.voxelCount() * size_t(v.narrow.bytes));
+}
+
+void writeSeriesPlan(const Volume &v, const UncompressedSeries &series, const fs::path &to) {
+    ResultWriter out(to);
+    putCheckedHeader(out, v, uint32_t(series.slices.size()));
+    const UncompressedSlice &first = series.slices.front();
+    CheckedPlanFormat format;
+    format.bitsAllocated = first.bitsAllocated;
+    format.bitsStored = first.bitsStored;
+    format.isSigned = first.isSigned ? 1 : 0;
+    format.intercept = first.intercept;
+    out.put(&format, sizeof format);
+    for (const UncompressedSlice &s : series.slices) {
+        const uint64_t offset = s.pixelOffset;
+        const uint32_t nameBytes = uint32_t(std::min<size_t>(s.file.size(), kMaxPlanNameBytes + 1));
+        out.put(&offset, sizeof offset);
+        out.put(&nameBytes, sizeof nameBytes);
+        out.put(s.file.data(), nameBytes);
+    }
 }
 
 void setLimit(int resource, uint64_t value) {
@@ -217,9 +268,63 @@ void setLimit(int resource, uint64_t value) {
 
 } // namespace
 
+namespace {
+
+// The rest of a hand-back that is a plan (CheckedHeader::planSlices > 0): its format and
+// slices checked, then the slices' pixels copied from the files in `path`, the folder that
+// was checked, and packed here.
+Volume readSeriesPlan(const fs::path &path, const fs::path &from, std::ifstream &in, const CheckedHeader &h,
+                      const LoadOptions &options, bool samples, LoadProgress *progress, Volume v) {
+    const auto damaged = [&](const std::string &what) -> Volume {
+        fail(path, "the parser in its separate process handed back a damaged plan (" + what + "); it is not loaded");
+    };
+    // Only a folder's load asks for a plan, and only to load it now.
+    if (!samples || !fs::is_directory(path)) return damaged("a plan where the samples were asked for");
+    if (int64_t(h.planSlices) != v.dims.z || v.dims.z < 2) return damaged("slice count");
+    CheckedPlanFormat format;
+    if (!in.read(reinterpret_cast<char *>(&format), sizeof format)) return damaged("short format");
+    if ((format.bitsAllocated != 8 && format.bitsAllocated != 16) || format.bitsStored < 1 ||
+        format.bitsStored > format.bitsAllocated || format.isSigned < 0 || format.isSigned > 1 ||
+        !(format.intercept == std::trunc(format.intercept)) || std::abs(format.intercept) > double(1 << 20))
+        return damaged("pixel format");
+    UncompressedSeries series;
+    series.type = v.sourceType;
+    uint64_t expected = sizeof h + h.modalityBytes + h.modalityFieldBytes + sizeof format;
+    for (uint32_t k = 0; k < h.planSlices; ++k) {
+        UncompressedSlice s;
+        uint64_t offset = 0;
+        uint32_t nameBytes = 0;
+        if (!in.read(reinterpret_cast<char *>(&offset), sizeof offset) ||
+            !in.read(reinterpret_cast<char *>(&nameBytes), sizeof nameBytes) || nameBytes == 0 ||
+            nameBytes > kMaxPlanNameBytes)
+            return damaged("slice entry");
+        s.file.resize(nameBytes);
+        if (!in.read(s.file.data(), nameBytes)) return damaged("short slice name");
+        // A name within the folder: no separator, no NUL, not the folder or its parent.
+        if (s.file.find_first_of(std::string("/\0", 2)) != std::string::npos || s.file == "." || s.file == "..")
+            return damaged("a slice name outside the folder");
+        s.pixelOffset = offset;
+        s.columns = v.dims.x;
+        s.rows = v.dims.y;
+        s.bitsAllocated = format.bitsAllocated;
+        s.bitsStored = format.bitsStored;
+        s.isSigned = format.isSigned == 1;
+        s.intercept = format.intercept;
+        series.slices.push_back(std::move(s));
+        expected += sizeof offset + sizeof nameBytes + nameBytes;
+    }
+    if (fileSize(from).value_or(0) != expected) return damaged("its size is not what its header says");
+    LoadProgress own(options, path);
+    readUncompressedSamples(path, series, progress ? *progress : own, 0.8, 0.9, v);
+    return v;
+}
+
+} // namespace
+
 // `samples` false: the header only (its fields and the file's size checked), for a caller that
 // keeps the result to load later.
-Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options, bool samples) {
+Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options, bool samples,
+                         LoadProgress *progress) {
     const auto damaged = [&](const std::string &what) -> Volume {
         fail(path, "the parser in its separate process handed back a damaged result (" + what + "); it is not loaded");
     };
@@ -251,6 +356,7 @@ Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadO
     if (!in.read(v.modality.data(), std::streamsize(h.modalityBytes))) return damaged("short modality");
     v.modalityField.resize(h.modalityFieldBytes);
     if (!in.read(v.modalityField.data(), std::streamsize(h.modalityFieldBytes))) return damaged("short modality");
+    if (h.planSlices > 0) return readSeriesPlan(path, from, in, h, options, samples, progress, std::move(v));
     const uint64_t sampleBytes = uint64_t(v.voxelCount()) * uint64_t(h.narrowBytes);
     const uint64_t expected = sizeof h + h.modalityBytes + h.modalityFieldBytes + sampleBytes;
     if (fileSize(from).value_or(0) != expected) return damaged("its size is not what its header says");
@@ -275,7 +381,7 @@ Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadO
 // caller made): true when it did, false when it refused the file (the caller then repeats the
 // load here for the refusal's own words); any other end of the child fails the load.
 bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
-                const fs::path &result) {
+                const fs::path &result, bool planAllowed) {
     const auto checker = dicomCheckerPath();
     if (!checker)
         fail(path, fmt::format("{}, which is first parsed in a separate process, but the DICOM checker '{}' "
@@ -305,6 +411,7 @@ bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
     std::vector<std::string> args = {checker->string(), path.string(), std::to_string(options.maxBytes),
                                      std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds),
                                      std::to_string(options.maxArchiveBytes), result.string()};
+    if (planAllowed) args.push_back("plan");
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -394,11 +501,14 @@ namespace volcast {
 
 int runDicomCheck(int argc, char **argv) {
     using namespace io; // the checker's limits and statuses, and the load (dicom_child.hpp)
-    if (argc < 5 || argc > 7) {
-        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT]]\n"
+    const bool planAllowed = argc == 8 && std::strcmp(argv[7], "plan") == 0;
+    if (argc < 5 || argc > 8 || (argc == 8 && !planAllowed)) {
+        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT [plan]]]\n"
                              "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
                              "files from outside away from the server), and writes what it loaded to the existing "
-                             "file RESULT; exit status 0 loaded, 1 refused, 3 out of memory.\n",
+                             "file RESULT; with 'plan', an uncompressed DICOM series in a folder is handed back as "
+                             "where its slices' pixels lie rather than as samples. Exit status 0 loaded, 1 refused, "
+                             "3 out of memory.\n",
                      kCheckerName);
         return kCheckUsage;
     }
@@ -426,8 +536,20 @@ int runDicomCheck(int argc, char **argv) {
         std::fflush(stdout);
     };
     try {
+        if (planAllowed && fs::is_directory(argv[1])) {
+            // The series' headers parsed and checked here as the load would; its pixels, which
+            // need no parsing, left for the caller to copy from the files.
+            LoadProgress progress(options, argv[1]);
+            progress(0, "reading header");
+            checkDicomFolderEntries(argv[1]);
+            Volume placed;
+            if (const auto series = placedUncompressedSeries(argv[1], options, progress, placed)) {
+                writeSeriesPlan(placed, *series, argv[6]);
+                return kCheckLoaded;
+            }
+        }
         const Volume v = loadVolumeHere(argv[1], options, false);
-        if (argc == 7) writeCheckedVolume(v, argv[6]);
+        if (argc >= 7) writeCheckedVolume(v, argv[6]);
         return kCheckLoaded;
     } catch (const LoadOutOfMemory &e) {
         std::fprintf(stderr, "%s\n", e.what());

@@ -19,9 +19,10 @@ namespace volcast::io {
 bool reachesGdcm(const fs::path &path);
 
 // The checker's hand-back in `from`, every field checked again; messages name `path`.
-// `samples` false: the header only (its fields and the file's size checked).
+// `samples` false: the header only (its fields and the file's size checked). A plan's
+// pixels are read from the files in the folder `path`, with `progress` where given.
 Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options,
-                         bool samples = true);
+                         bool samples = true, LoadProgress *progress = nullptr);
 
 // A result file of the caller's, removed however the load ends.
 struct CheckedResultFile {
@@ -41,10 +42,12 @@ struct CheckedResultFile {
     CheckedResultFile &operator=(const CheckedResultFile &) = delete;
 };
 
-// Parses the file in the checker process: true when it loaded it (its volume is in `result`),
-// false when it refused it; any other end of the child fails the load.
+// Parses the file in the checker process: true when it loaded it (its volume, or with
+// planAllowed and a folder it reads directly, its plan, is in `result`), false when it refused
+// it; any other end of the child fails the load. planAllowed only where the folder outlives
+// the reading of the result (never for a kept parse or an unpacked archive).
 bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
-                const fs::path &result);
+                const fs::path &result, bool planAllowed = false);
 
 // The load in this process (volume_io.cpp): the checker's own load, with dicomInChild false.
 Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dicomInChild);

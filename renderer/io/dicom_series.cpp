@@ -27,7 +27,6 @@
 #include <vector>
 
 namespace volcast::io {
-namespace {
 
 // Every entry of a DICOM folder must be a regular file or a folder that stays inside it:
 // GDCM opens each file to scan it, and a FIFO would block the loader.
@@ -46,6 +45,8 @@ void checkDicomFolderEntries(const fs::path &dir) {
             fail(dir, fmt::format("'{}' in the folder is not a regular file (a FIFO, socket or device)", name));
     }
 }
+
+namespace {
 
 // The numbers of a DS (decimal string) element, or nothing when it is absent or does not hold
 // exactly `count` finite numbers. Parsed here rather than by GDCM's attribute classes, whose
@@ -144,6 +145,24 @@ void checkSeriesGeometry(const fs::path &dir, const std::vector<SliceGeometry> &
 }
 
 } // namespace
+
+std::optional<UncompressedSeries> placedUncompressedSeries(const fs::path &dir, const LoadOptions &options,
+                                                          LoadProgress &progress, Volume &v) {
+    std::string why;
+    auto series = scanUncompressedSeries(dir, why);
+    if (!series) {
+        spdlog::debug("{}: read through GDCM ({})", dir.string(), why);
+        return std::nullopt;
+    }
+    placeUncompressedSeries(dir, *series, v);
+    checkShape(dir, v.dims, options);
+    progress(0.01, "checking slices");
+    std::vector<SliceGeometry> geometry;
+    for (const UncompressedSlice &s : series->slices)
+        geometry.push_back({s.file, s.position, s.orientation, s.rows, s.columns});
+    checkSeriesGeometry(dir, geometry);
+    return series;
+}
 
 // GDCM reads a slice whose pixel data is cut short as if the missing bytes were zero, so the
 // loader compares each slice's file size with the length its pixel data element declares,
@@ -264,21 +283,11 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     checkDicomFolderEntries(dir);
     // Uncompressed slices of one series are read straight from their files; any other
     // series through ITK and GDCM, below.
-    std::string why;
-    if (const auto series = scanUncompressedSeries(dir, why)) {
-        const UncompressedSlice &first = series->slices.front();
-        Volume v;
-        v.dims = {first.columns, first.rows, int64_t(series->slices.size())};
-        checkShape(dir, v.dims, options);
-        progress(0.01, "checking slices");
-        std::vector<SliceGeometry> geometry;
-        for (const UncompressedSlice &s : series->slices)
-            geometry.push_back({s.file, s.position, s.orientation, s.rows, s.columns});
-        checkSeriesGeometry(dir, geometry);
-        readUncompressedSeries(dir, *series, progress, v);
+    Volume v;
+    if (const auto series = placedUncompressedSeries(dir, options, progress, v)) {
+        readUncompressedSamples(dir, *series, progress, 0.02, 0.9, v);
         return v;
     }
-    spdlog::debug("{}: read through GDCM ({})", dir.string(), why);
     auto names = itk::GDCMSeriesFileNames::New();
     names->SetUseSeriesDetails(true);
     names->SetDirectory(dir.string());
@@ -309,7 +318,6 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     if (io->GetNumberOfDimensions() > 2 && io->GetDimensions(2) != 1)
         fail(dir, "series of multi-frame DICOM files are not supported (each file holds several slices)");
     const VoxelType type = checkedVoxelType(dir, *io);
-    Volume v;
     v.dims = {int64_t(io->GetDimensions(0)), int64_t(io->GetDimensions(1)), int64_t(files.size())};
     checkShape(dir, v.dims, options);
     // The stored pixels of one slice, before ITK's rescaling: rows x columns x stored size.

@@ -2,6 +2,7 @@
 // A DICOM series given as a folder (or packed as a .zip): the folder's entries, each slice's
 // pixel data length, the stack's geometry, then ITK's series reader. Internal to renderer/io/.
 
+#include "renderer/io/dicom_uncompressed.hpp"
 #include "renderer/io/volume_checks.hpp"
 
 #include <itkGDCMImageIO.h>
@@ -22,6 +23,15 @@ struct SliceGeometry {
 // The slice holds the pixel data its header declares, and at least `need` bytes of it; else
 // fails naming the slice. Returns where the slice lies.
 SliceGeometry checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_t need);
+
+// Every entry of the folder a regular file or a folder inside it (GDCM would block on a FIFO).
+void checkDicomFolderEntries(const fs::path &dir);
+
+// The folder's series when the direct reader takes it (dicom_uncompressed.hpp), checked as
+// any series is (its shape against the budget, its slices' geometry) and v placed; no
+// samples yet. Nothing when the series goes through GDCM.
+std::optional<UncompressedSeries> placedUncompressedSeries(const fs::path &dir, const LoadOptions &options,
+                                                          LoadProgress &progress, Volume &v);
 
 // Bytes of one stored DICOM pixel (before ITK applies the rescale slope and intercept).
 uint64_t storedDicomSize(itk::GDCMImageIO &io);

@@ -328,7 +328,8 @@ bool readAt(int fd, unsigned char *to, size_t size, uint64_t offset) {
 
 struct File {
     int fd = -1;
-    explicit File(const fs::path &p) : fd(::open(p.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW)) {}
+    // Non-blocking: a FIFO in its place is refused by fstat, never waited on.
+    explicit File(const fs::path &p) : fd(::open(p.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK)) {}
     ~File() {
         if (fd >= 0) ::close(fd);
     }
@@ -457,26 +458,12 @@ void packInPlace(Volume &v, const UncompressedSlice &format) {
 
 } // namespace
 
-void readUncompressedSeries(const fs::path &dir, const UncompressedSeries &series, LoadProgress &progress, Volume &v) {
-    const UncompressedSlice &first = series.slices.front();
-    const size_t stored = size_t(first.bitsAllocated / 8);
-    const size_t sliceBytes = size_t(first.rows) * size_t(first.columns) * stored;
-    v.narrowVoxels.assign(sliceBytes * series.slices.size() + kNarrowSlack, 0);
-    progress(0.02, "reading slices");
-    for (size_t k = 0; k < series.slices.size(); ++k) {
-        const UncompressedSlice &s = series.slices[k];
-        const File file(dir / s.file);
-        if (file.fd < 0 || !readAt(file.fd, v.narrowVoxels.data() + k * sliceBytes, sliceBytes, s.pixelOffset))
-            fail(dir, fmt::format("slice '{}' can no longer be read", s.file));
-        progress(0.02 + 0.88 * double(k + 1) / double(series.slices.size()), "reading slices");
-    }
-    if (stored == 1) packInPlace<uint8_t>(v, first);
-    else packInPlace<uint16_t>(v, first);
-
-    // Geometry as ITK's series reader computes it: x and y spacing from Pixel Spacing
-    // (between columns, between rows), the origin at the first slice, the z spacing and the
-    // third axis from the first slice to the last.
-    const UncompressedSlice &last = series.slices.back();
+void placeUncompressedSeries(const fs::path &dir, const UncompressedSeries &series, Volume &v) {
+    // As ITK's series reader computes it: x and y spacing from Pixel Spacing (between
+    // columns, between rows), the origin at the first slice, the z spacing and the third axis
+    // from the first slice to the last.
+    const UncompressedSlice &first = series.slices.front(), &last = series.slices.back();
+    v.dims = {first.columns, first.rows, int64_t(series.slices.size())};
     const Vec3d span = last.position - first.position;
     const auto &o = first.orientation;
     v.spacing = {first.pixelSpacing[1], first.pixelSpacing[0], length(span) / double(series.slices.size() - 1)};
@@ -493,6 +480,27 @@ void readUncompressedSeries(const fs::path &dir, const UncompressedSeries &serie
     v.orientationKnown = true;
     v.modality = statedText(first.modality);
     v.modalityField = v.modality.empty() ? "" : "DICOM";
+}
+
+void readUncompressedSamples(const fs::path &dir, const UncompressedSeries &series, LoadProgress &progress,
+                             double from, double to, Volume &v) {
+    const UncompressedSlice &first = series.slices.front();
+    const size_t stored = size_t(first.bitsAllocated / 8);
+    const size_t sliceBytes = size_t(first.rows) * size_t(first.columns) * stored;
+    v.narrowVoxels.assign(sliceBytes * series.slices.size() + kNarrowSlack, 0);
+    progress(from, "reading slices");
+    for (size_t k = 0; k < series.slices.size(); ++k) {
+        const UncompressedSlice &s = series.slices[k];
+        const File file(dir / s.file);
+        struct stat st {};
+        if (file.fd < 0 || ::fstat(file.fd, &st) != 0 || !S_ISREG(st.st_mode) ||
+            uint64_t(st.st_size) < s.pixelOffset + sliceBytes ||
+            !readAt(file.fd, v.narrowVoxels.data() + k * sliceBytes, sliceBytes, s.pixelOffset))
+            fail(dir, fmt::format("slice '{}' no longer holds its pixel data", s.file));
+        progress(from + (to - from) * double(k + 1) / double(series.slices.size()), "reading slices");
+    }
+    if (stored == 1) packInPlace<uint8_t>(v, first);
+    else packInPlace<uint16_t>(v, first);
 }
 
 } // namespace volcast::io

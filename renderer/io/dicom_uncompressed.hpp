@@ -55,9 +55,15 @@ struct UncompressedSeries {
 // checkDicomFolderEntries), else nothing, `why` saying what it met first. Reads only headers.
 std::optional<UncompressedSeries> scanUncompressedSeries(const fs::path &dir, std::string &why);
 
-// The series' samples into v's narrow store (dims already set), slice by slice, with progress
-// from 0.02 to 0.9; its geometry, type, modality and orientation. The slices' geometry has
-// been checked (checkSeriesGeometry) and v.dims against the memory budget (checkShape).
-void readUncompressedSeries(const fs::path &dir, const UncompressedSeries &series, LoadProgress &progress, Volume &v);
+// v placed as ITK's series reader places the series: dims, spacing, origin and direction
+// (checked), the type after rescaling, modality, orientation known. No samples yet.
+void placeUncompressedSeries(const fs::path &dir, const UncompressedSeries &series, Volume &v);
+
+// The series' samples into v's narrow store (v placed, its dims checked against the memory
+// budget), slice by slice with progress from `from` to `to`, packed as narrowWidth and
+// packNarrow would hold them. Each file is opened anew (not following links, refused unless
+// regular) and must still hold its slice's bytes at the offset given.
+void readUncompressedSamples(const fs::path &dir, const UncompressedSeries &series, LoadProgress &progress,
+                             double from, double to, Volume &v);
 
 } // namespace volcast::io

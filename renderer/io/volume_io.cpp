@@ -43,9 +43,11 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
             const bool dicom = folder || zip || (fileSize(path).value_or(0) > 0 && reachesGdcm(path));
             if (dicom || options.parseInChild) {
                 const CheckedResultFile result;
-                if (runChecker(path, options, progress, dicom, result.path)) {
+                // A folder's uncompressed series may come back as a plan: its pixels copied
+                // here from the files, straight into the volume.
+                if (runChecker(path, options, progress, dicom, result.path, folder)) {
                     progress(0.8, "reading the parsed volume");
-                    checked = readCheckedVolume(path, result.path, options);
+                    checked = readCheckedVolume(path, result.path, options, true, &progress);
                 }
             }
         }

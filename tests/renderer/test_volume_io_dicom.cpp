@@ -5,6 +5,7 @@
 
 #include "volume_io_test_helpers.hpp"
 
+#include "renderer/io/dicom_child.hpp"
 #include "renderer/io/dicom_uncompressed.hpp"
 #include "renderer/io/volume_io.hpp"
 
@@ -274,6 +275,52 @@ TEST_F(VolumeIoTest, UncompressedSeriesWithAnInterceptEqualsGdcmsRead) {
         EXPECT_EQ(direct.range.min, -1024.0f) << name;
         EXPECT_EQ(direct.sourceType, VoxelType::Int32) << name << ": 16 stored bits shifted by -1024 fit no 16-bit type";
     }
+}
+
+// The checker hands an uncompressed series in a folder back as a plan: where each slice's
+// pixels lie, which the caller copies from the files itself. The caller reads a plan as
+// untrusted (a checker a hostile file took over could write anything): a slice named outside
+// the folder, a FIFO in a slice's place or an offset past a file's end is refused, naming
+// the damage, and nothing blocks.
+TEST_F(VolumeIoTest, ASeriesPlanFromTheCheckerIsReadAsUntrusted) {
+    const fs::path series = dir / "series", plan = dir / "plan.bin";
+    saveDicomSeries(obliqueSeriesVolume(), series, VoxelType::Int16);
+    writeFile(plan, "");
+    const std::string command = std::string("'") + VOLCAST_DICOM_CHECK_BUILD_PATH + "' '" + series.string() +
+                                "' 4000000000 4096 60 4000000000 '" + plan.string() + "' plan";
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    EXPECT_LT(fs::file_size(plan), 1024u) << "a plan of 7 slices, not their samples";
+    const std::string original = readFile(plan);
+    Volume fromPlan = io::readCheckedVolume(series, plan, LoadOptions{});
+    computeStatistics(fromPlan);   // as the load does after reading a hand-back
+    expectSameVolume(fromPlan, loadThroughGdcm(series, dir / "gdcm"), "read from the plan");
+
+    const auto refused = [&](const std::string &bytes, const fs::path &folder, bool samples,
+                             std::initializer_list<const char *> words) {
+        writeFile(plan, bytes);
+        try {
+            io::readCheckedVolume(folder, plan, LoadOptions{}, samples);
+            ADD_FAILURE() << "a damaged plan was read";
+        } catch (const VolumeLoadError &e) {
+            for (const char *word : words) EXPECT_NE(std::string(e.what()).find(word), std::string::npos) << e.what();
+        }
+    };
+    const auto replaced = [&](const std::string &from, const std::string &to) {
+        std::string bytes = original;
+        const size_t at = bytes.find(from);
+        EXPECT_NE(at, std::string::npos) << from;
+        return bytes.replace(at, from.size(), to);
+    };
+    refused(replaced("slice_0003.dcm", "../outside.dcm"), series, true, {"damaged plan", "outside the folder"});
+    ASSERT_EQ(::mkfifo((series / "fifo_xx_03.dcm").c_str(), 0600), 0);
+    refused(replaced("slice_0003.dcm", "fifo_xx_03.dcm"), series, true, {"fifo_xx_03.dcm", "no longer holds"});
+    // Slice 3's offset: the 8 bytes before its name's length.
+    std::string far = original;
+    const size_t name = far.find("slice_0003.dcm");
+    for (size_t i = name - 12; i < name - 4; ++i) far[i] = char(0xff);
+    refused(far, series, true, {"slice_0003.dcm", "no longer holds"});
+    refused(original.substr(0, original.size() - 1), series, true, {"damaged plan"});
+    refused(original, series, false, {"damaged plan", "samples"});
 }
 
 } // namespace
