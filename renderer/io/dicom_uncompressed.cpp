@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <bit>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -419,34 +420,34 @@ namespace {
 
 // Stored pixels (Code: uint8_t or uint16_t) to the narrow store in place: the value is the
 // low bitsStored bits (sign-extended when signed) plus the intercept; the store holds value −
-// lowest in 1 or 2 bytes, as narrowWidth and packNarrow would choose and write.
+// lowest in 1 or 2 bytes, as narrowWidth and packNarrow would choose and write. The store's
+// bytes are read and written as Code through a may_alias type (the host is little-endian,
+// as the store), so that both passes vectorise.
 template <class Code>
 void packInPlace(Volume &v, const UncompressedSlice &format) {
+    static_assert(std::endian::native == std::endian::little, "the narrow store is little-endian");
+    using Aliased [[gnu::may_alias]] = Code;
     const size_t count = v.voxelCount();
+    Aliased *codes = reinterpret_cast<Aliased *>(v.narrowVoxels.data());
     const unsigned bits = unsigned(format.bitsStored);
-    const uint32_t mask = bits >= 32 ? 0xffffffffu : (uint32_t(1) << bits) - 1;
-    const auto valueOf = [&](Code c) -> int32_t {
-        const uint32_t u = uint32_t(c) & mask;
-        if (format.isSigned && (u >> (bits - 1)) & 1) return int32_t(u) - int32_t(uint32_t(1) << bits);
-        return int32_t(u);
-    };
-    unsigned char *store = v.narrowVoxels.data();
+    const uint32_t mask = (uint32_t(1) << bits) - 1;
+    const uint32_t sign = format.isSigned ? uint32_t(1) << (bits - 1) : 0;
+    // Two's complement of the low bits: flipping the sign bit and subtracting it extends it.
+    const auto valueOf = [mask, sign](Code c) { return int32_t((uint32_t(c) & mask) ^ sign) - int32_t(sign); };
     int32_t lo = std::numeric_limits<int32_t>::max(), hi = std::numeric_limits<int32_t>::lowest();
     for (size_t i = 0; i < count; ++i) {
-        Code c;
-        std::memcpy(&c, store + i * sizeof(Code), sizeof(Code));
-        const int32_t x = valueOf(c);
+        const int32_t x = valueOf(codes[i]);
         lo = std::min(lo, x);
         hi = std::max(hi, x);
     }
     const int bytes = hi - lo < 256 ? 1 : 2;
-    // Each sample is read before it is written, and the write lands at or before it.
-    for (size_t i = 0; i < count; ++i) {
-        Code c;
-        std::memcpy(&c, store + i * sizeof(Code), sizeof(Code));
-        const uint32_t u = uint32_t(valueOf(c) - lo);
-        store[i * size_t(bytes)] = uint8_t(u);
-        if (bytes == 2) store[i * 2 + 1] = uint8_t(u >> 8);
+    if (size_t(bytes) == sizeof(Code)) {
+        for (size_t i = 0; i < count; ++i) codes[i] = Code(uint32_t(valueOf(codes[i]) - lo));
+    } else {
+        // 16-bit pixels spanning fewer than 256 values: each byte lands at or before the
+        // sample it comes from, which is read first.
+        unsigned char *store = v.narrowVoxels.data();
+        for (size_t i = 0; i < count; ++i) store[i] = uint8_t(uint32_t(valueOf(codes[i]) - lo));
     }
     v.narrow = {bytes, float(double(lo) + format.intercept)};
     if (size_t(bytes) < sizeof(Code)) {

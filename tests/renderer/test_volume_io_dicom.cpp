@@ -277,6 +277,38 @@ TEST_F(VolumeIoTest, UncompressedSeriesWithAnInterceptEqualsGdcmsRead) {
     }
 }
 
+// 12 of 16 bits stored, as most CT scanners write them: the sample is the low 12 bits,
+// sign-extended when signed, whatever the high bits hold; GDCM reads it so, and so must the
+// direct reader. ITK writes 16 bits stored, so Bits Stored and High Bit are rewritten.
+TEST_F(VolumeIoTest, UncompressedSeriesOfTwelveStoredBitsEqualsGdcmsRead) {
+    for (const VoxelType type : {VoxelType::Int16, VoxelType::UInt16}) {
+        Volume v;
+        v.dims = {6, 5, 4};
+        v.voxels.resize(v.voxelCount());
+        // Mostly within 12 bits; every seventh sample has high bits set beyond them.
+        for (size_t i = 0; i < v.voxels.size(); ++i)
+            v.voxels[i] = float(int(i) * 97 % 4096 - (type == VoxelType::Int16 ? 2048 : 0) + (i % 7 == 0 ? 8192 : 0));
+        const std::string name(voxelTypeName(type));
+        saveDicomSeries(v, dir / name, type);
+        const std::string stored("\x28\x00\x01\x01\x02\x00\x00\x00\x10\x00", 10);
+        const std::string high("\x28\x00\x02\x01\x02\x00\x00\x00\x0f\x00", 10);
+        for (const auto &entry : fs::directory_iterator(dir / name)) {
+            std::string bytes = readFile(entry.path());
+            const size_t a = bytes.find(stored), b = bytes.find(high);
+            ASSERT_TRUE(a != std::string::npos && b != std::string::npos) << entry.path() << ": bits not where expected";
+            bytes[a + 8] = 12;
+            bytes[b + 8] = 11;
+            writeFile(entry.path(), bytes);
+        }
+        std::string why;
+        ASSERT_TRUE(io::scanUncompressedSeries(dir / name, why)) << name << ": " << why;
+        const Volume direct = loadVolume(dir / name);
+        const Volume gdcm = loadThroughGdcm(dir / name, dir / (name + "_gdcm"));
+        expectSameVolume(direct, gdcm, name);
+        EXPECT_LE(direct.range.max, 4095.0f) << name << ": 12 bits hold no more";
+    }
+}
+
 // The checker hands an uncompressed series in a folder back as a plan: where each slice's
 // pixels lie, which the caller copies from the files itself. The caller reads a plan as
 // untrusted (a checker a hostile file took over could write anything): a slice named outside
