@@ -113,6 +113,7 @@ struct OpenTiming {
     std::vector<Event> events;             // each (stage, task) in order of first arrival
     uint64_t retrievedBytes = 0;
     json volume;                           // the state's volume
+    json firstFrame;                       // the first frame's level, size and render and encode times
 };
 
 // The parts an open_volume's time goes to. The boundaries are the first arrival of a
@@ -124,7 +125,7 @@ struct OpenTiming {
 //                   for an upload, whose parse was kept when it arrived, from the first loading
 //                   step (reading the kept parse back, checked, statistics)
 //   renderer:       → the state (the renderer's bricks and tables)
-//   first_frame:    → the first frame
+//   first_frame:    → the first frame (its own header says its render and encode times)
 std::map<std::string, double> splitOpen(const std::vector<Event> &events, double stateMs, double frameMs) {
     double retrieveStart = kNaN, retrieveEnd = kNaN, checkStart = kNaN, checkEnd = kNaN, uploading = kNaN;
     double loadStart = kNaN;
@@ -182,6 +183,9 @@ OpenTiming openToFirstFrame(client::Client &c, const std::string &name, Clock::t
             if (std::isnan(stateMs)) continue;   // a frame of an earlier view: none here, but not ours
             t.totalMs = at;
             t.parts = splitOpen(t.events, stateMs, at);
+            const protocol::FrameHeader &h = m->frame.header;
+            t.firstFrame = {{"level", h.level}, {"width", h.width}, {"height", h.height}, {"final", h.final},
+                            {"render_ms", h.renderMs}, {"encode_ms", h.encodeMs}};
             return t;
         }
         if (!m->decoded) continue;
@@ -246,7 +250,8 @@ json openTimingJson(const OpenTiming &t) {
     json events = json::array();
     for (const auto &e : t.events)
         events.push_back({{"stage", e.stage}, {"task", e.task}, {"first_ms", e.firstMs}, {"last_ms", e.lastMs}});
-    return {{"ms", t.totalMs}, {"parts_ms", parts}, {"progress", events}, {"retrieved_bytes", t.retrievedBytes}};
+    return {{"ms", t.totalMs}, {"parts_ms", parts}, {"progress", events}, {"retrieved_bytes", t.retrievedBytes},
+            {"first_frame", t.firstFrame}};
 }
 
 // volcast's first frame of the series over DICOMweb, on a server started for it.
