@@ -3,6 +3,7 @@
 #include "renderer/common/parallel_for.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 
@@ -15,10 +16,56 @@ Vec3i mipLevelDims(Vec3i dims0, int level) {
     return d;
 }
 
-std::vector<float> downsampleMip(const SampleGrid &fine) {
+namespace {
+
+// The first level of a narrow store (an 8- or 16-bit scan), from its codes: the eight codes of
+// a block summed as integers, then the offset added eight times, in double. Each sample is
+// the integer float(code) + offset, so this sum is the float path's sum exactly, and so is
+// every average; it only skips widening each sample to float and then to double (0.18 s of a
+// 512x512x300 scan's first frame, against 0.03 s).
+template <class Code>
+void downsampleNarrow(const SampleGrid &fine, Vec3i m, MipSamples &coarse) {
+    using Aliased [[gnu::may_alias]] = Code;   // the store's bytes, little-endian as the host
+    const Vec3i n = fine.dims;
+    const auto *codes = reinterpret_cast<const Aliased *>(fine.narrow);
+    const double offsets = 8.0 * double(fine.width.offset);
+    const auto row = [&](int64_t j, int64_t k) { return codes + (size_t(k) * size_t(n.y) + size_t(j)) * size_t(n.x); };
+    auto slices = [&](int64_t kBegin, int64_t kEnd) {
+        for (int64_t K = kBegin; K < kEnd; ++K) {
+            const int64_t k0 = 2 * K, k1 = std::min(2 * K + 1, n.z - 1);
+            for (int64_t J = 0; J < m.y; ++J) {
+                const int64_t j0 = 2 * J, j1 = std::min(2 * J + 1, n.y - 1);
+                const Aliased *r00 = row(j0, k0), *r10 = row(j1, k0), *r01 = row(j0, k1), *r11 = row(j1, k1);
+                float *out = &coarse[size_t((K * m.y + J) * m.x)];
+                const auto block = [&](int64_t i0, int64_t i1) {
+                    const uint32_t sum = uint32_t(r00[i0]) + r00[i1] + r10[i0] + r10[i1] + r01[i0] + r01[i1] +
+                                         r11[i0] + r11[i1];
+                    return float((double(sum) + offsets) * 0.125);
+                };
+                const int64_t whole = n.x / 2;   // blocks with both samples inside the row
+                for (int64_t I = 0; I < whole; ++I) out[I] = block(2 * I, 2 * I + 1);
+                if (whole < m.x) out[whole] = block(n.x - 1, n.x - 1);   // an odd row repeats its edge
+            }
+        }
+    };
+    const bool share = m.z >= 2 && size_t(m.x * m.y * m.z) >= (size_t(1) << 16) && resolveThreadCount(0) > 1;
+    parallelFor(m.z, share ? 2 : 1, slices);
+}
+
+} // namespace
+
+MipSamples downsampleMip(const SampleGrid &fine) {
     const Vec3i n = fine.dims;
     const Vec3i m = mipLevelDims(n, 1);
-    std::vector<float> coarse(size_t(m.x) * size_t(m.y) * size_t(m.z));
+    MipSamples coarse(size_t(m.x) * size_t(m.y) * size_t(m.z));
+    if (fine.width.bytes == 1) {
+        downsampleNarrow<uint8_t>(fine, m, coarse);
+        return coarse;
+    }
+    if (fine.width.bytes == 2) {
+        downsampleNarrow<uint16_t>(fine, m, coarse);
+        return coarse;
+    }
     // Average the 2×2×2 block of each coarse sample; an odd axis repeats its edge sample.
     auto slices = [&](int64_t kBegin, int64_t kEnd) {
         std::vector<float> s00, s10, s01, s11; // a narrow level's rows, widened

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <tuple>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -144,18 +146,24 @@ TEST(MipPyramid, BuildsLevelsOnFirstRequestOnly) {
 // A volume held narrow (an 8- or 16-bit scan) is level 0 as it is, and its coarser levels
 // are the float averages the same samples held as float give, to the bit.
 TEST(MipPyramid, ANarrowLevelZeroBuildsTheLevelsItsFloatCopyBuilds) {
-    Volume v = makeVolume({21, 14, 9}, std::vector<float>(21 * 14 * 9));
-    std::mt19937 rng(5);
-    std::uniform_int_distribution<int> u(-1024, 3071);
-    for (float &x : v.voxels) x = float(u(rng));
-    Volume held = v;
-    ASSERT_TRUE(holdNarrow(held));
-    MipPyramid narrow(held), wide(v);
-    EXPECT_EQ(narrow.level(0).narrow, held.narrowVoxels.data()); // not a copy
-    EXPECT_EQ(narrow.level(0).toFloats(), v.voxels);
-    for (int L = 1; L <= narrow.maxLevel(); ++L) {
-        EXPECT_FALSE(narrow.level(L).isNarrow()) << "level " << L << ": averages are held as float";
-        EXPECT_EQ(narrow.level(L).toFloats(), wide.level(L).toFloats()) << "level " << L;
+    // 16 and 8 bits, odd and even axes (an odd axis repeats its edge sample).
+    for (const auto &[lo, hi, bytes, dims] : {std::tuple{-1024, 3071, 2, Vec3i{21, 14, 9}},
+                                              std::tuple{-3000, 60000, 2, Vec3i{16, 7, 10}},
+                                              std::tuple{0, 255, 1, Vec3i{13, 12, 5}}}) {
+        Volume v = makeVolume(dims, std::vector<float>(size_t(dims.x * dims.y * dims.z)));
+        std::mt19937 rng(5);
+        std::uniform_int_distribution<int> u(lo, hi);
+        for (float &x : v.voxels) x = float(u(rng));
+        Volume held = v;
+        ASSERT_TRUE(holdNarrow(held));
+        ASSERT_EQ(held.narrow.bytes, bytes);
+        MipPyramid narrow(held), wide(v);
+        EXPECT_EQ(narrow.level(0).narrow, held.narrowVoxels.data()); // not a copy
+        EXPECT_EQ(narrow.level(0).toFloats(), v.voxels);
+        for (int L = 1; L <= narrow.maxLevel(); ++L) {
+            EXPECT_FALSE(narrow.level(L).isNarrow()) << "level " << L << ": averages are held as float";
+            EXPECT_EQ(narrow.level(L).toFloats(), wide.level(L).toFloats()) << "level " << L << ", " << bytes << " bytes";
+        }
     }
 }
 
