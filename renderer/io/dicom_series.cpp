@@ -49,29 +49,13 @@ void checkDicomFolderEntries(const fs::path &dir) {
 namespace {
 
 // The numbers of a DS (decimal string) element, or nothing when it is absent or does not hold
-// exactly `count` finite numbers. Parsed here rather than by GDCM's attribute classes, whose
-// assertions a hostile value could reach.
+// exactly N finite numbers (decimalStrings).
 template <size_t N>
-std::optional<std::array<double, N>> decimalStrings(const gdcm::DataSet &ds, gdcm::Tag tag) {
+std::optional<std::array<double, N>> elementDecimals(const gdcm::DataSet &ds, gdcm::Tag tag) {
     if (!ds.FindDataElement(tag)) return std::nullopt;
     const gdcm::ByteValue *value = ds.GetDataElement(tag).GetByteValue();
-    if (!value || value->GetLength() == 0 || value->GetLength() > 1024) return std::nullopt;
-    std::string text(value->GetPointer(), value->GetLength());
-    std::array<double, N> out{};
-    size_t count = 0, at = 0;
-    while (at <= text.size()) {
-        const size_t end = std::min(text.find('\\', at), text.size());
-        std::string item = text.substr(at, end - at);
-        item.erase(std::remove_if(item.begin(), item.end(), [](unsigned char c) { return c == ' ' || c == '\0'; }),
-                   item.end());
-        char *stop = nullptr;
-        const double x = std::strtod(item.c_str(), &stop);
-        if (item.empty() || *stop != '\0' || !std::isfinite(x) || count == N) return std::nullopt;
-        out[count++] = x;
-        at = end + 1;
-    }
-    if (count != N) return std::nullopt;
-    return out;
+    if (!value) return std::nullopt;
+    return decimalStrings<N>(std::string_view(value->GetPointer(), value->GetLength()));
 }
 
 int64_t unsignedShort(const gdcm::DataSet &ds, gdcm::Tag tag) {
@@ -183,8 +167,8 @@ SliceGeometry checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_
     geometry.file = name;
     {
         const gdcm::DataSet &ds = dicom.GetDataSet();
-        if (const auto p = decimalStrings<3>(ds, gdcm::Tag(0x0020, 0x0032))) geometry.position = Vec3d{(*p)[0], (*p)[1], (*p)[2]};
-        geometry.orientation = decimalStrings<6>(ds, gdcm::Tag(0x0020, 0x0037));
+        if (const auto p = elementDecimals<3>(ds, gdcm::Tag(0x0020, 0x0032))) geometry.position = Vec3d{(*p)[0], (*p)[1], (*p)[2]};
+        geometry.orientation = elementDecimals<6>(ds, gdcm::Tag(0x0020, 0x0037));
         geometry.rows = unsignedShort(ds, gdcm::Tag(0x0028, 0x0010));
         geometry.columns = unsignedShort(ds, gdcm::Tag(0x0028, 0x0011));
     }

@@ -150,27 +150,12 @@ std::string text(std::span<const unsigned char> v) {
     return s;
 }
 
-// A decimal string's N numbers, all finite (the same rule as the loader's check of slices).
+// A decimal string's N numbers, or the slice is not taken.
 template <size_t N>
 std::array<double, N> decimals(std::span<const unsigned char> v, const char *what) {
-    if (v.size() > 1024) throw NotTaken{fmt::format("its {} is too long", what)};
-    const std::string s(reinterpret_cast<const char *>(v.data()), v.size());
-    std::array<double, N> out{};
-    size_t count = 0, at = 0;
-    while (at <= s.size()) {
-        const size_t end = std::min(s.find('\\', at), s.size());
-        std::string item = s.substr(at, end - at);
-        item.erase(std::remove_if(item.begin(), item.end(), [](unsigned char ch) { return ch == ' ' || ch == '\0'; }),
-                   item.end());
-        char *stop = nullptr;
-        const double x = std::strtod(item.c_str(), &stop);
-        if (item.empty() || *stop != '\0' || !std::isfinite(x) || count == N)
-            throw NotTaken{fmt::format("its {} is not {} numbers", what, N)};
-        out[count++] = x;
-        at = end + 1;
-    }
-    if (count != N) throw NotTaken{fmt::format("its {} is not {} numbers", what, N)};
-    return out;
+    const auto numbers = decimalStrings<N>(std::string_view(reinterpret_cast<const char *>(v.data()), v.size()));
+    if (!numbers) throw NotTaken{fmt::format("its {} is not {} finite numbers", what, N)};
+    return *numbers;
 }
 
 int unsignedShortValue(std::span<const unsigned char> v, const char *what) {

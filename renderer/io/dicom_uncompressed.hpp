@@ -13,11 +13,15 @@
 
 #include "renderer/io/volume_checks.hpp"
 
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <cstdlib>
 #include <cstdint>
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace volcast::io {
@@ -38,6 +42,29 @@ struct UncompressedSlice {
     double intercept = 0;                    // Rescale Intercept (the slope is 1: nothing else is taken)
     uint64_t pixelOffset = 0, pixelLength = 0;   // the Pixel Data value in the file
 };
+
+// A DICOM decimal string (DS) holding exactly N finite numbers separated by backslashes
+// (spaces and NUL padding ignored), or nothing. Parsed here for GDCM's path too, rather than
+// by its attribute classes, whose assertions a hostile value could reach.
+template <size_t N>
+std::optional<std::array<double, N>> decimalStrings(std::string_view text) {
+    if (text.empty() || text.size() > 1024) return std::nullopt;
+    std::array<double, N> out{};
+    size_t count = 0, at = 0;
+    while (at <= text.size()) {
+        const size_t end = std::min(text.find('\\', at), text.size());
+        std::string item;
+        for (char c : text.substr(at, end - at))
+            if (c != ' ' && c != '\0') item += c;
+        char *stop = nullptr;
+        const double x = std::strtod(item.c_str(), &stop);
+        if (item.empty() || *stop != '\0' || !std::isfinite(x) || count == N) return std::nullopt;
+        out[count++] = x;
+        at = end + 1;
+    }
+    if (count != N) return std::nullopt;
+    return out;
+}
 
 // The slice whose first bytes are `bytes` (the whole file or its start), or nothing when it
 // is not one this reader takes; then `why` says what it met first. Reads nothing outside
