@@ -14,8 +14,6 @@
 #include "tests/server/png_decode.hpp"
 #include "tests/server/server_fixture.hpp"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
 #include <cmath>

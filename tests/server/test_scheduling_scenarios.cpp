@@ -5,10 +5,10 @@
 // is left to the slow-renderer tests in test_render_scheduler.cpp.
 
 #include "client/cpp/ws_client.hpp"
+#include "server/error_calibrator.hpp"
 #include "server/server.hpp"
+#include "tests/server/png_decode.hpp"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -79,16 +79,16 @@ json turned(const json &camera, double angle) {
 // A frame's image as 8-bit RGB over black (the error estimate's metric, error_calibrator.hpp):
 // JPEG frames are that already; PNG frames carry straight alpha, multiplied in here.
 std::vector<double> rgbOverBlack(const volcast::client::Frame &f) {
-    OIIO::Filesystem::IOMemReader reader(f.image.data(), f.image.size());
-    OIIO::ImageSpec config;
-    config.attribute("oiio:UnassociatedAlpha", 1);
-    OIIO::Filesystem::IOProxy *proxy = &reader;
-    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-    auto in = OIIO::ImageInput::open(f.header.codec == protocol::Codec::Png ? "frame.png" : "frame.jpg", &config, &reader);
-    if (!in) throw std::runtime_error("decode: " + OIIO::geterror());
-    const int w = in->spec().width, h = in->spec().height, ch = in->spec().nchannels;
-    std::vector<uint8_t> px(size_t(w) * size_t(h) * size_t(ch));
-    in->read_image(0, 0, 0, ch, OIIO::TypeDesc::UINT8, px.data());
+    int w = 0, h = 0, ch = 3;
+    std::vector<uint8_t> px;
+    if (f.header.codec == protocol::Codec::Png) {
+        px = volcast::test::decodePng(f.image, w, h, ch);
+    } else {
+        volcast::server::Rgb8 decoded = volcast::server::decodeJpegRgb8(f.image);
+        w = decoded.width;
+        h = decoded.height;
+        px = std::move(decoded.rgb);
+    }
     std::vector<double> rgb(size_t(w) * size_t(h) * 3);
     for (size_t p = 0; p < size_t(w) * size_t(h); ++p)
         for (size_t c = 0; c < 3; ++c) {

@@ -13,8 +13,6 @@
 #include "tests/server/png_decode.hpp"
 #include "tests/server/server_fixture.hpp"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
