@@ -18,10 +18,8 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <limits>
-#include <map>
 
 namespace volcast::io {
 namespace {
@@ -35,8 +33,10 @@ constexpr uint32_t kUndefinedLength = 0xffffffffu;
 // Nested sequences deeper than this are not taken (GDCM reads them; a hostile file could
 // nest without end).
 constexpr int kMaxSequenceDepth = 16;
-// What a slice's header may take before its pixel data, read in one piece.
-constexpr size_t kHeaderBytes = 256 * 1024;
+// A slice's header is read in its first kHeaderBytes (CT and MR headers take a few KiB), and
+// again in its first kLongHeaderBytes where that was not enough; a longer one is not taken.
+constexpr size_t kHeaderBytes = 16 * 1024;
+constexpr size_t kLongHeaderBytes = 256 * 1024;
 
 constexpr uint32_t tagOf(uint16_t group, uint16_t element) { return uint32_t(group) << 16 | element; }
 constexpr uint32_t kPixelData = tagOf(0x7fe0, 0x0010);
@@ -354,12 +354,16 @@ std::optional<UncompressedSeries> scanUncompressedSeries(const fs::path &dir, st
             why = fmt::format("'{}' cannot be opened", name);
             return std::nullopt;
         }
-        head.resize(std::min<uint64_t>(uint64_t(st.st_size), kHeaderBytes));
-        if (!readAt(file.fd, head.data(), head.size(), 0)) {
-            why = fmt::format("'{}' cannot be read", name);
-            return std::nullopt;
+        std::optional<UncompressedSlice> slice;
+        for (const size_t limit : {kHeaderBytes, kLongHeaderBytes}) {
+            head.resize(std::min<uint64_t>(uint64_t(st.st_size), limit));
+            if (!readAt(file.fd, head.data(), head.size(), 0)) {
+                why = fmt::format("'{}' cannot be read", name);
+                return std::nullopt;
+            }
+            slice = parseUncompressedSlice(head, why);
+            if (slice || head.size() == uint64_t(st.st_size)) break;   // the whole file was read
         }
-        auto slice = parseUncompressedSlice(head, why);
         if (!slice) {
             why = fmt::format("'{}': {}", name, why);
             return std::nullopt;
@@ -480,7 +484,7 @@ void readUncompressedSamples(const fs::path &dir, const UncompressedSeries &seri
         const File file(dir / s.file);
         struct stat st {};
         if (file.fd < 0 || ::fstat(file.fd, &st) != 0 || !S_ISREG(st.st_mode) ||
-            uint64_t(st.st_size) < s.pixelOffset + sliceBytes ||
+            uint64_t(st.st_size) < sliceBytes || s.pixelOffset > uint64_t(st.st_size) - sliceBytes ||
             !readAt(file.fd, v.narrowVoxels.data() + k * sliceBytes, sliceBytes, s.pixelOffset))
             fail(dir, fmt::format("slice '{}' no longer holds its pixel data", s.file));
         progress(from + (to - from) * double(k + 1) / double(series.slices.size()), "reading slices");

@@ -277,6 +277,30 @@ TEST_F(VolumeIoTest, UncompressedSeriesWithAnInterceptEqualsGdcmsRead) {
     }
 }
 
+// A header longer than the reader's first read of a file (16 KiB; here a 20 KiB private
+// element before the pixel data, as some scanners write) is read again whole and still taken;
+// one longer than the second read (256 KiB) goes to GDCM, whose read is the same.
+TEST_F(VolumeIoTest, UncompressedSeriesWithLongHeadersEqualsGdcmsRead) {
+    for (const uint32_t extra : {20u * 1024u, 300u * 1024u}) {
+        const std::string name = "long_" + std::to_string(extra);
+        saveDicomSeries(obliqueSeriesVolume(), dir / name, VoxelType::Int16);
+        std::string element("\x29\x00\x10\x10", 4);   // (0029,1010), implicit VR: the length follows
+        for (int b = 0; b < 4; ++b) element += char((extra >> (8 * b)) & 0xff);
+        element += std::string(extra, 'x');
+        for (const auto &entry : fs::directory_iterator(dir / name)) {
+            std::string bytes = readFile(entry.path());
+            const size_t pixels = bytes.rfind(std::string("\xe0\x7f\x10\x00", 4));
+            ASSERT_NE(pixels, std::string::npos) << entry.path();
+            bytes.insert(pixels, element);
+            writeFile(entry.path(), bytes);
+        }
+        std::string why;
+        EXPECT_EQ(bool(io::scanUncompressedSeries(dir / name, why)), extra < 256u * 1024u) << name << ": " << why;
+        const Volume read = loadVolume(dir / name);
+        expectSameVolume(read, loadThroughGdcm(dir / name, dir / (name + "_gdcm")), name);
+    }
+}
+
 // 12 of 16 bits stored, as most CT scanners write them: the sample is the low 12 bits,
 // sign-extended when signed, whatever the high bits hold; GDCM reads it so, and so must the
 // direct reader. ITK writes 16 bits stored, so Bits Stored and High Bit are rewritten.
