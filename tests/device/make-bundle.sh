@@ -20,7 +20,9 @@ for spec in renderer:volcast-render tests/bench:volcast-bench tests:volcast_rend
   dir=${spec%%:*}; name=${spec#*:}
   link="$build/$dir/CMakeFiles/$name.dir/link.txt"
   [ -f "$link" ] || { echo "skip $name: no $link (build it first)"; continue; }
-  cmd=$(sed -e 's|[^ ]*libOpenImageIO\(_Util\)\?\.so[^ ]*||g' \
+  # image_stub.o stands for the whole image-file library: the library's object would otherwise
+  # still be pulled in (for a symbol besides the two the stub defines) and with it OpenImageIO.
+  cmd=$(sed -e 's|[^ ]*libOpenImageIO\(_Util\)\?\.so[^ ]*||g' -e 's|[^ ]*libvolcast_image_files\.a||g' \
             -e "s| -o $name | -o $work/pkg/bin/$name $work/image_stub.o |" "$link")
   (cd "$build/$dir" && eval "$cmd")
   echo "linked $name"
