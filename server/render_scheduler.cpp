@@ -808,7 +808,7 @@ void RenderScheduler::runUnit(Work &work) {
     // The final frame's image and bytes, which refinement at rest starts from: copied and
     // converted here, not under the lock.
     std::optional<Image> restBase;
-    std::vector<uint8_t> restShown;
+    PixelVector<uint8_t> restShown;
     if (work.final && !work.substitute && options_.restRefinementMs > 0) {
         restBase = image;
         restShown = rgba8FromImage(image).rgba;
@@ -866,7 +866,7 @@ void RenderScheduler::finishRest(Work &work) {
     Image image = frame.finish();
     protocol::ErrorEstimate estimate;
     int restPass = 0;
-    std::vector<uint8_t> bytes = rgba8FromImage(image).rgba;
+    PixelVector<uint8_t> bytes = rgba8FromImage(image).rgba;
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(work.slot);

@@ -204,7 +204,7 @@ class RenderScheduler {
         double spentMs = 0;              // their render time
         bool done = false;               // target reached, time or passes used up, or failed
         Image previous;                  // the float image rendered last (the final's, then each pass's)
-        std::vector<uint8_t> shown;      // the 8-bit RGBA of the frame shown last
+        PixelVector<uint8_t> shown;     // the 8-bit RGBA of the frame shown last
     };
     struct Slot {
         Deliver deliver;

@@ -30,7 +30,8 @@ TiledFrame::TiledFrame(FrameRequest request, int passes, int bandRows, bool enco
     if (rgba8_) {
         bytes_.width = gridWidth_;
         bytes_.height = gridHeight_;
-        bytes_.rgba.resize(size_t(gridWidth_) * size_t(gridHeight_) * 4);
+        // Zeroed, not left as the heap had it: no byte of another frame may reach a client.
+        bytes_.rgba.assign(size_t(gridWidth_) * size_t(gridHeight_) * 4, uint8_t(0));
     } else {
         current_ = Image(gridWidth_, gridHeight_);
     }

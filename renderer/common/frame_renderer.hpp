@@ -40,9 +40,7 @@ struct RenderStats {
     // own times from profiling events: what the queue spent on each command, not counting
     // the wait before it started. The native path fills hostConvertSeconds only.
     double hostSetUpSeconds = 0;      // the frame's set-up on the host up to the first command
-    double deviceUploadSeconds = 0;   // the parameter block (and counters zeroed)
-    double deviceKernelSeconds = 0;   // the ray-casting kernel
-    double deviceConvertSeconds = 0;  // float to 8-bit RGBA on the device (renderRgba8)
+    double deviceKernelSeconds = 0;   // the ray-casting kernel (with renderRgba8, its bytes too)
     double deviceReadBackSeconds = 0; // the image and the counters to the host
     double hostConvertSeconds = 0;    // float to 8-bit RGBA on the host (renderRgba8's default)
     int raysWide = 0, raysHigh = 0; // rays cast (image_scale < 1 casts fewer, then upsamples)
@@ -95,13 +93,13 @@ struct FrameRequest {
 // (byteFromUnit), the float image's bytes as a JPEG of it over black takes them (RGBX).
 struct Rgba8Image {
     int width = 0, height = 0;
-    std::vector<uint8_t> rgba;   // width × height × 4
+    PixelVector<uint8_t> rgba;   // width × height × 4 (resize leaves it unfilled: model/image.hpp)
     const uint8_t *pixel(int x, int y) const { return rgba.data() + (size_t(y) * size_t(width) + size_t(x)) * 4; }
     uint8_t *pixel(int x, int y) { return rgba.data() + (size_t(y) * size_t(width) + size_t(x)) * 4; }
 };
 
 // clamp(v) to [0, 1], NaN to 0: comparisons, so that loops of it vectorise (std::fmin is a
-// library call), and the same in OpenCL C (raycast.cl, rgba8FromFloat).
+// library call), and the same in OpenCL C (raycast.cl, rgba8FromUnit).
 inline float clampUnit(float v) {
     const float c = v > 0.0f ? v : 0.0f;
     return c < 1.0f ? c : 1.0f;

@@ -11,10 +11,11 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
-#include <sstream>
+#include <string_view>
 
 namespace volcast {
 
@@ -30,7 +31,6 @@ double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(
 // (a new size costs it 0.25–2 s, docs/platform.md) and the global size is rounded up to it.
 constexpr size_t kGroupEdge = 8;
 size_t roundUp(int n) { return (size_t(n) + kGroupEdge - 1) / kGroupEdge * kGroupEdge; }
-constexpr size_t kConvertGroup = 64; // work-items per group of the 8-bit conversion
 
 cl::Buffer upload(OpenClContext &cl, const void *data, size_t bytes, const std::string &what) {
     try {
@@ -74,10 +74,17 @@ std::string OpenClRenderer::buildOptions(const Quality &q, bool hasClipPlanes, i
     // steps and opacities (expm1/log1p), which the stability cases rely on.
     // Each switch in use is the kernel's macro of its name (featureNames); the cubic path
     // reads a 3-D image where the device filters it (CUBIC_IMAGE).
+    // Split by hand: every frame asks (a stringstream's set-up cost a frame 20 µs).
     std::string o;
     if (voxelBytes == 1 || voxelBytes == 2) o += " -DVOXEL_BYTES=" + std::to_string(voxelBytes);
-    std::istringstream names(featureNames(q, hasClipPlanes));
-    for (std::string name; names >> name;) o += " -D" + (name == "CUBIC" && cubicFromImage() ? "CUBIC_IMAGE" : name);
+    const std::string names = featureNames(q, hasClipPlanes);
+    for (size_t at = 0; at < names.size();) {
+        const size_t end = std::min(names.find(' ', at), names.size());
+        const std::string_view name = std::string_view(names).substr(at, end - at);
+        o += " -D";
+        o += name == "CUBIC" && cubicFromImage() ? std::string_view("CUBIC_IMAGE") : name;
+        at = end + 1;
+    }
     return o.empty() ? o : o.substr(1);
 }
 
@@ -203,7 +210,7 @@ Image OpenClRenderer::render(const FrameRequest &request, RenderStats *stats) {
     const FrameSetup setup = setUpFrame(*volume_, request, pyramid_.maxLevel(), options_.brickSize);
     std::lock_guard frameLock(mutex_);
     RenderStats st = setup.stats;
-    Image cast(setup.cast.width, setup.cast.height);
+    Image cast = Image::unfilled(setup.cast.width, setup.cast.height); // the read-back fills it
     const Clock::time_point launched = castRays(request, setup, st, start, cast.rgba.data(), nullptr);
     Image image = setup.upsample ? resizeBilinear(cast, request.width, request.height) : std::move(cast);
     st.renderSeconds = secondsSince(launched);
@@ -226,7 +233,7 @@ Rgba8Image OpenClRenderer::renderRgba8(const FrameRequest &request, RenderStats 
     Rgba8Image image;
     image.width = setup.cast.width;
     image.height = setup.cast.height;
-    image.rgba.resize(size_t(image.width) * size_t(image.height) * 4);
+    image.rgba.resize(size_t(image.width) * size_t(image.height) * 4); // unfilled: the read-back fills it
     const Clock::time_point launched = castRays(request, setup, st, start, nullptr, image.rgba.data());
     st.renderSeconds = secondsSince(launched);
     if (stats) *stats = st;
@@ -265,8 +272,18 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
     const TransferFunction &tf = request.transferFunction;
     DataSet &data = dataSet(quality.mipLevel, setup.use.cubic, st);
     st.buildOptions = buildOptions(quality, setup.clipPlaneCount > 0, data.width.bytes);
-    const auto built = cl_->program(kRaycastKernelSource, st.buildOptions);
-    st.kernelBuildSeconds = built.buildSeconds;
+    // The program is looked up (its source is the key) only for a feature set this renderer
+    // has no kernel of yet; after that the frame's kernel is one map lookup.
+    FrameKernels &k = kernels_[st.buildOptions];
+    if (!k.raycast()) {
+        const auto built = cl_->program(kRaycastKernelSource, st.buildOptions);
+        st.kernelBuildSeconds = built.buildSeconds;
+        try {
+            k.raycast = cl::Kernel(built.program, "raycast");
+        } catch (const cl::Error &e) {
+            throw OpenClError("the ray-casting kernel on " + cl_->deviceName() + ": " + describe(e));
+        }
+    }
 
     if (quality.emptySpaceSkipping) classify(data, tf, st);
 
@@ -290,10 +307,8 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
     counts_.add(&PreprocessCounts::preintegrationTables, rebuilt.preintegration);
     if (quality.adaptiveStep) adaptSteps(data, tf, setup, st);
 
-    // The set-up as the kernel reads it; kept in the renderer until the frame's commands end
-    // (the write is not blocking).
-    RayCastParams &p = hostParams_;
-    p = RayCastParams{};
+    // The set-up as the kernel reads it.
+    RayCastParams p{};
     fillCommonParams(setup, p);
     p.narrowOffset = data.width.offset;
     const TfTable &tfTable = tables_.tfTable();
@@ -316,15 +331,16 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
     Clock::time_point launched;
     auto &queue = cl_->queue();
     try {
-        FrameKernels &k = kernels_[st.buildOptions];
-        if (!k.raycast()) {
-            k.raycast = cl::Kernel(built.program, "raycast");
-            k.convert = cl::Kernel(built.program, "rgba8FromFloat");
+        if (!counters_()) {
+            // Running totals from here on: zeroed once, when made (see the read below).
+            std::fill(std::begin(hostCounts_), std::end(hostCounts_), 0u);
+            counters_ = cl::Buffer(cl_->context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, sizeof hostCounts_,
+                                   hostCounts_);
         }
-        if (!params_()) params_ = cl::Buffer(cl_->context(), CL_MEM_READ_ONLY, sizeof(RayCastParams));
-        if (!counters_()) counters_ = cl::Buffer(cl_->context(), CL_MEM_READ_WRITE, sizeof hostCounts_);
-        ensureBuffer(*cl_, floatOut_, floatOutBytes_, rays * 4 * sizeof(float), CL_MEM_READ_WRITE);
-        if (bytes) ensureBuffer(*cl_, byteOut_, byteOutBytes_, rays * 4, CL_MEM_WRITE_ONLY);
+        if (bytes)
+            ensureBuffer(*cl_, byteOut_, byteOutBytes_, rays * 4, CL_MEM_WRITE_ONLY);
+        else
+            ensureBuffer(*cl_, floatOut_, floatOutBytes_, rays * 4 * sizeof(float), CL_MEM_WRITE_ONLY);
 
         // Arguments in the order of the kernel's signature for this feature set.
         cl_uint arg = 0;
@@ -340,55 +356,59 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
         if (quality.emptySpaceSkipping && !quality.adaptiveStep)
             setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickVisible);
         if (quality.adaptiveStep) setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickStep);
-        setMemoryArg(k.raycast, k.raycastArgs, arg++, params_);
+        k.raycast.setArg(arg++, sizeof p, &p); // copied by the call: p need not outlive it
         const cl_int4 window{{win.x, win.y, win.width, win.height}};
         k.raycast.setArg(arg++, window);
-        setMemoryArg(k.raycast, k.raycastArgs, arg++, floatOut_);
+        setMemoryArg(k.raycast, k.raycastArgs, arg++, bytes ? byteOut_ : floatOut_);
+        k.raycast.setArg(arg++, cl_int(bytes ? 1 : 0));
         setMemoryArg(k.raycast, k.raycastArgs, arg++, counters_);
 
+        // Two commands: the kernel and the image's read; and the counters' read, the one
+        // blocking call. Each command costs a GPU tens of microseconds of latency, as much as a
+        // small frame's kernel: the parameters go with the launch (by value), the counters are
+        // running totals (no fill), and the ray caster writes the bytes (no conversion kernel).
         launched = Clock::now();
         st.hostSetUpSeconds = std::chrono::duration<double>(launched - start).count();
-        cl::Event writeParams, zeroCounters, kernel, convert, readImage, readCounters;
-        queue.enqueueWriteBuffer(params_, CL_FALSE, 0, sizeof p, &p, nullptr, &writeParams);
-        queue.enqueueFillBuffer(counters_, cl_uint(0), 0, sizeof hostCounts_, nullptr, &zeroCounters);
+        cl_uint before[VC_STAT_COUNT];
+        std::copy(std::begin(hostCounts_), std::end(hostCounts_), before);
+        cl::Event kernel, readImage, readCounters;
         queue.enqueueNDRangeKernel(k.raycast, cl::NDRange(size_t(win.x), size_t(win.y)),
                                    cl::NDRange(roundUp(win.width), roundUp(win.height)),
                                    cl::NDRange(kGroupEdge, kGroupEdge), nullptr, &kernel);
-        if (bytes) {
-            setMemoryArg(k.convert, k.convertArgs, 0, floatOut_);
-            setMemoryArg(k.convert, k.convertArgs, 1, byteOut_);
-            k.convert.setArg(2, cl_int(rays));
-            // One fixed work-group size, as for the ray caster (PoCL compiles one per size).
-            const size_t groups = (rays + kConvertGroup - 1) / kConvertGroup;
-            queue.enqueueNDRangeKernel(k.convert, cl::NullRange, cl::NDRange(groups * kConvertGroup),
-                                       cl::NDRange(kConvertGroup), nullptr, &convert);
+        if (bytes)
             queue.enqueueReadBuffer(byteOut_, CL_FALSE, 0, rays * 4, bytes, nullptr, &readImage);
-        } else {
+        else
             queue.enqueueReadBuffer(floatOut_, CL_FALSE, 0, rays * 4 * sizeof(float), floats, nullptr, &readImage);
-        }
         // In order on the queue: once this read ends, every command of the frame has.
         queue.enqueueReadBuffer(counters_, CL_TRUE, 0, sizeof hostCounts_, hostCounts_, nullptr, &readCounters);
         readImage.wait();
 
-        st.deviceUploadSeconds = deviceSeconds(writeParams) + deviceSeconds(zeroCounters);
         st.deviceKernelSeconds = deviceSeconds(kernel);
-        st.deviceConvertSeconds = bytes ? deviceSeconds(convert) : 0;
         st.deviceReadBackSeconds = deviceSeconds(readImage) + deviceSeconds(readCounters);
-        const cl_uint *counts = hostCounts_;
+        // This frame's counts: the totals' growth, modulo 2^32 per word. A 64-bit count's high
+        // word took the carries of its low word's wraps (raycast.cl), so the pair's growth
+        // modulo 2^64 is the count.
+        cl_uint counts[VC_STAT_COUNT];
+        for (int i = 0; i < VC_STAT_COUNT; ++i) counts[i] = hostCounts_[i] - before[i];
         st.raysHit = counts[VC_STAT_RAYS_HIT];
         const double hit = std::max<double>(counts[VC_STAT_RAYS_HIT], 1);
-        const auto wide = [&](int low, int high) { return double(uint64_t(counts[high]) << 32 | counts[low]); };
+        const auto wide = [&](int low, int high) {
+            const uint64_t now = uint64_t(hostCounts_[high]) << 32 | hostCounts_[low];
+            const uint64_t then = uint64_t(before[high]) << 32 | before[low];
+            return double(now - then);
+        };
         st.meanSamplesPerRay = wide(VC_STAT_SAMPLES, VC_STAT_SAMPLES_HIGH) / hit;
         st.skippedSegmentsPerRay = wide(VC_STAT_SEGMENTS_SKIPPED, VC_STAT_SEGMENTS_SKIPPED_HIGH) / hit;
         st.earlyTerminatedFraction = counts[VC_STAT_TERMINATED_EARLY] / hit;
         st.raysTruncated = counts[VC_STAT_TRUNCATED];
     } catch (const cl::Error &e) {
-        // Commands queued before the failure may still read hostParams_ or write the caller's
-        // image: let them end before either goes.
+        // Commands queued before the failure may still write the caller's image: let them end
+        // before it goes.
         try {
             queue.finish();
         } catch (const cl::Error &) {
         }
+        counters_ = cl::Buffer(); // their totals are unknown now: the next frame makes them anew
         throw OpenClError("rendering on " + cl_->deviceName() + " failed: " + describe(e));
     }
     return launched;

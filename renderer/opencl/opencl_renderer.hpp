@@ -56,7 +56,7 @@ class OpenClRenderer : public FrameRenderer {
 
     // Thread-safe; frames are rendered one at a time. A window casts only its own rays.
     Image render(const FrameRequest &request, RenderStats *stats = nullptr) override;
-    // Converted to 8 bits on the device (the kernel rgba8FromFloat), a quarter of the bytes
+    // Converted to 8 bits on the device (the ray caster writes them), a quarter of the bytes
     // read back (Rgba8Conversion); a whole frame with image_scale < 1 is upsampled and
     // converted on the host.
     Rgba8Image renderRgba8(const FrameRequest &request, RenderStats *stats = nullptr) override;
@@ -116,16 +116,15 @@ class OpenClRenderer : public FrameRenderer {
 
     // What every frame uses and that does not change between frames, kept: the kernels of
     // each program (by build options) with the memory objects set as their arguments, the
-    // parameter block and counters, and the output buffers (grown to the largest window).
+    // counters and the output buffers (grown to the largest window).
     struct FrameKernels {
-        cl::Kernel raycast, convert;
-        std::vector<cl::Memory> raycastArgs, convertArgs;   // by argument index
+        cl::Kernel raycast;
+        std::vector<cl::Memory> raycastArgs;   // by argument index
     };
     std::map<std::string, FrameKernels> kernels_;
-    cl::Buffer params_, counters_, floatOut_, byteOut_;
+    cl::Buffer counters_, floatOut_, byteOut_;
     size_t floatOutBytes_ = 0, byteOutBytes_ = 0;
-    RayCastParams hostParams_{};           // the block being written (the write does not block)
-    cl_uint hostCounts_[VC_STAT_COUNT] = {};
+    cl_uint hostCounts_[VC_STAT_COUNT] = {}; // the counters' running totals as last read
 };
 
 } // namespace volcast

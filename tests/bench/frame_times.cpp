@@ -63,21 +63,20 @@ class OtherLoad {
 // The parts of the timed frames (RenderStats), ms: the device's own times from OpenCL
 // profiling events, 0 on the native path.
 struct FrameParts {
-    std::vector<double> setUp, upload, kernel, convert, readBack, hostConvert;
+    std::vector<double> setUp, kernel, readBack, hostConvert;
     void add(const RenderStats &st) {
         hostConvert.push_back(st.hostConvertSeconds * 1e3);
         setUp.push_back(st.hostSetUpSeconds * 1e3);
-        upload.push_back(st.deviceUploadSeconds * 1e3);
         kernel.push_back(st.deviceKernelSeconds * 1e3);
-        convert.push_back(st.deviceConvertSeconds * 1e3);
         readBack.push_back(st.deviceReadBackSeconds * 1e3);
     }
     static double median(std::vector<double> v) { return v.empty() ? 0 : summarize(std::move(v)).median; }
     nlohmann::json json(const Timing &frame) const {
         const double k = median(kernel);
-        return {{"host_set_up_ms", median(setUp)},      {"device_upload_ms", median(upload)},
-                {"device_kernel_ms", k},                {"device_convert_ms", median(convert)},
-                {"device_read_back_ms", median(readBack)}, {"host_convert_ms", median(hostConvert)},
+        return {{"host_set_up_ms", median(setUp)},
+                {"device_kernel_ms", k},
+                {"device_read_back_ms", median(readBack)},
+                {"host_convert_ms", median(hostConvert)},
                 // The overhead target on a GPU: frame ≤ 1.2 × kernel (medians of the same frames; docs/gpu.md).
                 {"frame_over_kernel", k > 0 ? nlohmann::json(frame.median / k) : nlohmann::json(nullptr)}};
     }

@@ -44,8 +44,9 @@ OpenClRenderer &sharedRenderer() {
     return r;
 }
 
-// The conversion kernel on values chosen to hit every edge: each byte's exact half-way
-// point and the floats beside it, 0, 1, beyond both, infinities, NaN and denormals.
+// The ray caster's conversion (raycast.cl's rgba8FromUnit, called by a kernel added to its
+// source here) on values chosen to hit every edge: each byte's exact half-way point and the
+// floats beside it, 0, 1, beyond both, infinities, NaN and denormals.
 TEST(OpenClFrameParts, TheDeviceConvertsToBytesExactlyAsTheHost) {
     std::vector<float> values = {0.0f, -0.0f, 1.0f, -1.0f, 2.0f, std::numeric_limits<float>::infinity(),
                                  -std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN(),
@@ -61,8 +62,13 @@ TEST(OpenClFrameParts, TheDeviceConvertsToBytesExactlyAsTheHost) {
     const int pixels = int(values.size() / 4);
 
     OpenClContext &cl = *sharedContext();
-    const auto built = cl.program(kRaycastKernelSource, "");
-    cl::Kernel convert(built.program, "rgba8FromFloat");
+    const std::string source = std::string(kRaycastKernelSource) + R"(
+__kernel void bytesOfValues(__global const float4 *image, __global uchar4 *bytes, const int count) {
+    const int i = get_global_id(0);
+    if (i < count) bytes[i] = rgba8FromUnit(image[i]);
+})";
+    const auto built = cl.program(source, "");
+    cl::Kernel convert(built.program, "bytesOfValues");
     cl::Buffer in(cl.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, values.size() * sizeof(float), values.data());
     cl::Buffer out(cl.context(), CL_MEM_WRITE_ONLY, values.size());
     convert.setArg(0, in);
@@ -96,7 +102,6 @@ TEST(OpenClFrameParts, EightBitFramesAreTheHostConversionOfTheFloatFrames) {
         EXPECT_EQ(bytes.width, floats.width) << i;
         EXPECT_EQ(bytes.height, floats.height) << i;
         EXPECT_EQ(bytes.rgba, host.rgba) << "frame " << i;
-        EXPECT_GT(byteStats.deviceConvertSeconds, 0) << i;
         EXPECT_EQ(byteStats.hostConvertSeconds, 0) << i;
         EXPECT_EQ(byteStats.raysHit, floatStats.raysHit) << i;
     }
@@ -105,7 +110,6 @@ TEST(OpenClFrameParts, EightBitFramesAreTheHostConversionOfTheFloatFrames) {
     scaled.quality.imageScale = 0.5;
     RenderStats st;
     EXPECT_EQ(r.renderRgba8(scaled, &st).rgba, rgba8FromImage(r.render(scaled)).rgba);
-    EXPECT_EQ(st.deviceConvertSeconds, 0);
     EXPECT_GT(st.hostConvertSeconds, 0);
 }
 
@@ -117,7 +121,6 @@ TEST(OpenClFrameParts, TheHostConversionReadsBackFloats) {
     const FrameRequest frame = blobFrame(40, 36, false, false, false);
     RenderStats st;
     EXPECT_EQ(r.renderRgba8(frame, &st).rgba, rgba8FromImage(r.render(frame)).rgba);
-    EXPECT_EQ(st.deviceConvertSeconds, 0);
     EXPECT_GT(st.hostConvertSeconds, 0);
     EXPECT_GT(st.deviceKernelSeconds, 0);
 }
@@ -150,11 +153,9 @@ TEST(OpenClFrameParts, TheFramesPartsAreMeasuredAndAddUpToNoMoreThanTheFrame) {
         SCOPED_TRACE(bytes ? "8-bit" : "float");
         EXPECT_GT(st.deviceKernelSeconds, 0);
         EXPECT_GT(st.hostSetUpSeconds, 0);
-        EXPECT_GE(st.deviceUploadSeconds, 0);
         EXPECT_GE(st.deviceReadBackSeconds, 0);
-        EXPECT_EQ(st.deviceConvertSeconds > 0, bytes);
-        const double device = st.deviceUploadSeconds + st.deviceKernelSeconds + st.deviceConvertSeconds +
-                              st.deviceReadBackSeconds;
+        EXPECT_EQ(st.hostConvertSeconds, 0);
+        const double device = st.deviceKernelSeconds + st.deviceReadBackSeconds;
         EXPECT_LE(device, st.renderSeconds);
         EXPECT_LE(st.hostSetUpSeconds + st.renderSeconds, wall);
     }
@@ -163,7 +164,7 @@ TEST(OpenClFrameParts, TheFramesPartsAreMeasuredAndAddUpToNoMoreThanTheFrame) {
 // Kept buffers and kernels must not carry anything from one frame to the next: a renderer
 // that drew other sizes, windows and feature sets before gives each frame bit for bit as a
 // fresh renderer does, counters included (a smaller frame after a larger one reads only its
-// own part of the grown buffer; the counters are zeroed).
+// own part of the grown buffer; the counters, running totals, give each frame its own counts).
 TEST(OpenClFrameParts, AReusedRendererDrawsEachFrameAsAFreshOne) {
     const std::vector<FrameRequest> frames = {
         blobFrame(96, 64, true, true, false),

@@ -139,13 +139,13 @@ float sampleVolume(VOLUME_ARG, int4 n, float3 p) {
 #endif
 
 /* Level-0 index coordinates to the sampled level's (mip_level; identity at level 0). */
-float3 levelFromIndex(__global const RayCastParams *P, float3 p) {
+float3 levelFromIndex(const RayCastParams *P, float3 p) {
     return (p + 0.5f) * P->levelScale - 0.5f;
 }
 
 /* What every stage reads besides the volume (VOLUME_ARG): the parameters, tables, counters. */
 typedef struct {
-    __global const RayCastParams *P;
+    const RayCastParams *P;
     __global const float4 *tfTable;
 #ifdef PREINTEGRATED
     __global const float4 *preTable;
@@ -166,7 +166,7 @@ typedef struct {
 
 /* Transfer function: colour and sigma = −ln(1 − a), the optical depth of one opacity unit,
  * linear between table entries (tf_table.hpp). */
-float4 classify(__global const float4 *table, __global const RayCastParams *P, float v) {
+float4 classify(__global const float4 *table, const RayCastParams *P, float v) {
     const float x = vcTableCoordinate(v, P->tfMin, P->tfScale, (float)(P->tfEntries - 1));
     const int i = min((int)x, P->tfEntries - 2);
     return mix(table[i], table[i + 1], x - (float)i);
@@ -175,7 +175,7 @@ float4 classify(__global const float4 *table, __global const RayCastParams *P, f
 #ifdef PREINTEGRATED
 /* Fractional node coordinate of value v: the locator gives the node intervals a uniform
  * bucket overlaps, a binary search the one holding v (preintegration.hpp). */
-float nodeCoordinate(__global const float *nodes, __global const int *locator, __global const RayCastParams *P,
+float nodeCoordinate(__global const float *nodes, __global const int *locator, const RayCastParams *P,
                      float v) {
     v = clamp(v, nodes[0], nodes[P->preNodes - 1]);
     const int b = clamp((int)((v - P->preLocatorMin) * P->preLocatorScale), 0, P->preLocatorSize - 1);
@@ -213,7 +213,7 @@ float2 phong(VOLUME_ARG, const Frame *f, float3 q, float3 dir) {
                      sampleVolume(VOLUME, n, q - (float3)(0.0f, 1.0f, 0.0f));
     const float gz = sampleVolume(VOLUME, n, q + (float3)(0.0f, 0.0f, 1.0f)) -
                      sampleVolume(VOLUME, n, q - (float3)(0.0f, 0.0f, 1.0f));
-    __global const float4 *m = f->P->indexFromWorld;
+    const float4 *m = f->P->indexFromWorld;
     float diffuse, specular;
     vcPhong(vcWorldGradient(gx, gy, gz, m[0].x, m[1].x, m[2].x), vcWorldGradient(gx, gy, gz, m[0].y, m[1].y, m[2].y),
             vcWorldGradient(gx, gy, gz, m[0].z, m[1].z, m[2].z), dir.x, dir.y, dir.z, &diffuse, &specular);
@@ -232,7 +232,7 @@ typedef struct {
 
 /* Ray through the pixel centre (docs/design.md's camera), world space, and into index space,
  * where the volume is the box [-1/2, n - 1/2]. */
-Ray cameraRay(__global const RayCastParams *P, int x, int y) {
+Ray cameraRay(const RayCastParams *P, int x, int y) {
     const float u = vcImageU((float)x, (float)P->width, P->inverseWidth);
     const float v = vcImageV((float)y, (float)P->height, P->inverseHeight);
     /* ray_math.h reads the frame's constants from private arrays (OpenCL 1.2 has no generic
@@ -256,7 +256,7 @@ Ray cameraRay(__global const RayCastParams *P, int x, int y) {
 }
 
 /* [t0, t1]: the ray inside the volume's box [-1/2, n - 1/2], or the crop box inside it. */
-void clipToBox(__global const RayCastParams *P, Ray *r) {
+void clipToBox(const RayCastParams *P, Ray *r) {
     float t0 = 0.0f, t1 = INFINITY;
     vcClipToSlab(r->p0.x, r->dq.x, P->boxLo.x, P->boxHi.x, &t0, &t1);
     vcClipToSlab(r->p0.y, r->dq.y, P->boxLo.y, P->boxHi.y, &t0, &t1);
@@ -266,7 +266,7 @@ void clipToBox(__global const RayCastParams *P, Ray *r) {
 }
 
 /* CLIP_PLANES: [t0, t1] within the half spaces the scene's clip planes keep. */
-void clipToPlanes(__global const RayCastParams *P, Ray *r) {
+void clipToPlanes(const RayCastParams *P, Ray *r) {
 #ifdef CLIP_PLANES
     float t0 = r->t0, t1 = r->t1;
     for (int c = 0; c < P->clipPlaneCount; ++c) {
@@ -296,7 +296,7 @@ typedef struct {
 } Segment;
 
 /* JITTER: a random start offset per ray and pass (against onion rings), else 0. */
-float jitterOffset(__global const RayCastParams *P, int x, int y) {
+float jitterOffset(const RayCastParams *P, int x, int y) {
 #ifdef JITTER
     return vcRandom01((uint)x, (uint)y, P->seed, P->pass);
 #else
@@ -407,7 +407,7 @@ typedef struct {
 } BrickWalk;
 
 void brickLookUp(const Frame *f, BrickWalk *w) {
-    __global const RayCastParams *P = f->P;
+    const RayCastParams *P = f->P;
     const int bx = clamp(w->b[0], 0, P->bricks[0] - 1), by = clamp(w->b[1], 0, P->bricks[1] - 1),
               bz = clamp(w->b[2], 0, P->bricks[2] - 1);
     const size_t brick = ((size_t)bz * P->bricks[1] + by) * P->bricks[0] + bx;
@@ -423,7 +423,7 @@ float brickWalkExit(const BrickWalk *w) { return vcBrickExit(w->wall[0], w->wall
 
 /* The brick of q(t) for the ray entering at t. */
 void brickWalkStart(const Frame *f, const Ray *r, BrickWalk *w) {
-    __global const RayCastParams *P = f->P;
+    const RayCastParams *P = f->P;
     const float inverseB = 1.0f / (float)P->brickSize;
     w->q0[0] = r->q0.x, w->q0[1] = r->q0.y, w->q0[2] = r->q0.z;
     w->dq[0] = r->dqL.x, w->dq[1] = r->dqL.y, w->dq[2] = r->dqL.z;
@@ -726,7 +726,7 @@ float4 compositeRay(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint *sam
 }
 
 float4 castRay(VOLUME_ARG, const Frame *f, int x, int y) {
-    __global const RayCastParams *P = f->P;
+    const RayCastParams *P = f->P;
     Ray r = cameraRay(P, x, y);
     clipToBox(P, &r);
     clipToPlanes(P, &r);
@@ -741,6 +741,23 @@ float4 castRay(VOLUME_ARG, const Frame *f, int x, int y) {
     return pixel;
 }
 
+/* ---- the frame as it is encoded --------------------------------------------------------------- */
+
+/* 8-bit premultiplied RGBA, channel by channel round(clamp(v, 0, 1) · 255) with halves away
+ * from zero: renderer/common/frame_renderer.hpp's clampUnit and byteFromUnit bit for bit. The
+ * product is one correctly rounded multiply (nothing to contract it with), and round() is exact,
+ * so neither contraction nor a device's division or denormal liberties can change a byte. */
+uchar byteFromUnit(float v) {
+    const float c = v > 0.0f ? v : 0.0f; /* NaN to 0 */
+    return (uchar)round((c < 1.0f ? c : 1.0f) * 255.0f);
+}
+
+uchar4 rgba8FromUnit(float4 v) {
+    return (uchar4)(byteFromUnit(v.x), byteFromUnit(v.y), byteFromUnit(v.z), byteFromUnit(v.w));
+}
+
+/* ---- the kernel -------------------------------------------------------------------------------- */
+
 __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #ifdef PREINTEGRATED
                       __global const float4 *preTable, __global const float *preNodes, __global const int *preLocator,
@@ -751,11 +768,16 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #ifdef ADAPTIVE_STEP
                       __global const float *brickStep,
 #endif
-                      __global const RayCastParams *P, const int4 window, __global float4 *image,
-                      __global volatile uint *stats) {
+                      const RayCastParams params, const int4 window, __global float4 *image,
+                      const int rgba8, __global volatile uint *stats) {
     /* window: (x, y, width, height) of the ray grid this launch casts, its origin the launch's
      * offset; the launch is rounded up to whole work-groups, and the rays past the window are
-     * not cast (nor counted). image holds the window alone, row by row. */
+     * not cast (nor counted). image holds the window alone, row by row: float RGBA, or with
+     * rgba8 the 8-bit RGBA a frame is encoded from (a quarter of the bytes to read back, and
+     * no second kernel to convert them). stats are running totals: a frame reads what it
+     * added (opencl_renderer.cpp), so no command zeroes them. params come by value, with the
+     * launch: no command writes them either. */
+    const RayCastParams *P = &params;
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= window.x + window.z || y >= window.y + window.w || x >= P->width || y >= P->height) return;
 #ifdef VOXEL_BYTES
@@ -777,23 +799,10 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
 #endif
     f.stats = stats;
     f.n = (int4)(P->levelDims[0], P->levelDims[1], P->levelDims[2], 0);
-    image[(y - window.y) * window.z + (x - window.x)] = castRay(VOLUME, &f, x, y);
-}
-
-/* ---- the frame as it is encoded --------------------------------------------------------------- */
-
-/* 8-bit premultiplied RGBA, channel by channel round(clamp(v, 0, 1) · 255) with halves away
- * from zero: renderer/common/frame_renderer.hpp's clampUnit and byteFromUnit bit for bit. The
- * product is one correctly rounded multiply (nothing to contract it with), and round() is exact,
- * so neither contraction nor a device's division or denormal liberties can change a byte. */
-uchar byteFromUnit(float v) {
-    const float c = v > 0.0f ? v : 0.0f; /* NaN to 0 */
-    return (uchar)round((c < 1.0f ? c : 1.0f) * 255.0f);
-}
-
-__kernel void rgba8FromFloat(__global const float4 *image, __global uchar4 *bytes, const int count) {
-    const int i = get_global_id(0);
-    if (i >= count) return;
-    const float4 v = image[i];
-    bytes[i] = (uchar4)(byteFromUnit(v.x), byteFromUnit(v.y), byteFromUnit(v.z), byteFromUnit(v.w));
+    const float4 pixel = castRay(VOLUME, &f, x, y);
+    const int i = (y - window.y) * window.z + (x - window.x);
+    if (rgba8)
+        ((__global uchar4 *)image)[i] = rgba8FromUnit(pixel);
+    else
+        image[i] = pixel;
 }
