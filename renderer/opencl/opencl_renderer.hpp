@@ -34,9 +34,10 @@ namespace volcast {
 // VOLCAST_CUBIC_FETCH says `image` (for measuring that difference on a device).
 enum class CubicFetch { Auto, Taps64, Trilinear8 };
 
-// Where renderRgba8 turns floats into bytes. On a GPU the device converts and a quarter of
-// the bytes cross the bus; on a CPU device (PoCL) the read-back is a memcpy and the host's
-// vectorised loop is faster than the conversion kernel (0.6–1 against 2–3 ms at 512², docs/gpu.md).
+// Where renderRgba8 turns floats into bytes. On a GPU the ray caster writes the bytes and a
+// quarter of them cross the bus; on a CPU device (PoCL) the read-back is a memcpy, and the
+// host's vectorised loop beat the separate conversion kernel this path once had (0.6–1
+// against 2–3 ms at 512²); the ray caster writing bytes there is not measured (docs/gpu.md).
 enum class Rgba8Conversion { Auto, Device, Host };
 
 struct OpenClRendererOptions {
