@@ -16,11 +16,15 @@ work=/tmp/volcast-compare; rm -rf "$work"; mkdir -p "$work" "$out/compare"
 data=
 for b in "$@"; do
   name=$(basename "$b")
-  mkdir -p "$work/$name" && tar -C "$work/$name" -xJf "$b/pkg.tar.xz" || { echo "cannot unpack $b/pkg.tar.xz"; exit 1; }
+  mkdir -p "$work/$name"
+  if ! tar -C "$work/$name" -xJf "$b/pkg.tar.xz"; then echo "cannot unpack $b/pkg.tar.xz"; exit 1; fi
   [ -z "$data" ] && [ -d "$b/data" ] && data=$b/data
 done
 [ -n "$data" ] || { echo "no bundle holds data/ (the scans Table 1 reads)"; exit 1; }
-nv=$(ls /usr/local/nvidia/lib64/libnvidia-opencl.so.1 /usr/lib/x86_64-linux-gnu/libnvidia-opencl.so.1 2>/dev/null | head -1)
+nv=
+for f in /usr/local/nvidia/lib64/libnvidia-opencl.so.1 /usr/lib/x86_64-linux-gnu/libnvidia-opencl.so.1; do
+  [ -e "$f" ] && { nv=$f; break; }
+done
 [ -z "$nv" ] && nv=$(find / -xdev -name 'libnvidia-opencl.so.1' 2>/dev/null | head -1)
 [ -z "$nv" ] && { echo "no libnvidia-opencl.so.1 on this machine"; exit 1; }
 mkdir -p /tmp/volcast-icd; echo "$nv" > /tmp/volcast-icd/nvidia.icd; export OCL_ICD_VENDORS=/tmp/volcast-icd
