@@ -128,6 +128,41 @@ std::vector<uint8_t> classifyBricks(const MinMaxBricks &grid, const TransferFunc
     return visible;
 }
 
+std::vector<int32_t> emptyReach(const std::vector<uint8_t> &visible, Vec3i bricks) {
+    const int64_t nx = bricks.x, ny = bricks.y, nz = bricks.z;
+    if (nx < 1 || ny < 1 || nz < 1 || uint64_t(nx) * uint64_t(ny) * uint64_t(nz) != visible.size())
+        throw std::invalid_argument("emptyReach: " + std::to_string(visible.size()) + " flags for a grid of " +
+                                    std::to_string(nx) + "×" + std::to_string(ny) + "×" + std::to_string(nz) + " bricks");
+    const int32_t none = int32_t(std::max({nx, ny, nz}));
+    std::vector<int32_t> reach(visible.size());
+    for (size_t b = 0; b < visible.size(); ++b) reach[b] = visible[b] ? 0 : none;
+    // Two raster passes of the 26-neighbour mask, each brick taking 1 + the least of the
+    // neighbours already passed: exact for the chessboard distance, whose every shortest path
+    // to a visible brick can be taken in steps that all go one way along each axis.
+    const auto pass = [&](int dir) {
+        const int64_t zs = dir > 0 ? 0 : nz - 1, ys = dir > 0 ? 0 : ny - 1, xs = dir > 0 ? 0 : nx - 1;
+        for (int64_t z = zs; z >= 0 && z < nz; z += dir)
+            for (int64_t y = ys; y >= 0 && y < ny; y += dir)
+                for (int64_t x = xs; x >= 0 && x < nx; x += dir) {
+                    int32_t &here = reach[size_t((z * ny + y) * nx + x)];
+                    if (here == 0) continue;
+                    // The neighbours before this brick in the pass's order: the layer behind
+                    // (9), the row behind in this layer (3), the brick behind in this row (1).
+                    for (int64_t dz = -1; dz <= 0; ++dz)
+                        for (int64_t dy = -1; dy <= 1; ++dy)
+                            for (int64_t dx = -1; dx <= 1; ++dx) {
+                                if (dz == 0 && (dy > 0 || (dy == 0 && dx >= 0))) continue;
+                                const int64_t qx = x + dir * dx, qy = y + dir * dy, qz = z + dir * dz;
+                                if (qx < 0 || qy < 0 || qz < 0 || qx >= nx || qy >= ny || qz >= nz) continue;
+                                here = std::min(here, reach[size_t((qz * ny + qy) * nx + qx)] + 1);
+                            }
+                }
+    };
+    pass(1);
+    pass(-1);
+    return reach;
+}
+
 double emptyBrickFraction(const std::vector<uint8_t> &visible) {
     if (visible.empty()) return 0;
     const auto empty = std::count(visible.begin(), visible.end(), uint8_t(0));

@@ -66,6 +66,15 @@ bool opacityPositiveOn(const TransferFunction &tf, double lo, double hi);
 // 1 for each brick whose [min, max] the transfer function makes visible, 0 for empty ones.
 std::vector<uint8_t> classifyBricks(const MinMaxBricks &grid, const TransferFunction &tf);
 
+// Per brick, its chessboard (L∞) distance in bricks to the nearest visible brick: 0 for a
+// visible one; r ≥ 1 for an empty one, every brick within r − 1 of which on each axis is empty
+// too, so that a ray may cross the whole (2r − 1)³ cube of bricks around it in one step
+// (Sramek and Kaufman's distance-transform skipping, on the brick grid). Bricks outside the
+// grid count as empty: no ray samples there. Where no brick is visible every brick gets the
+// grid's largest extent, whose cube covers the grid. `visible` is classifyBricks' list for a
+// grid of `bricks` (x fastest); std::invalid_argument if its size is not their product.
+std::vector<int32_t> emptyReach(const std::vector<uint8_t> &visible, Vec3i bricks);
+
 // Fraction of bricks classified empty (0 for an empty list).
 double emptyBrickFraction(const std::vector<uint8_t> &visible);
 

@@ -16,6 +16,7 @@
 #include <hwy/contrib/math/math-inl.h>
 #include <hwy/highway.h>
 
+#include "renderer/cpu/bricked_samples.hpp"
 #include "renderer/cpu/cpu_march.hpp"
 
 #include <algorithm>
@@ -153,6 +154,19 @@ HWY_INLINE VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
                           hn::GatherIndex(df, v, i011), hn::GatherIndex(df, v, hn::Add(i011, one)));
 }
 
+// Trilinear from four 32-bit gathers of narrow samples, each a tap (low Bytes) and its +x
+// neighbour (the next Bytes): widened to float and blended as a float level's 8 taps.
+template <int Bytes>
+HWY_INLINE VF blendNarrowPairs(const FrameParams &P, const TrilinearCell &c, VI g00, VI g10, VI g01, VI g11) {
+    const DF df;
+    const DI di;
+    const VI mask = hn::Set(di, Bytes == 1 ? 0xFF : 0xFFFF);
+    const VF offset = hn::Set(df, P.narrowOffset);
+    const auto lo = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(g, mask)), offset); };
+    const auto hi = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(hn::ShiftRight<8 * Bytes>(g), mask)), offset); };
+    return blendTrilinear(c, lo(g00), hi(g00), lo(g10), hi(g10), lo(g01), hi(g01), lo(g11), hi(g11));
+}
+
 // The same trilinear sample from the volume's narrow store (FrameParams::narrowVoxels): each
 // 32-bit gather at a sample's byte offset holds it and its +x neighbour in its low 2·Bytes
 // bytes. On the last column that +x tap is the next row's first sample (or the store's
@@ -162,7 +176,6 @@ HWY_INLINE VF sampleTrilinear(const FrameParams &P, VF x, VF y, VF z) {
 // sampleTrilinear returns for the same samples held as float.
 template <int Bytes>
 HWY_INLINE VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
-    const DF df;
     const DI di;
     const TrilinearCell c = trilinearCell(P, x, y, z);
     const VI sy = upperStep(c.iy, P.levelDims[1], P.rowStride * Bytes);
@@ -172,11 +185,33 @@ HWY_INLINE VF sampleTrilinearNarrow(const FrameParams &P, VF x, VF y, VF z) {
     const int32_t *v = reinterpret_cast<const int32_t *>(P.narrowVoxels);
     const VI g00 = hn::GatherOffset(di, v, o000), g10 = hn::GatherOffset(di, v, hn::Add(o000, sy));
     const VI g01 = hn::GatherOffset(di, v, hn::Add(o000, sz)), g11 = hn::GatherOffset(di, v, hn::Add(hn::Add(o000, sy), sz));
-    const VI mask = hn::Set(di, Bytes == 1 ? 0xFF : 0xFFFF);
-    const VF offset = hn::Set(df, P.narrowOffset);
-    const auto lo = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(g, mask)), offset); };
-    const auto hi = [&](VI g) { return hn::Add(hn::ConvertTo(df, hn::And(hn::ShiftRight<8 * Bytes>(g), mask)), offset); };
-    return blendTrilinear(c, lo(g00), hi(g00), lo(g10), hi(g10), lo(g01), hi(g01), lo(g11), hi(g11));
+    return blendNarrowPairs<Bytes>(P, c, g00, g10, g01, g11);
+}
+
+// The same trilinear sample from the bricked copy (FrameParams::brickedVoxels): the cell's
+// brick and its corner inside it, whose 8 taps all lie in that brick (its ninth sample on
+// each axis repeats the last sample past the volume's edge). Each 32-bit gather holds a tap
+// and its +x neighbour, as sampleTrilinearNarrow's; the samples, widening and blend are the
+// same, so the value is bit for bit the one the slice layout gives.
+template <int Bytes>
+HWY_INLINE VF sampleTrilinearBricked(const FrameParams &P, VF x, VF y, VF z) {
+    const DI di;
+    static_assert(kLayoutEdge == 8, "the brick of a cell is its corner shifted right by 3");
+    const TrilinearCell c = trilinearCell(P, x, y, z);
+    const VI low = hn::Set(di, kLayoutEdge - 1);
+    const VI brick = hn::Add(hn::Mul(hn::Add(hn::Mul(hn::ShiftRight<3>(c.iz), hn::Set(di, P.layoutBricks[1])),
+                                             hn::ShiftRight<3>(c.iy)),
+                                     hn::Set(di, P.layoutBricks[0])),
+                             hn::ShiftRight<3>(c.ix));
+    const VI inside = hn::Add(hn::Mul(hn::Add(hn::Mul(hn::And(c.iz, low), hn::Set(di, kLayoutSide)), hn::And(c.iy, low)),
+                                      hn::Set(di, kLayoutSide)),
+                              hn::And(c.ix, low));
+    const VI o000 = hn::Mul(hn::Add(hn::Mul(brick, hn::Set(di, kLayoutBrickSamples)), inside), hn::Set(di, Bytes));
+    const VI sy = hn::Set(di, kLayoutSide * Bytes), sz = hn::Set(di, kLayoutSide * kLayoutSide * Bytes);
+    const int32_t *v = reinterpret_cast<const int32_t *>(P.brickedVoxels);
+    const VI g00 = hn::GatherOffset(di, v, o000), g10 = hn::GatherOffset(di, v, hn::Add(o000, sy));
+    const VI g01 = hn::GatherOffset(di, v, hn::Add(o000, sz)), g11 = hn::GatherOffset(di, v, hn::Add(hn::Add(o000, sy), sz));
+    return blendNarrowPairs<Bytes>(P, c, g00, g10, g01, g11);
 }
 
 // Cubic B-spline weights of the four taps around fractional position f.
@@ -222,6 +257,7 @@ VF sampleCubic(const FrameParams &P, VF x, VF y, VF z) {
 
 HWY_INLINE VF sampleVolume(const FrameParams &P, VF x, VF y, VF z) {
     if (P.features.cubic) return sampleCubic(P, x, y, z);
+    if (P.brickedVoxels) return P.narrowBytes == 1 ? sampleTrilinearBricked<1>(P, x, y, z) : sampleTrilinearBricked<2>(P, x, y, z);
     if (P.narrowBytes == 1) return sampleTrilinearNarrow<1>(P, x, y, z);
     if (P.narrowBytes == 2) return sampleTrilinearNarrow<2>(P, x, y, z);
     return sampleTrilinear(P, x, y, z);
@@ -290,31 +326,50 @@ void preintegratedSegment(const FrameParams &P, VF sf, VF sb, VF out[4]) {
 
 // The incremental brick walk (DDA) over the 8³ brick grid, per lane: the brick holding the
 // point the ray has reached, whether the transfer function leaves it visible, and the t at
-// which the ray crosses each of its walls (ray_math.h's vcBrickOf, vcBrickWall, vcBrickExit).
-// Moving on costs a comparison per segment and a division per brick crossed, instead of
-// recomputing the brick and its exit per segment. A point reached within float rounding of a
-// wall may be put in either brick: harmless, as each brick's value range covers half a voxel
-// beyond its box (minmax_bricks.hpp, border). The kernel walks one ray with the same formulas.
+// which the ray leaves it across each axis's wall (ray_math.h's vcBrickOf, vcBrickWall,
+// vcBrickExit). Moving on costs a comparison per segment and a division per wall crossed,
+// instead of recomputing the brick and its exit per segment. A point reached within float
+// rounding of a wall may be put in either brick: harmless, as each brick's value range covers
+// half a voxel beyond its box (minmax_bricks.hpp, border). The kernel walks one ray with the
+// same formulas, a brick at a time.
+//
+// Empty regions. An empty brick at chessboard distance r from the nearest visible one
+// (FrameParams::brickReach) lies at the centre of a cube of empty bricks `extent` = r − 1 on
+// each side, and the walk takes that cube as the brick: its walls are the cube's, so the
+// march skips to where the ray leaves it in one step rather than one per brick. Crossing a
+// cube's wall moves the brick on that axis past the cube; on the other axes the brick is the
+// one holding the point reached, kept inside the cube's slab against rounding. A
+// pre-integrated segment is skipped only inside one brick (its ends may read values on either
+// side of a visible range in two empty bricks), and the adaptive step's bricks each have
+// their own step: for those the extent stays 0, the walk a brick at a time.
 //
 // With the adaptive step the walk reads the brick's step (FrameParams::brickStep) instead: its
 // segment length in `step`, visible where it is positive.
 struct BrickWalk {
     VI b[3];
-    VF wall[3]; // t where the ray leaves the brick across its wall on each axis (inf if parallel)
+    VI extent;  // bricks each side of b[] that are empty too: the cube the walk crosses at once
+    VF wall[3]; // t where the ray leaves the cube across its wall on each axis (inf if parallel)
     MF visible;
     VF step;    // the adaptive step: the brick's segment length
 
-    BrickWalk() : visible(hn::FirstN(DF(), 0)), step(hn::Zero(DF())) {
+    BrickWalk() : extent(hn::Zero(DI())), visible(hn::FirstN(DF(), 0)), step(hn::Zero(DF())) {
         for (int a = 0; a < 3; ++a) {
             b[a] = hn::Zero(DI());
             wall[a] = hn::Set(DF(), kInf);
         }
     }
 
+    // The wall on axis a of the cube of bricks b ± extent that the ray leaves by: the outer
+    // wall of brick b + extent ahead, or b − extent behind.
     VF wallAt(const FrameParams &P, const VF q0[3], const VF dq[3], int a) const {
         const DF df;
-        return vcBrickWall(hn::ConvertTo(df, b[a]), hn::Set(df, float(P.brickSize)), q0[a], dq[a]);
+        const DI di;
+        const VI ahead = hn::IfThenElse(hn::RebindMask(di, hn::Lt(dq[a], hn::Zero(df))), hn::Neg(extent), extent);
+        return vcBrickWall(hn::ConvertTo(df, hn::Add(b[a], ahead)), hn::Set(df, float(P.brickSize)), q0[a], dq[a]);
     }
+    // Visibility and extent of the lanes' bricks (clamped to the grid: a brick past its edge,
+    // reached by rounding or beyond the box, takes the edge brick's; its cube, shifted outward
+    // with it, stays inside the edge brick's within the grid).
     void lookUp(const FrameParams &P, MF lanes) {
         const DI di;
         VI c[3];
@@ -327,8 +382,12 @@ struct BrickWalk {
             step = hn::IfThenElse(lanes, here, step);
             now = hn::Gt(here, hn::Zero(DF()));
         } else {
-            const VI flag = hn::GatherIndex(di, P.brickVisible, brick);
-            now = hn::RebindMask(DF(), hn::Ne(flag, hn::Zero(di)));
+            const VI reach = hn::GatherIndex(di, P.brickReach, brick);
+            now = hn::RebindMask(DF(), hn::Eq(reach, hn::Zero(di)));
+            if (!P.features.preintegrated) {
+                const VI e = hn::Max(hn::Sub(reach, hn::Set(di, 1)), hn::Zero(di));
+                extent = hn::IfThenElse(hn::RebindMask(di, lanes), e, extent);
+            }
         }
         visible = hn::Or(hn::And(lanes, now), hn::AndNot(lanes, visible));
     }
@@ -341,32 +400,60 @@ struct BrickWalk {
             const VF q = hn::MulAdd(t, dq[a], q0[a]);
             b[a] = hn::ConvertTo(di, vcBrickOf(q, inverseB));
             b[a] = hn::Min(hn::Max(b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
-            wall[a] = wallAt(P, q0, dq, a);
         }
         visible = hn::FirstN(df, 0);
+        extent = hn::Zero(di);
         lookUp(P, lanes);
+        for (int a = 0; a < 3; ++a) wall[a] = wallAt(P, q0, dq, a);
     }
     VF exit() const { return vcBrickExit(wall[0], wall[1], wall[2]); }
-    // Moves the lanes of `lanes` on to the brick holding q(t), t not before where they are.
+    // Moves the lanes of `lanes` on to the brick (or cube) holding q(t), t not before where
+    // they are. Bricks are crossed one wall at a time with their own walls, and looked up once
+    // at the end: where the brick reached is the centre of an empty cube, its walls become
+    // the cube's, which lie beyond the brick's, so the ray is still inside.
     void advance(const FrameParams &P, const VF q0[3], const VF dq[3], VF t, MF lanes) {
         const DF df;
         const DI di;
+        const VI one = hn::Set(di, 1), zero = hn::Zero(di);
         MF moved = hn::FirstN(df, 0);
         for (;;) {
             const VF first = exit();
             const MF move = hn::And(lanes, hn::Ge(t, first));
             if (hn::AllFalse(df, move)) break;
             moved = hn::Or(moved, move);
+            const auto moveI = hn::RebindMask(di, move);
+            // Leaving a cube: the bricks on the other axes are those of the point reached.
+            const bool leavesCube = !hn::AllFalse(di, hn::And(moveI, hn::Gt(extent, zero)));
+            VI along[3];
+            if (leavesCube) {
+                const VF inverseB = hn::Set(df, 1.0f / float(P.brickSize));
+                for (int a = 0; a < 3; ++a) {
+                    const VI there = hn::ConvertTo(di, vcBrickOf(hn::MulAdd(first, dq[a], q0[a]), inverseB));
+                    along[a] = hn::Min(hn::Max(there, hn::Sub(b[a], extent)), hn::Add(b[a], extent));
+                }
+            }
             MF done = hn::FirstN(df, 0);
             for (int a = 0; a < 3; ++a) {
                 const MF here = hn::AndNot(done, hn::And(move, hn::Eq(wall[a], first)));
                 done = hn::Or(done, here);
-                const VI stepA = hn::IfThenElse(hn::RebindMask(di, hn::Gt(dq[a], hn::Zero(df))), hn::Set(di, 1), hn::Set(di, -1));
-                b[a] = hn::IfThenElse(hn::RebindMask(di, here), hn::Add(b[a], stepA), b[a]);
-                wall[a] = hn::IfThenElse(here, wallAt(P, q0, dq, a), wall[a]);
+                const auto hereI = hn::RebindMask(di, here);
+                const VI past = hn::Add(extent, one);
+                const VI stepA = hn::IfThenElse(hn::RebindMask(di, hn::Gt(dq[a], hn::Zero(df))), past, hn::Neg(past));
+                b[a] = hn::IfThenElse(hereI, hn::Add(b[a], stepA), b[a]);
+                if (leavesCube) b[a] = hn::IfThenElse(hn::AndNot(hereI, moveI), along[a], b[a]);
+                if (!leavesCube) wall[a] = hn::IfThenElse(here, wallAt(P, q0, dq, a), wall[a]);
+            }
+            if (leavesCube) {
+                // The new bricks alone until they are looked up: all three walls move.
+                extent = hn::IfThenElse(moveI, zero, extent);
+                for (int a = 0; a < 3; ++a) wall[a] = hn::IfThenElse(move, wallAt(P, q0, dq, a), wall[a]);
             }
         }
-        if (!hn::AllFalse(df, moved)) lookUp(P, moved);
+        if (hn::AllFalse(df, moved)) return;
+        lookUp(P, moved);
+        const MF cube = hn::And(moved, hn::RebindMask(df, hn::Gt(extent, zero)));
+        if (!hn::AllFalse(df, cube))
+            for (int a = 0; a < 3; ++a) wall[a] = hn::IfThenElse(cube, wallAt(P, q0, dq, a), wall[a]);
     }
 };
 

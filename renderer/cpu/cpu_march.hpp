@@ -53,6 +53,10 @@ struct FrameParams {
     const uint8_t *narrowVoxels = nullptr;
     int narrowBytes = 0;
     float narrowOffset = 0;
+    // The same narrow level bricked (bricked_samples.hpp): 9³ samples a brick, bricks
+    // kLayoutBrickSamples apart, x fastest. Set: read instead of narrowVoxels.
+    const uint8_t *brickedVoxels = nullptr;
+    int layoutBricks[2] = {0, 0};   // bricks along x and y
     int levelDims[3];               // samples per axis of the level (unpadded)
     int rowStride = 0, sliceStride = 0; // in samples, of what is sampled
 
@@ -68,12 +72,13 @@ struct FrameParams {
     int preNodeCount = 0, preLocatorSize = 0;
     float preLocatorMin = 0, preLocatorScale = 0;
 
-    // Empty-space skipping: per brick 1 if visible, as int32 so that lanes gather it.
-    const int32_t *brickVisible = nullptr;
+    // Empty-space skipping: per brick its chessboard distance in bricks to the nearest visible
+    // brick, 0 where visible (emptyReach, minmax_bricks.hpp), as int32 so that lanes gather it.
+    const int32_t *brickReach = nullptr;
     int bricks[3] = {0, 0, 0};
     int brickSize = 8;
     // The adaptive step: per brick its segment length, world units, or −1 where the brick is
-    // skipped (adaptive_step.hpp). Set: the brick walk reads it instead of brickVisible.
+    // skipped (adaptive_step.hpp). Set: the brick walk reads it instead of brickReach.
     const float *brickStep = nullptr;
 };
 

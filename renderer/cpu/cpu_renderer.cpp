@@ -114,6 +114,10 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
         if (samples.isNarrow() && lastOffset <= uint64_t(INT32_MAX)) {
             data.narrow = samples.narrow;
             data.width = samples.width;
+            if (bricksFit(data.dims, options_, samples.width.bytes)) {
+                data.bricked = cpu::brickSamples(samples, threads_);
+                heldBytes_ += uint64_t(data.bricked->store.size());
+            }
         } else {
             checkIndexable(data.dims, 0);
             if (samples.isNarrow()) data.widened = samples.toFloats();
@@ -131,6 +135,13 @@ CpuRenderer::DataSet &CpuRenderer::dataSet(int level, bool cubic, RenderStats &s
     return dataSets_.emplace(key, std::move(data)).first->second;
 }
 
+// Whether a narrow level is held bricked: asked for, and its byte offsets fit int32 (the
+// gathers'); else it is sampled where it lies.
+bool CpuRenderer::bricksFit(Vec3i dims, const CpuRendererOptions &options, int bytes) {
+    return options.layout == SampleLayout::Bricks && bytes < 4 &&
+           cpu::BrickedSamples::plannedBytes(dims, bytes) <= uint64_t(INT32_MAX);
+}
+
 uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options, int level0Bytes) {
     const auto count = [](Vec3i d, int pad) { return uint64_t(d.x + pad) * uint64_t(d.y + pad) * uint64_t(d.z + pad); };
     const int b = std::max(1, options.brickSize);
@@ -139,6 +150,7 @@ uint64_t CpuRenderer::plannedBytes(Vec3i dims, const CpuRendererOptions &options
     uint64_t bytes = level0Bytes < 4 && count(dims, 0) * uint64_t(level0Bytes) + kNarrowSlack > uint64_t(INT32_MAX)
                          ? count(dims, 0) * sizeof(float)
                          : 0;
+    if (bricksFit(dims, options, level0Bytes)) bytes += cpu::BrickedSamples::plannedBytes(dims, level0Bytes);
     for (int level = 0;; ++level) {
         const Vec3i d = mipLevelDims(dims, level);
         if (level > 0) bytes += count(d, 0) * sizeof(float);                  // the mip level
@@ -169,8 +181,9 @@ const MinMaxBricks &CpuRenderer::bricks(DataSet &data, int level, RenderStats &s
 
 void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st) {
     if (!data.classification.update(bricks(data, level, st), tf, st)) return;
-    // As int32, so that the march's lanes gather it.
-    data.brickVisible.assign(data.classification.visible.begin(), data.classification.visible.end());
+    // Each brick's distance to the nearest visible one (0 where visible), as int32 so that the
+    // march's lanes gather it: a ray crosses a cube of empty bricks in one step.
+    data.brickReach = emptyReach(data.classification.visible, data.bricks->bricks);
     counts_.add(&PreprocessCounts::brickClassifications);
 }
 
@@ -233,6 +246,11 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
         p.narrowVoxels = data.narrow;
         p.narrowBytes = data.width.bytes;
         p.narrowOffset = data.width.offset;
+        if (data.bricked) {
+            p.brickedVoxels = data.bricked->store.data();
+            p.layoutBricks[0] = int(data.bricked->bricks.x);
+            p.layoutBricks[1] = int(data.bricked->bricks.y);
+        }
     }
     p.rowStride = int(data.dims.x + pad);
     p.sliceStride = int((data.dims.x + pad) * (data.dims.y + pad));
@@ -241,7 +259,7 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     p.tfMin = float(tfTable.minValue);
     p.tfScale = float(tfTable.scale);
     p.tfEntries = tfTable.entries();
-    p.brickVisible = quality.emptySpaceSkipping ? data.brickVisible.data() : nullptr;
+    p.brickReach = quality.emptySpaceSkipping ? data.brickReach.data() : nullptr;
     p.brickStep = quality.adaptiveStep ? data.adaptive.steps.step.data() : nullptr;
     // A window casts only its own rays, tiled from its corner; each ray is cast as in the
     // whole grid (its lanes do not depend on the other rays of its packet).

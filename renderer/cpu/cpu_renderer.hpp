@@ -13,6 +13,7 @@
 #include "renderer/common/minmax_bricks.hpp"
 #include "renderer/common/mip_pyramid.hpp"
 #include "renderer/common/narrow_samples.hpp"
+#include "renderer/cpu/bricked_samples.hpp"
 
 #include <atomic>
 #include <map>
@@ -22,9 +23,19 @@
 
 namespace volcast {
 
+// How the native path holds an 8- or 16-bit level 0 (the only narrow level) for its trilinear
+// samples. Slices is the default: the bricked copy takes 1.5× the store's bytes again, and
+// its frames took 0.88–1.02× as long on a 200 MiB scan, 0.96–1.13× on a 4 MiB one
+// (docs/cpu_renderer.md, "Sample layout").
+enum class SampleLayout {
+    Slices, // the volume's own store, slice after slice: no copy
+    Bricks, // a bricked copy beside it (bricked_samples.hpp): fewer cache lines per sample
+};
+
 struct CpuRendererOptions {
     int threads = 0;   // 0: one per core
     int brickSize = 8; // level voxels per min-max brick edge
+    SampleLayout layout = SampleLayout::Slices;
 };
 
 class CpuRenderer : public FrameRenderer {
@@ -50,7 +61,8 @@ class CpuRenderer : public FrameRenderer {
     // What memoryBytes() reaches at most for a volume of `dims`: every mip level sampled,
     // trilinear and cubic, with empty-space skipping. The server's memory budget counts it.
     // `level0Bytes`: the volume's bytes per sample (Volume::narrow.bytes). Trilinear frames
-    // copy no level, unless a narrow level 0's byte offsets pass int32 (then it is widened).
+    // copy no level but a narrow level 0 into bricks (SampleLayout::Bricks), or into floats
+    // where its byte offsets pass int32.
     static uint64_t plannedBytes(Vec3i dims, const CpuRendererOptions &options = {}, int level0Bytes = 4);
 
     // What description() says for a renderer with these options, before any volume exists
@@ -68,15 +80,17 @@ class CpuRenderer : public FrameRenderer {
         const unsigned char *narrow = nullptr;
         NarrowWidth width;
         std::vector<float> widened;
+        std::optional<cpu::BrickedSamples> bricked; // the narrow level bricked (SampleLayout::Bricks)
         std::vector<float> padded; // cubic: coefficients, mirrored 1 before and 2 after each axis
         std::optional<MinMaxBricks> bricks;
         BrickClassification classification;
-        std::vector<int32_t> brickVisible; // classification.visible as int32, for gathers
+        std::vector<int32_t> brickReach; // emptyReach of classification.visible: int32, for gathers
         std::optional<BrickGradients> gradients; // the adaptive step's, on first need
         AdaptiveStepTable adaptive;
     };
 
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
+    static bool bricksFit(Vec3i dims, const CpuRendererOptions &options, int bytes);
     void classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st);
     // The bricks' min-max grid over the data set, built on first need.
     const MinMaxBricks &bricks(DataSet &data, int level, RenderStats &st);

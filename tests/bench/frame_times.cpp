@@ -4,6 +4,7 @@
 
 #include "renderer/model/image.hpp"
 #include "renderer/io/volume_io.hpp"
+#include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/make_frame_renderer.hpp"
 #include "tests/bench/phantom.hpp"
 #include "tests/bench/studies.hpp"
@@ -125,8 +126,12 @@ CellResult timeOrbit(FrameRenderer &renderer, const TransferFunction &tf, const 
 } // namespace
 
 std::unique_ptr<FrameRenderer> makeStudyRenderer(const std::shared_ptr<OpenClContext> &cl, const std::string &backEnd,
-                                                 std::shared_ptr<const Volume> volume) {
+                                                 std::shared_ptr<const Volume> volume, const std::string &layout) {
+    if (layout != "bricks" && layout != "slices")
+        throw std::invalid_argument("layout '" + layout + "': expected bricks or slices");
     // The back ends as the server makes them: no OpenCL context is the native path.
+    if (backEnd == "cpu" && layout == "bricks")
+        return std::make_unique<CpuRenderer>(std::move(volume), CpuRendererOptions{.layout = SampleLayout::Bricks});
     if (backEnd == "cpu") return makeFrameRenderer(nullptr, std::move(volume));
     if (backEnd == "opencl") return makeFrameRenderer(cl, std::move(volume));
     throw std::invalid_argument("back end '" + backEnd + "': expected opencl or cpu");
@@ -212,9 +217,10 @@ void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &option
     std::map<std::string, std::map<std::string, CellResult>> cells;
     j["renderer"] = options.backEnd;
     const bool openCl = options.backEnd == "opencl";
+    if (!openCl) j["layout"] = options.layout;
     std::vector<std::vector<std::string>> partRows;
     for (const Entry &e : volumes) {
-        const std::unique_ptr<FrameRenderer> renderer = makeStudyRenderer(cl, options.backEnd, e.volume);
+        const std::unique_ptr<FrameRenderer> renderer = makeStudyRenderer(cl, options.backEnd, e.volume, options.layout);
         j["device"] = renderer->description();
         const TransferFunction tf = peerTransferFunction(e.range, e.volume->smallestSpacing());
         for (const auto &s : sizes) {
@@ -325,7 +331,7 @@ void table1(const std::shared_ptr<OpenClContext> &cl, const StudyOptions &option
 
 void peerMode(const std::shared_ptr<OpenClContext> &cl, const PeerModeOptions &options) {
     auto volume = std::make_shared<Volume>(loadVolume(options.volume));
-    const std::unique_ptr<FrameRenderer> frameRenderer = makeStudyRenderer(cl, options.backEnd, volume);
+    const std::unique_ptr<FrameRenderer> frameRenderer = makeStudyRenderer(cl, options.backEnd, volume, options.layout);
     FrameRenderer &renderer = *frameRenderer;
     const ValueRange nominal = nominalRange(*volume);
     const TransferFunction tf = peerTransferFunction(nominal, volume->smallestSpacing());

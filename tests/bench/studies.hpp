@@ -24,6 +24,8 @@ struct StudyOptions {
     // Table 1's ray caster: opencl (the context's device) or cpu (native); auto is resolved
     // to one of them before a study runs (resolveBackEnd).
     std::string backEnd = "auto";
+    // Table 1's sample layout on the native path: slices or bricks (CpuRendererOptions::layout).
+    std::string layout = "slices";
     // Figure 5's and the error study's ray casters, timed in turn cell by cell (interleaved).
     std::vector<std::string> backEnds = {"auto"};
     // The error studies' stepping, each cell drawn with each side by side: uniform (quality.step
@@ -50,16 +52,19 @@ struct PeerModeOptions {
     double maxSeconds = 30;
     std::filesystem::path png; // if set: each size's last frame, as PATH_WxH.png
     std::string backEnd = "auto"; // opencl or cpu; auto resolved as StudyOptions::backEnd
+    std::string layout = "slices"; // the native path's sample layout: slices or bricks
 };
 
 // "auto" as the server and volcast-render resolve it (resolveDeviceChoice: opencl where an
 // OpenCL GPU exists, else cpu); "opencl" and "cpu" as they are.
 std::string resolveBackEnd(const std::string &backEnd);
 
-// The ray caster a study times: "opencl" on `cl`, or "cpu" (the native path). Throws
+// The ray caster a study times: "opencl" on `cl`, or "cpu" (the native path, its narrow
+// samples held in `layout`: "slices", as the server holds them, or "bricks"). Throws
 // std::invalid_argument for anything else (auto is resolved before).
 std::unique_ptr<FrameRenderer> makeStudyRenderer(const std::shared_ptr<OpenClContext> &cl, const std::string &backEnd,
-                                                 std::shared_ptr<const Volume> volume);
+                                                 std::shared_ptr<const Volume> volume,
+                                                 const std::string &layout = "slices");
 void peerMode(const std::shared_ptr<OpenClContext> &cl, const PeerModeOptions &options);
 
 // A CT-like int16 NRRD (detached .raw beside the header) of `dims`, written slice by slice.

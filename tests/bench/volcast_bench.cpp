@@ -58,6 +58,10 @@ int main(int argc, char **argv) {
                         "Table 1's ray caster: auto (an OpenCL GPU, else cpu), opencl (on --device) or cpu (native)")
             ->check(CLI::IsMember({"auto", "opencl", "cpu"}))
             ->capture_default_str();
+        sub->add_option("--layout", options.layout,
+                        "Table 1's native path: its 8- and 16-bit samples in the volume's slices (as served) or in a bricked copy")
+            ->check(CLI::IsMember({"bricks", "slices"}))
+            ->capture_default_str();
     }
     for (auto *sub : {f5, all})
         sub->add_option("--viewport", viewportFigure5, "Figure 5's square viewport")->capture_default_str();
@@ -112,6 +116,9 @@ int main(int argc, char **argv) {
     peers->add_option("--kernel-cache", device.kernelCacheDir, "PoCL's compiled-kernel cache folder");
     peers->add_option("--backend", peer.backEnd, "Ray caster: auto (an OpenCL GPU, else cpu), opencl (on --device) or cpu (native)")
         ->check(CLI::IsMember({"auto", "opencl", "cpu"}))
+        ->capture_default_str();
+    peers->add_option("--layout", peer.layout, "The native path's 8- and 16-bit samples: in the volume's slices (as served) or in a bricked copy")
+        ->check(CLI::IsMember({"bricks", "slices"}))
         ->capture_default_str();
 
     std::filesystem::path memoryVolume;

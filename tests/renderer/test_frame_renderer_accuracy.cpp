@@ -535,16 +535,9 @@ TEST(CpuRenderer, DrawsTheOpenClImageToFloatRounding) {
     }
 }
 
-// Empty-space skipping by sample position, on both back ends: a sampled segment is not taken
-// when its centre lies in a brick the transfer function makes empty, a pre-integrated one when
-// it lies wholly in one. Every segment left out would have added exactly 0, so the image is
-// the one without skipping, and both back ends draw it to float rounding with the same
-// samples. The sampled segments taken are counted independently here, in double: those whose
-// centre lies in a visible brick. (Per-segment skipping, the kernel's earlier rule, took the
-// segment straddling into each empty brick too: 16.6 samples per ray here against 10.4.)
-TEST(CpuRenderer, SkipsBySamplePositionOnBothBackEnds) {
-    const SyntheticVolume sphere = makeSphere({48, 40, 44}, {1, 1, 1.2}, 9, 2, 200);
-    const Volume &v = sphere.volume;
+// Returns the widest cube of empty bricks the native path may cross at once, in bricks.
+int skipsBySamplePositionOnBothBackEnds(const Volume &v) {
+    SCOPED_TRACE(std::to_string(v.dims.x) + "×" + std::to_string(v.dims.y) + "×" + std::to_string(v.dims.z) + " sphere");
     TransferFunction tf;
     tf.points = {{0, 0, 0, 0, 0}, {60, 0, 0, 0, 0}, {120, 1, 0.6, 0.3, 0.3}, {200, 1, 1, 1, 0.5}};
     const Camera cam = test::obliqueCamera(v, 40);
@@ -572,6 +565,8 @@ TEST(CpuRenderer, SkipsBySamplePositionOnBothBackEnds) {
             }
         return taken;
     };
+    const std::vector<int32_t> reach = emptyReach(classifyBricks(grid, tf), grid.bricks);
+    const int widestCube = 2 * *std::max_element(reach.begin(), reach.end()) - 1;
     const auto count = [](double perRay, const RenderStats &s) { return std::llround(perRay * double(s.raysHit)); };
     for (bool preintegrated : {false, true})
         for (bool jitter : {false, true}) {
@@ -600,6 +595,21 @@ TEST(CpuRenderer, SkipsBySamplePositionOnBothBackEnds) {
             std::printf("%s: samples per ray %.2f (CPU), %.2f (OpenCL), %.2f without skipping\n", what.c_str(),
                         sc.meanSamplesPerRay, so.meanSamplesPerRay, none.meanSamplesPerRay);
         }
+    return widestCube;
+}
+
+// Empty-space skipping by sample position, on both back ends: a sampled segment is not taken
+// when its centre lies in a brick the transfer function makes empty, a pre-integrated one when
+// it lies wholly in one. Every segment left out would have added exactly 0, so the image is
+// the one without skipping, and both back ends draw it to float rounding with the same
+// samples. The sampled segments taken are counted independently here, in double: those whose
+// centre lies in a visible brick. (Per-segment skipping, the kernel's earlier rule, took the
+// segment straddling into each empty brick too: 16.6 samples per ray here against 10.4.)
+// The native path crosses a cube of empty bricks in one step (emptyReach); the second sphere,
+// small in a large box, leaves cubes up to 11 bricks wide around it, the first up to 3.
+TEST(CpuRenderer, SkipsBySamplePositionOnBothBackEnds) {
+    EXPECT_EQ(skipsBySamplePositionOnBothBackEnds(makeSphere({48, 40, 44}, {1, 1, 1.2}, 9, 2, 200).volume), 3);
+    EXPECT_EQ(skipsBySamplePositionOnBothBackEnds(makeSphere({104, 96, 120}, {1, 1, 1.25}, 12, 2, 200).volume), 11);
 }
 
 TEST(CpuRenderer, PreprocessingHappensOnlyWhenASwitchFirstNeedsIt) {
@@ -686,10 +696,10 @@ TEST(NarrowSamples, StatisticsEqualThoseOfTheFloatCopy) {
     }
 }
 
-// An 8- or 16-bit scan held in the narrow store and sampled there, in place, draws the image
-// of the same samples held as float bit for bit, in every switch that samples trilinearly
-// (and with the same samples), with no copy of level 0 at all. Only the widening differs,
-// and it is exact.
+// An 8- or 16-bit scan held in the narrow store draws the image of the same samples held as
+// float bit for bit, in every switch that samples trilinearly (and with the same samples):
+// sampled in place with no copy of level 0 at all (SampleLayout::Slices), or from its bricked
+// copy (Bricks, the one copy made). Only the widening differs, and it is exact.
 TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
     const Camera cam = test::obliqueCamera(blob().volume, 30);
     const std::vector<ClipPlane> clip{{blob().volume.center(), normalize(Vec3d{0.2, 1, -0.3})}};
@@ -709,36 +719,43 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
         ASSERT_EQ(held.narrow.bytes, scan.bytes) << scan.what;
         EXPECT_TRUE(held.voxels.empty()) << scan.what << ": the float store is given up";
         EXPECT_EQ(held.sampleBytes(), uint64_t(24 * 24 * 24) * uint64_t(scan.bytes) + kNarrowSlack) << scan.what;
-        CpuRenderer narrow(held), wide(v);
-        EXPECT_EQ(narrow.memoryBytes(), 0) << scan.what << ": level 0 is sampled in place";
-        EXPECT_EQ(wide.memoryBytes(), 0) << scan.what << ": so is a float level 0";
-        Quality q = plain(0.5);
-        std::vector<std::pair<std::string, Quality>> cases{{"plain", q}};
-        q.jitter = true;
-        q.seed = 3;
-        q.earlyTermination = 0.98;
-        q.emptySpaceSkipping = true;
-        cases.push_back({"jitter, early termination, skipping", q});
-        q.shading = true;
-        cases.push_back({"shading", q});
-        q.preintegrated = true;
-        q.step = 1.3;
-        cases.push_back({"pre-integrated, shading", q});
-        q = plain(0.5);
-        q.compositing = Compositing::Maximum;
-        cases.push_back({"MIP", q});
-        q = plain(0.5);
-        q.imageScale = 0.5;
-        cases.push_back({"image scale 1/2", q});
-        for (const auto &[what, quality] : cases) {
-            const std::string label = std::string(scan.what) + ", " + what;
-            for (const auto &planes : {std::vector<ClipPlane>{}, clip}) {
-                RenderStats sn, sw;
-                const Image a = narrow.render({tf, cam, 40, 40, quality, planes}, &sn);
-                const Image b = wide.render({tf, cam, 40, 40, quality, planes}, &sw);
-                EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label;
-                EXPECT_EQ(sn.meanSamplesPerRay, sw.meanSamplesPerRay) << label;
-                EXPECT_GT(compareImages(a, Image(40, 40)).maxAbs, 0.05) << label << ": nothing drawn";
+        for (const SampleLayout layout : {SampleLayout::Bricks, SampleLayout::Slices}) {
+            const bool bricks = layout == SampleLayout::Bricks;
+            const std::string heldAs = std::string(scan.what) + (bricks ? " in bricks" : " in slices");
+            CpuRenderer narrow(held, CpuRendererOptions{.layout = layout}), wide(v);
+            EXPECT_EQ(narrow.memoryBytes(), bricks ? cpu::BrickedSamples::plannedBytes(v.dims, scan.bytes) : 0)
+                << heldAs << ": level 0 is sampled in place, or from its one bricked copy";
+            EXPECT_LE(narrow.memoryBytes(), CpuRenderer::plannedBytes(v.dims, CpuRendererOptions{.layout = layout}, scan.bytes))
+                << heldAs << ": the server's budget counts the copy";
+            EXPECT_EQ(wide.memoryBytes(), 0) << heldAs << ": a float level 0 is sampled in place";
+            Quality q = plain(0.5);
+            std::vector<std::pair<std::string, Quality>> cases{{"plain", q}};
+            q.jitter = true;
+            q.seed = 3;
+            q.earlyTermination = 0.98;
+            q.emptySpaceSkipping = true;
+            cases.push_back({"jitter, early termination, skipping", q});
+            q.shading = true;
+            cases.push_back({"shading", q});
+            q.preintegrated = true;
+            q.step = 1.3;
+            cases.push_back({"pre-integrated, shading", q});
+            q = plain(0.5);
+            q.compositing = Compositing::Maximum;
+            cases.push_back({"MIP", q});
+            q = plain(0.5);
+            q.imageScale = 0.5;
+            cases.push_back({"image scale 1/2", q});
+            for (const auto &[what, quality] : cases) {
+                const std::string label = heldAs + ", " + what;
+                for (const auto &planes : {std::vector<ClipPlane>{}, clip}) {
+                    RenderStats sn, sw;
+                    const Image a = narrow.render({tf, cam, 40, 40, quality, planes}, &sn);
+                    const Image b = wide.render({tf, cam, 40, 40, quality, planes}, &sw);
+                    EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label;
+                    EXPECT_EQ(sn.meanSamplesPerRay, sw.meanSamplesPerRay) << label;
+                    EXPECT_GT(compareImages(a, Image(40, 40)).maxAbs, 0.05) << label << ": nothing drawn";
+                }
             }
         }
     }
@@ -748,9 +765,11 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
 // row and slice the sampler must take the sample itself as the upper tap. Random integer
 // samples, non-zero up to every face, seen through the high faces and the low ones, with
 // boundary segments reaching half a voxel past the outermost samples, at mip levels 0 and 1;
-// flat axes (one sample) too. The judge is the OpenCL kernel, which clamps every tap on its
-// own (2e-5: DrawsTheOpenClImageToFloatRounding); narrow and float agree bit for bit. A wrong
-// edge tap changes pixels here; a blob that fades to zero before the faces would hide it.
+// flat axes (one sample) too; 9 samples, a brick and one more, for the bricked copy, whose
+// last brick then holds one cell's corner and repeats the last sample. The judge is the
+// OpenCL kernel, which clamps every tap on its own (2e-5: DrawsTheOpenClImageToFloatRounding);
+// narrow (in bricks and in slices) and float agree bit for bit. A wrong edge tap changes
+// pixels here; a blob that fades to zero before the faces would hide it.
 TEST(CpuRenderer, LevelsSampledInPlaceDrawTheOpenClImageAtEveryFace) {
     std::mt19937 rng(11);
     for (const auto &[dims, lo, hi] : {std::tuple{Vec3i{13, 11, 9}, 0, 255}, std::tuple{Vec3i{13, 11, 9}, -1024, 3071},
@@ -768,7 +787,7 @@ TEST(CpuRenderer, LevelsSampledInPlaceDrawTheOpenClImageAtEveryFace) {
         TransferFunction tf;
         tf.points = {{double(lo), 0.2, 0.5, 1, 0.05}, {double(hi), 1, 0.6, 0.2, 0.6}};
         tf.opacityUnit = 1;
-        CpuRenderer narrow(held), wide(v);
+        CpuRenderer narrow(held), bricks(held, CpuRendererOptions{.layout = SampleLayout::Bricks}), wide(v);
         OpenClRenderer judge(test::sharedOpenClContext(), v);
         Camera high = test::obliqueCamera(v, 40), low = high;
         low.eye = v.center() - (high.eye - v.center());
@@ -781,7 +800,8 @@ TEST(CpuRenderer, LevelsSampledInPlaceDrawTheOpenClImageAtEveryFace) {
                                           side + ", mip " + std::to_string(mip);
                 const Image a = narrow.render({tf, cam, 48, 48, q, {}});
                 const Image b = wide.render({tf, cam, 48, 48, q, {}});
-                EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label;
+                EXPECT_EQ(compareImages(a, b).maxAbs, 0) << label << ", slices";
+                EXPECT_EQ(compareImages(bricks.render({tf, cam, 48, 48, q, {}}), b).maxAbs, 0) << label << ", bricks";
                 EXPECT_LT(compareImages(b, judge.render({tf, cam, 48, 48, q, {}})).maxAbs, 2e-5) << label;
                 EXPECT_GT(compareImages(a, Image(48, 48)).maxAbs, 0.05) << label << ": nothing drawn";
             }

@@ -249,5 +249,40 @@ TEST(MinMaxBricks, OpacityTestIsExactOnIntervalEnds) {
     EXPECT_FALSE(opacityPositiveOn(none, 0, 1));     // no points: transparent everywhere
 }
 
+// The chessboard distance to the nearest visible brick, against its definition counted
+// brick by brick: on grids with one, a few and many visible bricks, flat and one-brick axes,
+// and none visible (the grid's largest extent, whose cube covers the grid).
+TEST(MinMaxBricks, EmptyReachIsTheChessboardDistanceToTheNearestVisibleBrick) {
+    std::mt19937 rng(5);
+    const std::vector<Vec3i> grids{{7, 5, 6}, {1, 9, 4}, {12, 1, 1}, {1, 1, 1}, {9, 8, 10}};
+    for (const Vec3i g : grids)
+        for (double density : {0.0, 0.002, 0.05, 0.5}) {
+            const size_t n = size_t(g.x) * size_t(g.y) * size_t(g.z);
+            std::vector<uint8_t> visible(n);
+            std::bernoulli_distribution on(density);
+            for (uint8_t &v : visible) v = on(rng) ? 1 : 0;
+            if (density == 0.002) visible[n / 2] = 1; // exactly one, somewhere inside
+            const std::vector<int32_t> reach = emptyReach(visible, g);
+            ASSERT_EQ(reach.size(), n);
+            const int none = int(std::max({g.x, g.y, g.z}));
+            for (int z = 0; z < g.z; ++z)
+                for (int y = 0; y < g.y; ++y)
+                    for (int x = 0; x < g.x; ++x) {
+                        int nearest = none;
+                        for (int qz = 0; qz < g.z; ++qz)
+                            for (int qy = 0; qy < g.y; ++qy)
+                                for (int qx = 0; qx < g.x; ++qx)
+                                    if (visible[size_t((qz * g.y + qy) * g.x + qx)])
+                                        nearest = std::min(nearest, std::max({std::abs(qx - x), std::abs(qy - y),
+                                                                              std::abs(qz - z)}));
+                        ASSERT_EQ(reach[size_t((z * g.y + y) * g.x + x)], nearest)
+                            << "brick (" << x << ", " << y << ", " << z << ") of " << g.x << "×" << g.y << "×" << g.z
+                            << ", density " << density;
+                    }
+        }
+    EXPECT_THROW(emptyReach(std::vector<uint8_t>(5), {2, 2, 1}), std::invalid_argument);
+    EXPECT_THROW(emptyReach({}, {0, 1, 1}), std::invalid_argument);
+}
+
 } // namespace
 } // namespace volcast
