@@ -538,6 +538,7 @@ void projectPacket(const FrameParams &P, VF t0, VF t1, VF j, const VF q0[3], con
 struct PacketMarch {
     VF t0, t1, j, q0[3], dq[3], dir[3];
     VF k, segStart;
+    VF lastFull; // the last full segment k that ends before t1, one fewer for rounding
     BrickWalk walk;
     MF alive, sfStale;
     VF depth, depthCarry, T, color[3], colorCarry[3], sf;
@@ -647,7 +648,6 @@ template <int N>
 HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &totals) {
     const DF df;
     const DI di;
-    const int lanes = int(hn::Lanes(df));
     const Features &F = P.features;
     const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step), half = hn::Set(df, 0.5f);
     StepState st[N];
@@ -695,8 +695,7 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
             const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, m.t0), d), m.j),
                                                         hn::Set(df, F.preintegrated ? 0.0f : 0.5f))),
                                       one);
-            const VF byEnd = hn::Sub(hn::Floor(hn::Sub(hn::Div(hn::Sub(m.t1, m.t0), d), m.j)), one);
-            s.jumpTo = hn::IfThenElse(s.skipped, hn::Min(byExit, byEnd), zero);
+            s.jumpTo = hn::IfThenElse(s.skipped, hn::Min(byExit, m.lastFull), zero);
         }
     }
     for (int p = 0; p < N; ++p) {
@@ -797,11 +796,11 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
         if (F.emptySpaceSkipping && s.anySkipped) {
             // Segments k … jumpTo are skipped; the next to look at is jumpTo + 1.
             const MF jump = hn::And(m.alive, hn::Ge(s.jumpTo, m.k));
-            HWY_ALIGN float count[kMaxLanes];
-            hn::Store(hn::IfThenElse(jump, hn::Add(hn::Sub(s.jumpTo, m.k), hn::Set(df, 2.0f)),
-                                     hn::IfThenElseZero(s.skipped, one)),
-                      df, count);
-            for (int l = 0; l < lanes; ++l) totals.skipped += uint64_t(count[l]);
+            // Whole numbers below 2^24 (a ray's segments are bounded by maxSamples): exact in
+            // float and in their int32 sum.
+            const VF count = hn::IfThenElse(jump, hn::Add(hn::Sub(s.jumpTo, m.k), hn::Set(df, 2.0f)),
+                                            hn::IfThenElseZero(s.skipped, one));
+            totals.skipped += uint64_t(hn::GetLane(hn::SumOfLanes(di, hn::ConvertTo(di, count))));
             m.segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(s.jumpTo, m.j), d, m.t0), m.segStart);
             m.k = hn::IfThenElse(jump, hn::Add(s.jumpTo, one), m.k);
         }
@@ -843,6 +842,9 @@ HWY_INLINE bool startPacket(const FrameParams &P, int bx, int by, int x1, int y1
     }
     m.alive = rays.hit;
     m.k = hn::IfThenElse(hn::Gt(m.j, zero), zero, one); // the first boundary past t0
+    // The last full segment before t1, one fewer for rounding: where a jump over empty space
+    // stops at the latest.
+    m.lastFull = hn::Sub(hn::Floor(hn::Sub(hn::Div(hn::Sub(m.t1, m.t0), hn::Set(df, P.step)), m.j)), one);
     m.segStart = m.t0;
     m.walk = BrickWalk();
     if ((F.emptySpaceSkipping || F.adaptiveStep) && F.intensityProjection == 0)
