@@ -163,6 +163,7 @@ bool BrickClassification::update(const MinMaxBricks &bricks, const TransferFunct
     }
     const auto t = std::chrono::steady_clock::now();
     visible = classifyBricks(bricks, tf);
+    reach = emptyReach(visible, bricks.bricks);
     const size_t empty = size_t(std::count(visible.begin(), visible.end(), uint8_t(0)));
     emptyFraction = visible.empty() ? 0 : double(empty) / double(visible.size());
     classifiedFor = tf;

@@ -117,9 +117,10 @@ class FrameTables {
 struct BrickClassification {
     std::optional<TransferFunction> classifiedFor;
     std::vector<uint8_t> visible; // per brick: 1 where the transfer function makes some value visible
+    std::vector<int32_t> reach;   // per brick: emptyReach(visible), 0 where visible (the brick walks')
     double emptyFraction = 0;
     // Classifies `bricks` for `tf` unless they already are; true when it did (a back end then
-    // converts or uploads `visible`). Fills st.emptyBrickFraction and, when it classifies,
+    // uploads `reach`). Fills st.emptyBrickFraction and, when it classifies,
     // st.brickClassifySeconds.
     bool update(const MinMaxBricks &bricks, const TransferFunction &tf, RenderStats &st);
 };

@@ -331,7 +331,7 @@ void preintegratedSegment(const FrameParams &P, VF sf, VF sb, VF out[4]) {
 // instead of recomputing the brick and its exit per segment. A point reached within float
 // rounding of a wall may be put in either brick: harmless, as each brick's value range covers
 // half a voxel beyond its box (minmax_bricks.hpp, border). The kernel walks one ray with the
-// same formulas, a brick at a time.
+// same formulas (raycast.cl's brickWalkTo), cubes included.
 //
 // Empty regions. An empty brick at chessboard distance r from the nearest visible one
 // (FrameParams::brickReach) lies at the centre of a cube of empty bricks `extent` = r − 1 on

@@ -172,7 +172,7 @@ const MinMaxBricks &CpuRenderer::bricks(DataSet &data, int level, RenderStats &s
                                                         options_.brickSize, 2);
         else data.bricks = buildMinMaxBricks(pyramid_.level(level), options_.brickSize, 1);
         heldBytes_ += uint64_t(data.bricks->minmax.size()) * sizeof(float) +
-                      uint64_t(data.bricks->brickCount()) * sizeof(int32_t); // and the visible flags below
+                      uint64_t(data.bricks->brickCount()) * sizeof(int32_t); // and the classification's reach
         st.brickGridSeconds = secondsSince(t);
         counts_.add(&PreprocessCounts::brickGrids);
     }
@@ -181,9 +181,6 @@ const MinMaxBricks &CpuRenderer::bricks(DataSet &data, int level, RenderStats &s
 
 void CpuRenderer::classify(DataSet &data, int level, const TransferFunction &tf, RenderStats &st) {
     if (!data.classification.update(bricks(data, level, st), tf, st)) return;
-    // Each brick's distance to the nearest visible one (0 where visible), as int32 so that the
-    // march's lanes gather it: a ray crosses a cube of empty bricks in one step.
-    data.brickReach = emptyReach(data.classification.visible, data.bricks->bricks);
     counts_.add(&PreprocessCounts::brickClassifications);
 }
 
@@ -259,7 +256,7 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     p.tfMin = float(tfTable.minValue);
     p.tfScale = float(tfTable.scale);
     p.tfEntries = tfTable.entries();
-    p.brickReach = quality.emptySpaceSkipping ? data.brickReach.data() : nullptr;
+    p.brickReach = quality.emptySpaceSkipping ? data.classification.reach.data() : nullptr;
     p.brickStep = quality.adaptiveStep ? data.adaptive.steps.step.data() : nullptr;
     // A window casts only its own rays, tiled from its corner; each ray is cast as in the
     // whole grid (its lanes do not depend on the other rays of its packet).

@@ -84,7 +84,6 @@ class CpuRenderer : public FrameRenderer {
         std::vector<float> padded; // cubic: coefficients, mirrored 1 before and 2 after each axis
         std::optional<MinMaxBricks> bricks;
         BrickClassification classification;
-        std::vector<int32_t> brickReach; // emptyReach of classification.visible: int32, for gathers
         std::optional<BrickGradients> gradients; // the adaptive step's, on first need
         AdaptiveStepTable adaptive;
     };

@@ -182,7 +182,7 @@ const MinMaxBricks &OpenClRenderer::bricks(DataSet &data, RenderStats &st) {
 
 void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderStats &st) {
     if (!data.classification.update(bricks(data, st), tf, st)) return;
-    data.brickVisible = upload(*cl_, data.classification.visible, "the brick classification");
+    data.brickReach = upload(*cl_, data.classification.reach, "the brick classification");
     counts_.add(&PreprocessCounts::brickClassifications);
 }
 
@@ -355,7 +355,7 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
         }
         // The adaptive step's walk reads the steps, which mark the skipped bricks too.
         if (quality.emptySpaceSkipping && !quality.adaptiveStep)
-            setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickVisible);
+            setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickReach);
         if (quality.adaptiveStep) setMemoryArg(k.raycast, k.raycastArgs, arg++, data.brickStep);
         k.raycast.setArg(arg++, sizeof p, &p); // copied by the call: p need not outlive it
         const cl_int4 window{{win.x, win.y, win.width, win.height}};

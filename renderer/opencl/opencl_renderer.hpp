@@ -84,7 +84,7 @@ class OpenClRenderer : public FrameRenderer {
         cl::Image3D image;           // padded coefficients for the 8-fetch path
         std::optional<MinMaxBricks> bricks;
         BrickClassification classification;
-        cl::Buffer brickVisible;           // classification.visible on the device
+        cl::Buffer brickReach;             // classification.reach on the device
         std::optional<BrickGradients> gradients; // the adaptive step's, on first need
         AdaptiveStepTable adaptive;
         cl::Buffer brickStep;              // adaptive.steps.step on the device

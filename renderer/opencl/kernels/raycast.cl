@@ -153,7 +153,7 @@ typedef struct {
     __global const int *preLocator;
 #endif
 #if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
-    __global const uchar *brickVisible;
+    __global const int *brickReach;
 #endif
 #ifdef ADAPTIVE_STEP
     __global const float *brickStep;
@@ -396,11 +396,18 @@ float4 projectIntensity(VOLUME_ARG, const Frame *f, const Ray *r, float j, uint 
  * each of its walls (vcBrickOf, vcBrickWall, vcBrickExit). Moving on costs a comparison per
  * segment and a division per wall crossed. A point within float rounding of a wall may be put
  * in either brick: harmless, as each brick's value range covers half a voxel beyond its box
- * (minmax_bricks.hpp). The native path walks a packet of rays with the same formulas.
- * ADAPTIVE_STEP: the walk reads the brick's step instead, visible where it is positive. */
+ * (minmax_bricks.hpp). An empty brick at chessboard distance r from the nearest visible one
+ * (brickReach, emptyReach) is the centre of a cube of empty bricks `extent` = r − 1 on each
+ * side, and the walk takes the cube's walls as the brick's, so a run of empty segments ends
+ * where the ray leaves the cube. Pre-integrated segments keep single bricks (two empty bricks
+ * may hold values on either side of a visible range). The native path walks a packet of rays
+ * with the same formulas (cpu_march.cpp's BrickWalk).
+ * ADAPTIVE_STEP: the walk reads the brick's step instead, visible where it is positive, a
+ * brick at a time. */
 typedef struct {
     float q0[3], dq[3]; /* the ray in level coordinates */
     int b[3];
+    int extent; /* bricks each side of b that are empty too */
     float wall[3];
     bool visible;
     float step; /* ADAPTIVE_STEP: the brick's segment length */
@@ -415,8 +422,18 @@ void brickLookUp(const Frame *f, BrickWalk *w) {
     w->step = f->brickStep[brick];
     w->visible = w->step > 0.0f;
 #else
-    w->visible = f->brickVisible[brick] != 0;
+    const int reach = f->brickReach[brick];
+    w->visible = reach == 0;
+#ifndef PREINTEGRATED
+    w->extent = max(reach - 1, 0);
 #endif
+#endif
+}
+
+/* The wall on axis a of the cube of bricks b ± extent that the ray leaves by. */
+float brickWallAt(const Frame *f, const BrickWalk *w, int a) {
+    const int ahead = w->dq[a] < 0.0f ? -w->extent : w->extent;
+    return vcBrickWall((float)(w->b[a] + ahead), (float)f->P->brickSize, w->q0[a], w->dq[a]);
 }
 
 float brickWalkExit(const BrickWalk *w) { return vcBrickExit(w->wall[0], w->wall[1], w->wall[2]); }
@@ -430,12 +447,16 @@ void brickWalkStart(const Frame *f, const Ray *r, BrickWalk *w) {
     for (int a = 0; a < 3; ++a) {
         const float q = fma(r->t0, w->dq[a], w->q0[a]);
         w->b[a] = clamp((int)vcBrickOf(q, inverseB), 0, P->bricks[a] - 1);
-        w->wall[a] = vcBrickWall((float)w->b[a], (float)P->brickSize, w->q0[a], w->dq[a]);
     }
+    w->extent = 0;
     brickLookUp(f, w);
+    for (int a = 0; a < 3; ++a) w->wall[a] = brickWallAt(f, w, a);
 }
 
-/* Moves on to the brick holding q(t), t not before where the walk is. */
+/* Moves on to the brick (or cube) holding q(t), t not before where the walk is: bricks are
+ * crossed one wall at a time and looked up once at the end. Leaving a cube moves the brick on
+ * the crossed axis past it and takes the bricks on the other axes from the point reached,
+ * kept inside the cube's slab against rounding. */
 void brickWalkTo(const Frame *f, float t, BrickWalk *w) {
     bool moved = false;
     for (;;) {
@@ -443,10 +464,23 @@ void brickWalkTo(const Frame *f, float t, BrickWalk *w) {
         if (!(t >= first)) break;
         moved = true;
         const int a = w->wall[0] == first ? 0 : (w->wall[1] == first ? 1 : 2);
-        w->b[a] += w->dq[a] > 0.0f ? 1 : -1;
-        w->wall[a] = vcBrickWall((float)w->b[a], (float)f->P->brickSize, w->q0[a], w->dq[a]);
+        const int e = w->extent;
+        if (e > 0) {
+            const float inverseB = 1.0f / (float)f->P->brickSize;
+            for (int o = 0; o < 3; ++o)
+                if (o != a) w->b[o] = clamp((int)vcBrickOf(fma(first, w->dq[o], w->q0[o]), inverseB), w->b[o] - e, w->b[o] + e);
+        }
+        w->b[a] += w->dq[a] > 0.0f ? e + 1 : -(e + 1);
+        w->extent = 0;
+        if (e > 0)
+            for (int o = 0; o < 3; ++o) w->wall[o] = brickWallAt(f, w, o);
+        else
+            w->wall[a] = brickWallAt(f, w, a);
     }
-    if (moved) brickLookUp(f, w);
+    if (!moved) return;
+    brickLookUp(f, w);
+    if (w->extent > 0)
+        for (int o = 0; o < 3; ++o) w->wall[o] = brickWallAt(f, w, o);
 }
 
 #if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
@@ -763,7 +797,7 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
                       __global const float4 *preTable, __global const float *preNodes, __global const int *preLocator,
 #endif
 #if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
-                      __global const uchar *brickVisible,
+                      __global const int *brickReach,
 #endif
 #ifdef ADAPTIVE_STEP
                       __global const float *brickStep,
@@ -792,7 +826,7 @@ __kernel void raycast(KERNEL_VOLUME_ARG, __global const float4 *tfTable,
     f.preLocator = preLocator;
 #endif
 #if defined(EMPTY_SPACE_SKIPPING) && !defined(ADAPTIVE_STEP)
-    f.brickVisible = brickVisible;
+    f.brickReach = brickReach;
 #endif
 #ifdef ADAPTIVE_STEP
     f.brickStep = brickStep;
