@@ -163,13 +163,22 @@ bool BrickClassification::update(const MinMaxBricks &bricks, const TransferFunct
     }
     const auto t = std::chrono::steady_clock::now();
     visible = classifyBricks(bricks, tf);
-    reach = emptyReach(visible, bricks.bricks);
+    reach_.clear();
     const size_t empty = size_t(std::count(visible.begin(), visible.end(), uint8_t(0)));
     emptyFraction = visible.empty() ? 0 : double(empty) / double(visible.size());
     classifiedFor = tf;
     st.brickClassifySeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
     st.emptyBrickFraction = emptyFraction;
     return true;
+}
+
+const std::vector<int32_t> &BrickClassification::reachFor(const MinMaxBricks &bricks, RenderStats &st) {
+    if (reach_.empty()) {
+        const auto t = std::chrono::steady_clock::now();
+        reach_ = emptyReach(visible, bricks.bricks);
+        st.brickClassifySeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+    }
+    return reach_;
 }
 
 bool AdaptiveStepTable::update(const MinMaxBricks &bricks, const BrickGradients &gradients, const TransferFunction &tf,

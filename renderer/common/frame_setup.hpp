@@ -117,12 +117,18 @@ class FrameTables {
 struct BrickClassification {
     std::optional<TransferFunction> classifiedFor;
     std::vector<uint8_t> visible; // per brick: 1 where the transfer function makes some value visible
-    std::vector<int32_t> reach;   // per brick: emptyReach(visible), 0 where visible (the brick walks')
     double emptyFraction = 0;
     // Classifies `bricks` for `tf` unless they already are; true when it did (a back end then
-    // uploads `reach`). Fills st.emptyBrickFraction and, when it classifies,
-    // st.brickClassifySeconds.
+    // drops what it made of the last classification). Fills st.emptyBrickFraction and, when
+    // it classifies, st.brickClassifySeconds.
     bool update(const MinMaxBricks &bricks, const TransferFunction &tf, RenderStats &st);
+    // Per brick emptyReach(visible), 0 where visible: what the brick walks read when they
+    // skip (the adaptive step's walk reads its steps instead). Made on first need after each
+    // classification, its time added to st.brickClassifySeconds.
+    const std::vector<int32_t> &reachFor(const MinMaxBricks &bricks, RenderStats &st);
+
+  private:
+    std::vector<int32_t> reach_; // empty: not made for this classification yet
 };
 
 // A level's adaptive steps (adaptive_step.hpp), kept until the transfer function, the steps,

@@ -256,7 +256,9 @@ Image CpuRenderer::render(const FrameRequest &request, RenderStats *stats) {
     p.tfMin = float(tfTable.minValue);
     p.tfScale = float(tfTable.scale);
     p.tfEntries = tfTable.entries();
-    p.brickReach = quality.emptySpaceSkipping ? data.classification.reach.data() : nullptr;
+    p.brickReach = quality.emptySpaceSkipping && !quality.adaptiveStep
+                       ? data.classification.reachFor(*data.bricks, st).data()
+                       : nullptr;
     p.brickStep = quality.adaptiveStep ? data.adaptive.steps.step.data() : nullptr;
     // A window casts only its own rays, tiled from its corner; each ray is cast as in the
     // whole grid (its lanes do not depend on the other rays of its packet).

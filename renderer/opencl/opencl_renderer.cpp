@@ -180,10 +180,14 @@ const MinMaxBricks &OpenClRenderer::bricks(DataSet &data, RenderStats &st) {
     return *data.bricks;
 }
 
-void OpenClRenderer::classify(DataSet &data, const TransferFunction &tf, RenderStats &st) {
-    if (!data.classification.update(bricks(data, st), tf, st)) return;
-    data.brickReach = upload(*cl_, data.classification.reach, "the brick classification");
-    counts_.add(&PreprocessCounts::brickClassifications);
+void OpenClRenderer::classify(DataSet &data, const Quality &quality, const TransferFunction &tf, RenderStats &st) {
+    if (data.classification.update(bricks(data, st), tf, st)) {
+        data.brickReach = cl::Buffer(); // the last classification's
+        counts_.add(&PreprocessCounts::brickClassifications);
+    }
+    // The adaptive step's walk reads its steps instead.
+    if (!quality.adaptiveStep && !data.brickReach())
+        data.brickReach = upload(*cl_, data.classification.reachFor(*data.bricks, st), "the brick classification");
 }
 
 void OpenClRenderer::adaptSteps(DataSet &data, const TransferFunction &tf, const FrameSetup &setup, RenderStats &st) {
@@ -286,7 +290,7 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
         }
     }
 
-    if (quality.emptySpaceSkipping) classify(data, tf, st);
+    if (quality.emptySpaceSkipping) classify(data, quality, tf, st);
 
     // The tables, uploaded when rebuilt: the 1-D table for every frame (with pre-integration,
     // its partial segments too opaque for the table's alpha read it: raycast.cl).

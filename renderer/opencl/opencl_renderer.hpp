@@ -84,7 +84,7 @@ class OpenClRenderer : public FrameRenderer {
         cl::Image3D image;           // padded coefficients for the 8-fetch path
         std::optional<MinMaxBricks> bricks;
         BrickClassification classification;
-        cl::Buffer brickReach;             // classification.reach on the device
+        cl::Buffer brickReach;             // classification.reachFor on the device; null until a frame walks it
         std::optional<BrickGradients> gradients; // the adaptive step's, on first need
         AdaptiveStepTable adaptive;
         cl::Buffer brickStep;              // adaptive.steps.step on the device
@@ -92,7 +92,9 @@ class OpenClRenderer : public FrameRenderer {
 
     bool cubicFromImage() const;
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
-    void classify(DataSet &data, const TransferFunction &tf, RenderStats &st);
+    // Classifies the bricks for `tf`, and for a frame whose walk reads it (not the adaptive
+    // step's) uploads their reach.
+    void classify(DataSet &data, const Quality &quality, const TransferFunction &tf, RenderStats &st);
     // The bricks' min-max grid over the data set, built on first need.
     const MinMaxBricks &bricks(DataSet &data, RenderStats &st);
     // The adaptive step's per-brick steps for this frame, uploaded when they change.

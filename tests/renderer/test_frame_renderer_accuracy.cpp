@@ -605,8 +605,8 @@ int skipsBySamplePositionOnBothBackEnds(const Volume &v) {
 // samples. The sampled segments taken are counted independently here, in double: those whose
 // centre lies in a visible brick. (Per-segment skipping, the kernel's earlier rule, took the
 // segment straddling into each empty brick too: 16.6 samples per ray here against 10.4.)
-// The native path crosses a cube of empty bricks in one step (emptyReach); the second sphere,
-// small in a large box, leaves cubes up to 11 bricks wide around it, the first up to 3.
+// Both walks cross a cube of empty bricks in one step (emptyReach); the second sphere, small
+// in a large box, leaves cubes up to 11 bricks wide around it, the first up to 3.
 TEST(CpuRenderer, SkipsBySamplePositionOnBothBackEnds) {
     EXPECT_EQ(skipsBySamplePositionOnBothBackEnds(makeSphere({48, 40, 44}, {1, 1, 1.2}, 9, 2, 200).volume), 3);
     EXPECT_EQ(skipsBySamplePositionOnBothBackEnds(makeSphere({104, 96, 120}, {1, 1, 1.25}, 12, 2, 200).volume), 11);
@@ -725,8 +725,10 @@ TEST(CpuRenderer, EightAndSixteenBitSamplesDrawTheFloatCopysImageBitForBit) {
             CpuRenderer narrow(held, CpuRendererOptions{.layout = layout}), wide(v);
             EXPECT_EQ(narrow.memoryBytes(), bricks ? cpu::BrickedSamples::plannedBytes(v.dims, scan.bytes) : 0)
                 << heldAs << ": level 0 is sampled in place, or from its one bricked copy";
-            EXPECT_LE(narrow.memoryBytes(), CpuRenderer::plannedBytes(v.dims, CpuRendererOptions{.layout = layout}, scan.bytes))
-                << heldAs << ": the server's budget counts the copy";
+            EXPECT_EQ(CpuRenderer::plannedBytes(v.dims, CpuRendererOptions{.layout = layout}, scan.bytes) -
+                          CpuRenderer::plannedBytes(v.dims, CpuRendererOptions{.layout = SampleLayout::Slices}, scan.bytes),
+                      narrow.memoryBytes())
+                << heldAs << ": the server's budget counts the copy, and nothing else for it";
             EXPECT_EQ(wide.memoryBytes(), 0) << heldAs << ": a float level 0 is sampled in place";
             Quality q = plain(0.5);
             std::vector<std::pair<std::string, Quality>> cases{{"plain", q}};
