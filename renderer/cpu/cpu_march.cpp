@@ -541,6 +541,7 @@ struct PacketMarch {
     VF lastFull; // the last full segment k that ends before t1, one fewer for rounding
     BrickWalk walk;
     MF alive, sfStale;
+    MF refreshOwed; // a transmittance refresh fell on a segment that added nothing
     VF depth, depthCarry, T, color[3], colorCarry[3], sf;
     VI samples;
     HWY_ALIGN int32_t hita[kMaxLanes];
@@ -556,8 +557,9 @@ struct MarchTotals {
 struct StepState {
     VF boundary, segEnd, len, tMid, jumpTo, value, segDepth, alpha, segColor[3], weight, q[3];
     MF take, partial, skipped;
+    MF adds; // taken segments that add to the pixel (all of them, but sampled ones of depth 0)
     TableSpot spot;
-    bool any = false, anySkipped = false;
+    bool any = false, anySkipped = false, anyAdds = false;
 };
 
 // A pre-integrated segment's contribution: the segment from the table for a full step; a
@@ -717,11 +719,17 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
     // T·alpha·rgb, in its order), 1 for a premultiplied one.
     if (F.preintegrated) {
         for (int p = 0; p < N; ++p)
-            if (st[p].any) preintegratedContribution(P, ms[p], st[p]);
+            if (st[p].any) {
+                preintegratedContribution(P, ms[p], st[p]);
+                st[p].adds = st[p].take;
+                st[p].anyAdds = true;
+            }
     } else {
-        // Sample the segment at its centre and classify: sigma first, and the colour only if
-        // some lane's sigma is positive. Where none is, alpha is 0 and T·alpha·colour is +0
-        // for any colour, so 0 stands in for it exactly.
+        // Sample the segment at its centre and classify: sigma first, corrected for the
+        // segment's length (Eq. 3: depth sigma·len/u, opacity 1 − exp(−depth)). A segment of
+        // depth 0 has opacity 0 and adds nothing (T·0·colour = +0, depth + 0, T·1): it is not
+        // composited, so the colour, the opacity and the sums are made only where some lane's
+        // depth is positive.
         for (int p = 0; p < N; ++p)
             if (st[p].any) st[p].value = sampleVolume(P, st[p].q[0], st[p].q[1], st[p].q[2]);
         for (int p = 0; p < N; ++p)
@@ -732,16 +740,17 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
         for (int p = 0; p < N; ++p) {
             StepState &s = st[p];
             if (!s.any) continue;
-            const bool opaqueSomewhere = !hn::AllFalse(df, hn::And(s.take, hn::Gt(s.segDepth, zero)));
-            for (int a = 0; a < 3; ++a) s.segColor[a] = opaqueSomewhere ? tableChannel(P, s.spot, a) : zero;
-            // Correct opacity for the segment length (Eq. 3): 1 − exp(−sigma·len/u).
             s.segDepth = vcSegmentDepth(s.segDepth, s.len, hn::Set(df, P.opacityUnit));
+            s.adds = hn::And(s.take, hn::Gt(s.segDepth, zero));
+            s.anyAdds = !hn::AllFalse(df, s.adds);
+            if (s.anyAdds)
+                for (int a = 0; a < 3; ++a) s.segColor[a] = tableChannel(P, s.spot, a);
         }
         for (int p = 0; p < N; ++p)
-            if (st[p].any) st[p].alpha = vcOpacityFromDepth(st[p].segDepth);
+            if (st[p].anyAdds) st[p].alpha = vcOpacityFromDepth(st[p].segDepth);
         for (int p = 0; p < N; ++p) {
             StepState &s = st[p];
-            if (!s.any) continue;
+            if (!s.anyAdds) continue;
             if (F.shading) {
                 const MF lit = hn::And(s.take, hn::Gt(s.alpha, zero));
                 if (!hn::AllFalse(df, lit)) {
@@ -758,13 +767,19 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
         PacketMarch &m = ms[p];
         StepState &s = st[p];
         if (!s.any) continue;
-        const VF tw = hn::Mul(m.T, s.weight);
-        for (int a = 0; a < 3; ++a) addCompensated(s.take, m.color[a], m.colorCarry[a], hn::Mul(tw, s.segColor[a]), false);
-        addCompensated(s.take, m.depth, m.depthCarry, s.segDepth, true);
-        // T = exp(−depth), kept by products and made exact every few samples.
+        // T = exp(−depth), kept by products and made exact every few samples; a refresh due
+        // on a segment that adds nothing is made at the lane's next segment that adds.
         const VI refresh = hn::And(m.samples, hn::Set(di, int32_t(VC_EXACT_TRANSMITTANCE_EVERY - 1)));
-        const MF exact = hn::And(s.take, hn::RebindMask(df, hn::Eq(refresh, hn::Zero(di))));
-        m.T = hn::IfThenElse(s.take, vcNextTransmittance(m.T, s.alpha, m.depth, m.depthCarry, exact), m.T);
+        const MF due = hn::Or(m.refreshOwed, hn::And(s.take, hn::RebindMask(df, hn::Eq(refresh, hn::Zero(di)))));
+        m.refreshOwed = hn::AndNot(s.adds, due);
+        if (s.anyAdds) {
+            const VF tw = hn::Mul(m.T, s.weight);
+            for (int a = 0; a < 3; ++a)
+                addCompensated(s.adds, m.color[a], m.colorCarry[a], hn::Mul(tw, s.segColor[a]), false);
+            addCompensated(s.adds, m.depth, m.depthCarry, s.segDepth, true);
+            m.T = hn::IfThenElse(s.adds, vcNextTransmittance(m.T, s.alpha, m.depth, m.depthCarry, hn::And(s.adds, due)),
+                                 m.T);
+        }
         if (F.earlyTermination) {
             const MF stop = hn::And(s.take, hn::Ge(m.depth, hn::Set(df, P.terminationDepth)));
             if (!hn::AllFalse(df, stop)) {
@@ -807,6 +822,214 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
     }
 }
 
+// The empty cube around the brick holding level point q, for the lanes' points (clamped to
+// the grid as BrickWalk::lookUp clamps): its brick, and its reach (FrameParams::brickReach),
+// 0 where the brick is visible.
+struct CubeAt {
+    VI b[3];
+    VI reach;
+};
+HWY_INLINE CubeAt cubeAt(const FrameParams &P, const VF q[3]) {
+    const DF df;
+    const DI di;
+    const VF inverseB = hn::Set(df, 1.0f / float(P.brickSize));
+    CubeAt c;
+    for (int a = 0; a < 3; ++a) {
+        c.b[a] = hn::ConvertTo(di, vcBrickOf(q[a], inverseB));
+        c.b[a] = hn::Min(hn::Max(c.b[a], hn::Zero(di)), hn::Set(di, P.bricks[a] - 1));
+    }
+    const VI brick = hn::Add(
+        hn::Mul(hn::Add(hn::Mul(c.b[2], hn::Set(di, P.bricks[1])), c.b[1]), hn::Set(di, P.bricks[0])), c.b[0]);
+    c.reach = hn::GatherIndex(di, P.brickReach, brick);
+    return c;
+}
+// t where the ray leaves the cube of empty bricks b ± (reach − 1): BrickWalk's walls of it.
+HWY_INLINE VF cubeExit(const FrameParams &P, const CubeAt &c, const VF q0[3], const VF dq[3]) {
+    const DF df;
+    const DI di;
+    const VI extent = hn::Max(hn::Sub(c.reach, hn::Set(di, 1)), hn::Zero(di));
+    VF wall[3];
+    for (int a = 0; a < 3; ++a) {
+        const VI ahead = hn::IfThenElse(hn::RebindMask(di, hn::Lt(dq[a], hn::Zero(df))), hn::Neg(extent), extent);
+        wall[a] = vcBrickWall(hn::ConvertTo(df, hn::Add(c.b[a], ahead)), hn::Set(df, float(P.brickSize)), q0[a], dq[a]);
+    }
+    return vcBrickExit(wall[0], wall[1], wall[2]);
+}
+
+// What a packet carries from one sampled segment to the next: the march's running values,
+// held in registers for the whole march rather than in PacketMarch.
+struct SampledLanes {
+    VF k, segStart, T, depth, depthCarry, color[3], colorCarry[3];
+    VI samples;
+    MF alive, refreshOwed;
+};
+
+// The march of N packets side by side to their end, for frames whose segments are all sampled
+// at their centres (no pre-integration, no adaptive step): marchStep's segments, skips, sums
+// and refreshes in the same order, compiled for the frame's switches only.
+// Two things differ from marchStep, measured on Table 1's cells (docs/cpu_renderer.md, "The
+// sampled march"): the running values stay in registers, and empty space is found by looking
+// up the brick of each segment's centre, then, where it is empty, its cube's exit (cubeAt,
+// cubeExit), rather than by carrying a brick walk from segment to segment. The brick found is
+// the walk's but for a centre within rounding of a wall, where either brick is right
+// (BrickWalk): the image is marchStep's up to float rounding.
+template <int N, bool Skipping, bool Shading>
+HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotals &totals) {
+    const DF df;
+    const DI di;
+    const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step), half = hn::Set(df, 0.5f);
+    const VF unit = hn::Set(df, P.opacityUnit), stopDepth = hn::Set(df, P.terminationDepth);
+    const VI everyMask = hn::Set(di, int32_t(VC_EXACT_TRANSMITTANCE_EVERY - 1));
+    const VI maxSamples = hn::Set(di, P.maxSamples);
+    const bool boundarySegment = P.features.boundarySegment, earlyTermination = P.features.earlyTermination;
+    SampledLanes L[N];
+    for (int p = 0; p < N; ++p) {
+        const PacketMarch &m = ms[p];
+        SampledLanes &l = L[p];
+        l.k = m.k;
+        l.segStart = m.segStart;
+        l.T = m.T;
+        l.depth = m.depth;
+        l.depthCarry = m.depthCarry;
+        for (int a = 0; a < 3; ++a) {
+            l.color[a] = m.color[a];
+            l.colorCarry[a] = m.colorCarry[a];
+        }
+        l.samples = m.samples;
+        l.alive = m.alive;
+        l.refreshOwed = m.refreshOwed;
+    }
+    for (;;) {
+        bool anyAlive = false;
+        for (int p = 0; p < N; ++p) anyAlive = anyAlive || !hn::AllFalse(df, L[p].alive);
+        if (!anyAlive) break;
+        // The segment's bounds and centre.
+        VF boundary[N], segEnd[N], len[N], q[N][3], jumpTo[N];
+        MF take[N], skipped[N];
+        bool any[N], anySkipped[N];
+        for (int p = 0; p < N; ++p) {
+            const PacketMarch &m = ms[p];
+            const SampledLanes &l = L[p];
+            boundary[p] = hn::MulAdd(hn::Add(l.k, m.j), d, m.t0);
+            segEnd[p] = hn::Min(boundary[p], m.t1);
+            len[p] = hn::Sub(segEnd[p], l.segStart);
+            const VF tMid = hn::MulAdd(half, len[p], l.segStart);
+            take[p] = hn::And(l.alive, hn::Gt(len[p], zero));
+            if (!boundarySegment) take[p] = hn::AndNot(hn::Or(hn::Gt(boundary[p], m.t1), hn::Eq(l.k, zero)), take[p]);
+            for (int a = 0; a < 3; ++a) q[p][a] = hn::MulAdd(tMid, m.dq[a], m.q0[a]);
+            skipped[p] = hn::FirstN(df, 0);
+            jumpTo[p] = zero;
+            anySkipped[p] = false;
+        }
+        // Skipping by the centre's brick, and the later segments whose centre is in its cube.
+        if constexpr (Skipping) {
+            CubeAt cube[N];
+            for (int p = 0; p < N; ++p) cube[p] = cubeAt(P, q[p]);
+            for (int p = 0; p < N; ++p) {
+                const PacketMarch &m = ms[p];
+                skipped[p] = hn::AndNot(hn::RebindMask(df, hn::Eq(cube[p].reach, hn::Zero(di))), take[p]);
+                anySkipped[p] = !hn::AllFalse(df, skipped[p]);
+                if (!anySkipped[p]) continue;
+                take[p] = hn::AndNot(skipped[p], take[p]);
+                const VF exit = cubeExit(P, cube[p], m.q0, m.dq);
+                const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, m.t0), d), m.j), half)), one);
+                jumpTo[p] = hn::IfThenElse(skipped[p], hn::Min(byExit, m.lastFull), zero);
+            }
+        }
+        // The sample.
+        VF value[N];
+        for (int p = 0; p < N; ++p) {
+            SampledLanes &l = L[p];
+            any[p] = !hn::AllFalse(df, take[p]);
+            if (!any[p]) continue;
+            const MF truncated = hn::AndNot(hn::RebindMask(df, hn::Lt(l.samples, maxSamples)), take[p]);
+            if (!hn::AllFalse(df, truncated)) {
+                totals.truncated += hn::CountTrue(df, truncated);
+                l.alive = hn::AndNot(truncated, l.alive);
+                take[p] = hn::AndNot(truncated, take[p]);
+            }
+            l.samples = hn::Add(l.samples, hn::IfThenElseZero(hn::RebindMask(di, take[p]), hn::Set(di, 1)));
+            value[p] = sampleVolume(P, q[p][0], q[p][1], q[p][2]);
+        }
+        // Its depth, and which lanes it adds to (marchStep's rule).
+        TableSpot spot[N];
+        VF segDepth[N];
+        MF adds[N], exact[N];
+        bool anyAdds[N];
+        for (int p = 0; p < N; ++p) {
+            anyAdds[p] = false;
+            if (!any[p]) continue;
+            SampledLanes &l = L[p];
+            spot[p] = tableSpot(P, value[p]);
+            segDepth[p] = vcSegmentDepth(tableChannel(P, spot[p], 3), len[p], unit);
+            adds[p] = hn::And(take[p], hn::Gt(segDepth[p], zero));
+            anyAdds[p] = !hn::AllFalse(df, adds[p]);
+            const VI refresh = hn::And(l.samples, everyMask);
+            const MF due = hn::Or(l.refreshOwed, hn::And(take[p], hn::RebindMask(df, hn::Eq(refresh, hn::Zero(di)))));
+            l.refreshOwed = hn::AndNot(adds[p], due);
+            exact[p] = hn::And(adds[p], due);
+        }
+        // Colour, opacity and the sums where it adds.
+        for (int p = 0; p < N; ++p) {
+            if (!anyAdds[p]) continue;
+            SampledLanes &l = L[p];
+            VF segColor[3];
+            for (int a = 0; a < 3; ++a) segColor[a] = tableChannel(P, spot[p], a);
+            const VF alpha = vcOpacityFromDepth(segDepth[p]);
+            if constexpr (Shading) {
+                const MF lit = hn::And(take[p], hn::Gt(alpha, zero));
+                if (!hn::AllFalse(df, lit)) {
+                    VF diffuse, specular;
+                    phong(P, q[p], ms[p].dir, diffuse, specular);
+                    for (int a = 0; a < 3; ++a)
+                        segColor[a] = hn::IfThenElse(lit, vcShade(segColor[a], diffuse, specular), segColor[a]);
+                }
+            }
+            const VF tw = hn::Mul(l.T, alpha);
+            for (int a = 0; a < 3; ++a)
+                addCompensated(adds[p], l.color[a], l.colorCarry[a], hn::Mul(tw, segColor[a]), false);
+            addCompensated(adds[p], l.depth, l.depthCarry, segDepth[p], true);
+            l.T = hn::IfThenElse(adds[p], vcNextTransmittance(l.T, alpha, l.depth, l.depthCarry, exact[p]), l.T);
+        }
+        // Early termination, and on to the next segment (past the skipped ones).
+        for (int p = 0; p < N; ++p) {
+            const PacketMarch &m = ms[p];
+            SampledLanes &l = L[p];
+            if (any[p] && earlyTermination) {
+                const MF stop = hn::And(take[p], hn::Ge(l.depth, stopDepth));
+                if (!hn::AllFalse(df, stop)) {
+                    totals.terminated += hn::CountTrue(df, stop);
+                    l.alive = hn::AndNot(stop, l.alive);
+                }
+            }
+            l.alive = hn::AndNot(hn::Ge(boundary[p], m.t1), l.alive);
+            l.segStart = hn::IfThenElse(l.alive, segEnd[p], l.segStart);
+            l.k = hn::IfThenElse(l.alive, hn::Add(l.k, one), l.k);
+            if (anySkipped[p]) {
+                const MF jump = hn::And(l.alive, hn::Ge(jumpTo[p], l.k));
+                const VF count = hn::IfThenElse(jump, hn::Add(hn::Sub(jumpTo[p], l.k), hn::Set(df, 2.0f)),
+                                                hn::IfThenElseZero(skipped[p], one));
+                totals.skipped += uint64_t(hn::GetLane(hn::SumOfLanes(di, hn::ConvertTo(di, count))));
+                l.segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(jumpTo[p], m.j), d, m.t0), l.segStart);
+                l.k = hn::IfThenElse(jump, hn::Add(jumpTo[p], one), l.k);
+            }
+        }
+    }
+    for (int p = 0; p < N; ++p) {
+        PacketMarch &m = ms[p];
+        const SampledLanes &l = L[p];
+        m.alive = l.alive;
+        m.T = l.T;
+        m.depth = l.depth;
+        m.depthCarry = l.depthCarry;
+        for (int a = 0; a < 3; ++a) {
+            m.color[a] = l.color[a];
+            m.colorCarry[a] = l.colorCarry[a];
+        }
+        m.samples = l.samples;
+    }
+}
+
 // Sets up the packet of the lanes' block at (bx, by): rays, cleared pixels for the lanes
 // that miss, and the march's start; false when no lane hits (nothing to march).
 HWY_INLINE bool startPacket(const FrameParams &P, int bx, int by, int x1, int y1, const int32_t *laneX,
@@ -846,10 +1069,11 @@ HWY_INLINE bool startPacket(const FrameParams &P, int bx, int by, int x1, int y1
     // stops at the latest.
     m.lastFull = hn::Sub(hn::Floor(hn::Sub(hn::Div(hn::Sub(m.t1, m.t0), hn::Set(df, P.step)), m.j)), one);
     m.segStart = m.t0;
-    m.walk = BrickWalk();
-    if ((F.emptySpaceSkipping || F.adaptiveStep) && F.intensityProjection == 0)
+    // The brick walk of marchStep's segments (marchSampled looks bricks up where it samples).
+    if (F.intensityProjection == 0 && (F.adaptiveStep || (F.emptySpaceSkipping && F.preintegrated)))
         m.walk.start(P, m.q0, m.dq, m.t0, m.alive);
     m.sfStale = hn::Not(m.alive); // pre-integration: sf must be sampled at segStart first
+    m.refreshOwed = hn::FirstN(df, 0);
     m.depth = m.depthCarry = zero;
     m.T = one;
     for (int a = 0; a < 3; ++a) m.color[a] = m.colorCarry[a] = zero;
@@ -880,6 +1104,8 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
     const int packetWide = std::min(lanes, 4), packetHigh = lanes / packetWide;
     const Features &F = P.features;
     MarchTotals totals;
+    // Every segment sampled at its centre: marchSampled, compiled for skipping and shading.
+    const bool sampled = !F.preintegrated && !F.adaptiveStep && F.intensityProjection == 0;
 
     HWY_ALIGN float outa[4][kMaxLanes];
     HWY_ALIGN int32_t samplesa[kMaxLanes], laneX[kMaxLanes], laneY[kMaxLanes];
@@ -909,12 +1135,21 @@ void MarchTile(const FrameParams &P, int x0, int y0, int x1, int y1, float *rgba
                     m[p].alive = hn::FirstN(df, 0);
                 }
             }
-            for (;;) {
-                bool alive = false;
-                for (int p = 0; p < kPackets; ++p) alive = alive || !hn::AllFalse(df, m[p].alive);
-                if (!alive) break;
-                marchStep<kPackets>(P, m, totals);
-            }
+            if (sampled) {
+                if (F.emptySpaceSkipping) {
+                    if (F.shading) marchSampled<kPackets, true, true>(P, m, totals);
+                    else marchSampled<kPackets, true, false>(P, m, totals);
+                } else {
+                    if (F.shading) marchSampled<kPackets, false, true>(P, m, totals);
+                    else marchSampled<kPackets, false, false>(P, m, totals);
+                }
+            } else
+                for (;;) {
+                    bool alive = false;
+                    for (int p = 0; p < kPackets; ++p) alive = alive || !hn::AllFalse(df, m[p].alive);
+                    if (!alive) break;
+                    marchStep<kPackets>(P, m, totals);
+                }
             for (int p = 0; p < kPackets; ++p) {
                 if (!marching[p]) continue;
                 for (int a = 0; a < 3; ++a) hn::Store(hn::Sub(m[p].color[a], m[p].colorCarry[a]), df, outa[a]);

@@ -399,7 +399,37 @@ std::vector<Row> faintMedia(const Backend &be) {
                               1e-9, exact);
         });
     }
-    return {ocl.row(), pre.row(), ref.row()};
+    // A medium so faint that 1 − a rounds to 1 in float (a = 2e-8 per voxel), so that T falls
+    // only through its exact refreshes, with a clear voxel (value 0) in every 16 placed where
+    // each refresh falls: samples at voxel centres, the 16th, 32nd … on the clear ones. Those
+    // add nothing and are not composited; the refresh due on each is made at the next sample.
+    // Dropped instead, T would stay 1 and the colour be 0.9 % high. The bound: T between
+    // refreshes 16 roundings (1e-6 relative), each alpha ~2e-7 relative, the sums compensated:
+    // 1e-4 relative, with room.
+    {
+        constexpr int kPeriod = 16, kChord = kPeriod * 60000;
+        const SyntheticVolume gaps = sampleField("faint_with_gaps", {2, 2, kChord}, {1, 1, 1}, {}, [](const Vec3d &p) {
+            return std::lround(p.z) % kPeriod == kPeriod - 1 ? 0.0 : 1.0;
+        });
+        Medium faint;
+        faint.a = 2e-8;
+        TransferFunction tf = faint.tf();
+        tf.points = {{0, faint.r, faint.g, faint.b, 0}, {1, faint.r, faint.g, faint.b, faint.a}};
+        const Rgba want = faint.over(double(kChord) / kPeriod * (kPeriod - 1));
+        const Camera alongGaps = orthographic({0.5, 0.5, -10}, {0, 0, 1}, {0, 1, 0}, 2);
+        Check gapRow("faint media with a clear voxel in every 16: a = 2e-8 (1 − a rounds to 1), step 1, " +
+                         std::to_string(kChord) + " voxels",
+                     be.name, "closed form 1 − (1 − a)^n over the n faint voxels, rgb = c·A, relative", 1e-4);
+        gapRow.attempt("along z", [&] {
+            const auto gapRenderer = be.make(gaps.volume);
+            const Image img = gapRenderer->render({tf, alongGaps, 1, 1, plain(1), {}});
+            gapRow.image(img);
+            const float *px = img.pixel(0, 0);
+            const double wanted[4] = {want.r, want.g, want.b, want.a};
+            for (int k = 0; k < 4; ++k) gapRow.error(std::fabs(double(px[k]) - wanted[k]) / wanted[k]);
+        });
+        return {ocl.row(), pre.row(), ref.row(), gapRow.row()};
+    }
 }
 
 // ---- Opaque media ------------------------------------------------------------------------

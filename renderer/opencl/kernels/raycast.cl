@@ -512,6 +512,7 @@ typedef struct {
     float color[3], colorCarry[3];
     uint samples, skipped;
     bool terminated;
+    bool refreshOwed; /* a transmittance refresh fell on a segment that added nothing */
 #ifdef PREINTEGRATED
     float sf;     /* the value at the segment's front */
     bool sfStale; /* after a skip: sf must be sampled at the segment's start first */
@@ -528,6 +529,7 @@ March startMarch(VOLUME_ARG, const Frame *f, const Ray *r) {
     for (int c = 0; c < 3; ++c) m.color[c] = m.colorCarry[c] = 0.0f;
     m.samples = m.skipped = 0u;
     m.terminated = false;
+    m.refreshOwed = false;
 #ifdef PREINTEGRATED
     m.sf = sampleVolume(VOLUME, f->n, r->q0 + r->t0 * r->dqL);
     m.sfStale = false;
@@ -658,14 +660,24 @@ SegmentColour segmentColour(VOLUME_ARG, const Frame *f, const Ray *r, const Segm
 }
 
 /* Front to back (Eq. 2): colour += T·weight·rgb and depth += the segment's, compensated, and T
- * behind the segment (vcNextTransmittance). */
+ * behind the segment (vcNextTransmittance). A sampled segment of depth 0 has opacity 0 and adds
+ * nothing (T·0·rgb, depth + 0, T·1), so it is not composited; a refresh of T due on it is made
+ * at the ray's next segment that adds. The native march does the same (cpu_march.cpp). */
 void composite(March *m, SegmentColour c) {
+    bool exact = (m->samples & (VC_EXACT_TRANSMITTANCE_EVERY - 1u)) == 0u;
+#ifndef PREINTEGRATED
+    if (!(c.depth > 0.0f)) {
+        m->refreshOwed = m->refreshOwed || exact;
+        return;
+    }
+    exact = exact || m->refreshOwed;
+    m->refreshOwed = false;
+#endif
     const float w = m->T * c.weight;
     vcAddCompensated(&m->color[0], &m->colorCarry[0], w * c.rgb.x);
     vcAddCompensated(&m->color[1], &m->colorCarry[1], w * c.rgb.y);
     vcAddCompensated(&m->color[2], &m->colorCarry[2], w * c.rgb.z);
     vcAddCompensatedDepth(&m->opticalDepth, &m->depthCarry, c.depth);
-    const bool exact = (m->samples & (VC_EXACT_TRANSMITTANCE_EVERY - 1u)) == 0u;
     m->T = vcNextTransmittance(m->T, c.alpha, m->opticalDepth, m->depthCarry, exact);
 }
 
