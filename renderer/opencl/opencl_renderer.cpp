@@ -12,6 +12,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cstring>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -60,6 +61,37 @@ OpenClRenderer::OpenClRenderer(std::shared_ptr<OpenClContext> cl, std::shared_pt
 
 OpenClRenderer::OpenClRenderer(std::shared_ptr<OpenClContext> cl, const Volume &volume, OpenClRendererOptions options)
     : OpenClRenderer(std::move(cl), std::make_shared<const Volume>(volume), options) {}
+
+OpenClRenderer::~OpenClRenderer() {
+    if (!pinnedHost_) return;
+    try {
+        cl_->queue().enqueueUnmapMemObject(pinned_, pinnedHost_);
+        cl_->queue().finish();
+    } catch (const cl::Error &) {
+        // The context goes with its memory; nothing else to give back.
+    }
+}
+
+ReadBack OpenClRenderer::readBack() const {
+    if (options_.readBack != ReadBack::Auto) return options_.readBack;
+    const char *v = std::getenv("VOLCAST_OPENCL_READBACK");
+    const std::string how = v ? v : "";
+    if (how == "counters-first") return ReadBack::CountersFirst;
+    if (how == "pinned") return ReadBack::Pinned;
+    return ReadBack::Direct;
+}
+
+void *OpenClRenderer::pinnedHost(size_t bytes) {
+    if (bytes <= pinnedBytes_) return pinnedHost_;
+    auto &queue = cl_->queue();
+    if (pinnedHost_) queue.enqueueUnmapMemObject(pinned_, pinnedHost_);
+    pinnedHost_ = nullptr;
+    pinnedBytes_ = 0;
+    pinned_ = cl::Buffer(cl_->context(), CL_MEM_READ_WRITE | CL_MEM_ALLOC_HOST_PTR, bytes);
+    pinnedHost_ = queue.enqueueMapBuffer(pinned_, CL_TRUE, CL_MAP_READ | CL_MAP_WRITE, 0, bytes);
+    pinnedBytes_ = bytes;
+    return pinnedHost_;
+}
 
 bool OpenClRenderer::cubicFromImage() const {
     if (options_.cubicFetch == CubicFetch::Auto) {
@@ -368,10 +400,16 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
         k.raycast.setArg(arg++, cl_int(bytes ? 1 : 0));
         setMemoryArg(k.raycast, k.raycastArgs, arg++, counters_);
 
-        // Two commands: the kernel and the image's read; and the counters' read, the one
-        // blocking call. Each command costs a GPU tens of microseconds of latency, as much as a
-        // small frame's kernel: the parameters go with the launch (by value), the counters are
+        // The kernel, the image's read and the counters' read, the last queued the one
+        // blocking call (in order on the queue: once it ends, every command of the frame
+        // has). Each command costs a GPU tens of microseconds of latency, as much as a small
+        // frame's kernel: the parameters go with the launch (by value), the counters are
         // running totals (no fill), and the ray caster writes the bytes (no conversion kernel).
+        const ReadBack how = readBack();
+        const cl::Buffer &out = bytes ? byteOut_ : floatOut_;
+        const size_t outBytes = bytes ? rays * 4 : rays * 4 * sizeof(float);
+        void *const frame = bytes ? static_cast<void *>(bytes) : static_cast<void *>(floats);
+        void *const landing = how == ReadBack::Pinned ? pinnedHost(outBytes) : frame;
         launched = Clock::now();
         st.hostSetUpSeconds = std::chrono::duration<double>(launched - start).count();
         cl_uint before[VC_STAT_COUNT];
@@ -380,13 +418,16 @@ OpenClRenderer::Clock::time_point OpenClRenderer::castRays(const FrameRequest &r
         queue.enqueueNDRangeKernel(k.raycast, cl::NDRange(size_t(win.x), size_t(win.y)),
                                    cl::NDRange(roundUp(win.width), roundUp(win.height)),
                                    cl::NDRange(kGroupEdge, kGroupEdge), nullptr, &kernel);
-        if (bytes)
-            queue.enqueueReadBuffer(byteOut_, CL_FALSE, 0, rays * 4, bytes, nullptr, &readImage);
-        else
-            queue.enqueueReadBuffer(floatOut_, CL_FALSE, 0, rays * 4 * sizeof(float), floats, nullptr, &readImage);
-        // In order on the queue: once this read ends, every command of the frame has.
-        queue.enqueueReadBuffer(counters_, CL_TRUE, 0, sizeof hostCounts_, hostCounts_, nullptr, &readCounters);
+        if (how == ReadBack::Direct) {
+            queue.enqueueReadBuffer(out, CL_FALSE, 0, outBytes, landing, nullptr, &readImage);
+            queue.enqueueReadBuffer(counters_, CL_TRUE, 0, sizeof hostCounts_, hostCounts_, nullptr, &readCounters);
+        } else {
+            queue.enqueueReadBuffer(counters_, CL_FALSE, 0, sizeof hostCounts_, hostCounts_, nullptr, &readCounters);
+            queue.enqueueReadBuffer(out, CL_TRUE, 0, outBytes, landing, nullptr, &readImage);
+        }
         readImage.wait();
+        readCounters.wait();
+        if (landing != frame) std::memcpy(frame, landing, outBytes);
 
         st.deviceKernelSeconds = deviceSeconds(kernel);
         st.deviceReadBackSeconds = deviceSeconds(readImage) + deviceSeconds(readCounters);

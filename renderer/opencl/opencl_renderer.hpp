@@ -40,9 +40,20 @@ enum class CubicFetch { Auto, Taps64, Trilinear8 };
 // against 2–3 ms at 512²); the ray caster writing bytes there is not measured (docs/gpu.md).
 enum class Rgba8Conversion { Auto, Device, Host };
 
+// How a frame's image and counters come back. Direct: the image read straight into the
+// frame's memory, then the counters' read, blocking. On an H100 the counters' read waited
+// ~0.2 ms behind the driver's copy of the image from its pinned staging memory into the
+// frame's pageable memory (docs/gpu.md), so two remedies are built for a card to decide
+// between: CountersFirst (the counters' read right after the kernel, the image's last and
+// blocking) and Pinned (the image read into host memory the device can reach directly,
+// CL_MEM_ALLOC_HOST_PTR mapped once, then copied into the frame on the host). Auto is Direct
+// unless VOLCAST_OPENCL_READBACK says `counters-first` or `pinned`.
+enum class ReadBack { Auto, Direct, CountersFirst, Pinned };
+
 struct OpenClRendererOptions {
     CubicFetch cubicFetch = CubicFetch::Auto;
     Rgba8Conversion rgba8Conversion = Rgba8Conversion::Auto;   // Auto: Device on a GPU, else Host
+    ReadBack readBack = ReadBack::Auto;
     int brickSize = 8; // level voxels per min-max brick edge
 };
 
@@ -54,6 +65,7 @@ class OpenClRenderer : public FrameRenderer {
                    OpenClRendererOptions options = {});
     // Convenience for tools and tests: keeps a copy of the volume.
     OpenClRenderer(std::shared_ptr<OpenClContext> cl, const Volume &volume, OpenClRendererOptions options = {});
+    ~OpenClRenderer() override;
 
     // Thread-safe; frames are rendered one at a time. A window casts only its own rays.
     Image render(const FrameRequest &request, RenderStats *stats = nullptr) override;
@@ -91,6 +103,10 @@ class OpenClRenderer : public FrameRenderer {
     };
 
     bool cubicFromImage() const;
+    ReadBack readBack() const;
+    // The pinned host memory of ReadBack::Pinned, at least `bytes`, mapped for the renderer's
+    // life (grown, remapped, as the output buffers grow).
+    void *pinnedHost(size_t bytes);
     DataSet &dataSet(int level, bool cubic, RenderStats &st);
     // Classifies the bricks for `tf`, and for a frame whose walk reads it (not the adaptive
     // step's) uploads their reach.
@@ -127,6 +143,9 @@ class OpenClRenderer : public FrameRenderer {
     std::map<std::string, FrameKernels> kernels_;
     cl::Buffer counters_, floatOut_, byteOut_;
     size_t floatOutBytes_ = 0, byteOutBytes_ = 0;
+    cl::Buffer pinned_;
+    void *pinnedHost_ = nullptr;
+    size_t pinnedBytes_ = 0;
     cl_uint hostCounts_[VC_STAT_COUNT] = {}; // the counters' running totals as last read
 };
 

@@ -7,8 +7,12 @@
 # the scans come from the first bundle holding data/. TABLE1_ARGS replaces the default cells
 # (512x512 and 1920x1080, all three volumes, 20 repeats). Each run's tables are printed; its
 # files go to $OUT/compare/NAME-ROUND, packed into $OUT/compare.tgz.
+# READBACKS="direct counters-first pinned" runs each bundle once per read-back in every round
+# (VOLCAST_OPENCL_READBACK, opencl_renderer.hpp's ReadBack), named NAME-READBACK; then one
+# bundle is enough.
 set -u
-[ $# -ge 2 ] || { echo "usage: $0 BUNDLE BUNDLE [...]"; exit 2; }
+readbacks=${READBACKS:-}
+[ $# -ge 2 ] || { [ $# -ge 1 ] && [ -n "$readbacks" ]; } || { echo "usage: $0 BUNDLE BUNDLE [...]  (or READBACKS=... $0 BUNDLE)"; exit 2; }
 rounds=${ROUNDS:-3}
 out=${OUT:-.}
 args=${TABLE1_ARGS:---sizes 512x512,1920x1080 --repeats 20}
@@ -32,10 +36,14 @@ nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
 for r in $(seq 1 "$rounds"); do
   for b in "$@"; do
     name=$(basename "$b")
-    echo "=== $name, round $r (at $SECONDS s)"
-    # shellcheck disable=SC2086  # TABLE1_ARGS is a list of options
-    LD_LIBRARY_PATH=$work/$name/lib timeout 90 "$work/$name/bin/volcast-bench" table1 --backend opencl --device gpu \
-      --data "$data" $args --out "$out/compare/$name-$r" 2>&1 | grep '^|'
+    for rb in ${readbacks:-default}; do
+      label=$name; [ "$rb" = default ] || label=$name-$rb
+      echo "=== $label, round $r (at $SECONDS s)"
+      # shellcheck disable=SC2086  # TABLE1_ARGS is a list of options
+      VOLCAST_OPENCL_READBACK=${rb/default/} LD_LIBRARY_PATH=$work/$name/lib timeout 90 \
+        "$work/$name/bin/volcast-bench" table1 --backend opencl --device gpu \
+        --data "$data" $args --out "$out/compare/$label-$r" 2>&1 | grep '^|'
+    done
   done
 done
 tar -czf "$out/compare.tgz" -C "$out" compare && rm -rf "$out/compare"

@@ -189,6 +189,38 @@ TEST(OpenClFrameParts, AReusedRendererDrawsEachFrameAsAFreshOne) {
     }
 }
 
+// The three ways to read a frame back (ReadBack) bring back the same image and the same
+// counts, float and 8-bit, as the pinned memory grows with the frames and is reused by
+// smaller ones.
+TEST(OpenClFrameParts, EveryReadBackBringsBackTheSameFrameAndCounts) {
+    const std::vector<FrameRequest> frames = {
+        blobFrame(32, 24, false, false, false),
+        blobFrame(96, 64, true, true, false),
+        blobFrame(64, 64, false, false, true, RayWindow{3, 3, 17, 9}),
+        blobFrame(31, 47, false, true, true),
+    };
+    OpenClRendererOptions direct = onDevice();
+    direct.readBack = ReadBack::Direct;
+    OpenClRenderer reference(sharedContext(), test::blob().volume, direct);
+    for (const ReadBack how : {ReadBack::CountersFirst, ReadBack::Pinned}) {
+        OpenClRendererOptions o = onDevice();
+        o.readBack = how;
+        OpenClRenderer r(sharedContext(), test::blob().volume, o);
+        SCOPED_TRACE(how == ReadBack::Pinned ? "pinned" : "counters first");
+        for (size_t i = 0; i < frames.size(); ++i) {
+            RenderStats got, want;
+            const Image a = r.render(frames[i], &got);
+            const Image b = reference.render(frames[i], &want);
+            EXPECT_EQ(a.rgba, b.rgba) << "frame " << i;
+            EXPECT_EQ(r.renderRgba8(frames[i]).rgba, reference.renderRgba8(frames[i]).rgba) << "frame " << i;
+            EXPECT_EQ(got.raysHit, want.raysHit) << i;
+            EXPECT_EQ(got.meanSamplesPerRay, want.meanSamplesPerRay) << i;
+            EXPECT_EQ(got.skippedSegmentsPerRay, want.skippedSegmentsPerRay) << i;
+            EXPECT_GT(got.deviceReadBackSeconds, 0) << i;
+        }
+    }
+}
+
 // A window casts its rays and no others: windows tiling a frame (widths and heights that are
 // not multiples of the work-group's 8) hit as many rays and sample as often as the frame,
 // and hold its pixels.
