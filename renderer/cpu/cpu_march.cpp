@@ -1015,18 +1015,17 @@ HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotal
             }
         }
     }
+    // What MarchTile writes to the pixels: the sums and the samples (every lane has stopped).
     for (int p = 0; p < N; ++p) {
         PacketMarch &m = ms[p];
-        const SampledLanes &l = L[p];
-        m.alive = l.alive;
-        m.T = l.T;
-        m.depth = l.depth;
-        m.depthCarry = l.depthCarry;
+        m.alive = L[p].alive;
+        m.depth = hn::Sub(L[p].depth, L[p].depthCarry);
+        m.depthCarry = hn::Zero(df);
         for (int a = 0; a < 3; ++a) {
-            m.color[a] = l.color[a];
-            m.colorCarry[a] = l.colorCarry[a];
+            m.color[a] = hn::Sub(L[p].color[a], L[p].colorCarry[a]);
+            m.colorCarry[a] = hn::Zero(df);
         }
-        m.samples = l.samples;
+        m.samples = L[p].samples;
     }
 }
 
