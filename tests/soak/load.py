@@ -176,6 +176,13 @@ async def load(args) -> int:
     print(f"motion-to-frame, all     p50 {serverproc.percentile(all_lat, 50):.0f} ms, p95 "
           f"{serverproc.percentile(all_lat, 95):.0f} ms ({len(all_lat)} cameras shown, "
           f"{sum(st.unshown for st in results)} never shown)")
+    # The same over the run, by the time each camera was sent: where the slow frames fall.
+    spans = {}
+    for st in results:
+        for sent, ms in zip(st.latency_sent, st.latencies_ms):
+            spans.setdefault(int((sent - start) // 10), []).append(ms)
+    print("motion-to-frame by 10 s   " + ", ".join(
+        f"{10 * k}–{10 * k + 10} s p95 {serverproc.percentile(v, 95):.0f} ms" for k, v in sorted(spans.items())))
     p50s = sorted(serverproc.percentile(st.latencies_ms, 50) for st in results if st.latencies_ms)
     if p50s:
         print(f"per-session p50 spread   min {p50s[0]:.0f} ms, median {statistics.median(p50s):.0f} ms, "

@@ -32,6 +32,7 @@ class DragStats:
     cameras: int = 0
     drags: int = 0
     latencies_ms: List[float] = field(default_factory=list)
+    latency_sent: List[float] = field(default_factory=list)  # when each latency's camera went (time.monotonic())
     errors: List[str] = field(default_factory=list)
     rests_without_final: int = 0      # rests that ended before the view's final frame came
     longest_gap_s: float = 0.0        # longest time without a frame while the session wanted one
@@ -98,7 +99,9 @@ class DragSession:
                     request = frame.header.get("request")
                     if isinstance(request, int):
                         for cid in [c for c in self.pending if c <= request]:
-                            self.stats.latencies_ms.append((now - self.pending.pop(cid)) * 1000.0)
+                            sent = self.pending.pop(cid)
+                            self.stats.latencies_ms.append((now - sent) * 1000.0)
+                            self.stats.latency_sent.append(sent)
                     if frame.header["final"]:
                         self.stats.final_frames += 1
                         self.final_for = request

@@ -337,6 +337,7 @@ async def soak(args) -> int:
         while good.stats.final_frames == 0 and not good_task.done() and time.monotonic() < warm_end:
             await asyncio.sleep(0.1)
         good.stats.latencies_ms.clear()
+        good.stats.latency_sent.clear()
         rss_warm = server.rss_kib() if server else None
         per = [args.messages // args.sessions + (1 if i < args.messages % args.sessions else 0)
                for i in range(args.sessions)]
