@@ -562,6 +562,69 @@ struct StepState {
     bool any = false, anySkipped = false, anyAdds = false;
 };
 
+// What both marches (marchStep, marchSampled) do to a step's lanes the same way.
+
+// Takes a sample in the lanes of `take` that have samples left; the others stop, truncated.
+HWY_INLINE void countSample(const FrameParams &P, MF &take, MF &alive, VI &samples, MarchTotals &totals) {
+    const DF df;
+    const DI di;
+    const MF truncated = hn::AndNot(hn::RebindMask(df, hn::Lt(samples, hn::Set(di, P.maxSamples))), take);
+    if (!hn::AllFalse(df, truncated)) {
+        totals.truncated += hn::CountTrue(df, truncated);
+        alive = hn::AndNot(truncated, alive);
+        take = hn::AndNot(truncated, take);
+    }
+    samples = hn::Add(samples, hn::IfThenElseZero(hn::RebindMask(di, take), hn::Set(di, 1)));
+}
+
+// Where the transmittance is made exact this step: every VC_EXACT_TRANSMITTANCE_EVERY samples
+// (counted with this one), and a refresh due on a segment that adds nothing is made at the
+// lane's next segment that adds (refreshOwed).
+HWY_INLINE MF exactTransmittance(MF take, MF adds, VI samples, MF &refreshOwed) {
+    const DF df;
+    const DI di;
+    const VI refresh = hn::And(samples, hn::Set(di, int32_t(VC_EXACT_TRANSMITTANCE_EVERY - 1)));
+    const MF due = hn::Or(refreshOwed, hn::And(take, hn::RebindMask(df, hn::Eq(refresh, hn::Zero(di)))));
+    refreshOwed = hn::AndNot(adds, due);
+    return hn::And(adds, due);
+}
+
+// Front to back (Eq. 2) in the lanes of `adds`: colour += T·weight·segColor and depth +=
+// segDepth, compensated, and T behind the segment (vcNextTransmittance).
+HWY_INLINE void composite(MF adds, MF exact, VF weight, const VF segColor[3], VF alpha, VF segDepth, VF &T,
+                          VF color[3], VF colorCarry[3], VF &depth, VF &depthCarry) {
+    const VF tw = hn::Mul(T, weight);
+    for (int a = 0; a < 3; ++a) addCompensated(adds, color[a], colorCarry[a], hn::Mul(tw, segColor[a]), false);
+    addCompensated(adds, depth, depthCarry, segDepth, true);
+    T = hn::IfThenElse(adds, vcNextTransmittance(T, alpha, depth, depthCarry, exact), T);
+}
+
+// The last segment a skipped lane passes at once: the last full segment k' whose deciding
+// point (t0 + (k' + j − decide)·d: ½ for a sampled segment's centre, 0 for a pre-integrated
+// one's end) is before the empty region's exit, one fewer for rounding, and ending before t1.
+HWY_INLINE VF lastSkipped(const PacketMarch &m, VF exit, VF d, float decide, MF skipped) {
+    const DF df;
+    const VF byExit = hn::Sub(
+        hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, m.t0), d), m.j), hn::Set(df, decide))), hn::Set(df, 1.0f));
+    return hn::IfThenElse(skipped, hn::Min(byExit, m.lastFull), hn::Zero(df));
+}
+
+// Segments k … jumpTo of the skipped lanes still alive are passed (k already moved on by one);
+// the next to look at is jumpTo + 1. Counts every skipped segment.
+HWY_INLINE void passSkipped(const PacketMarch &m, VF d, VF jumpTo, MF skipped, MF alive, VF &k, VF &segStart,
+                            MarchTotals &totals) {
+    const DF df;
+    const DI di;
+    const VF one = hn::Set(df, 1.0f);
+    const MF jump = hn::And(alive, hn::Ge(jumpTo, k));
+    // Whole numbers below 2^24 (a ray's segments are bounded by maxSamples): exact in float
+    // and in their int32 sum.
+    const VF count = hn::IfThenElse(jump, hn::Add(hn::Sub(jumpTo, k), hn::Set(df, 2.0f)), hn::IfThenElseZero(skipped, one));
+    totals.skipped += uint64_t(hn::GetLane(hn::SumOfLanes(di, hn::ConvertTo(di, count))));
+    segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(jumpTo, m.j), d, m.t0), segStart);
+    k = hn::IfThenElse(jump, hn::Add(jumpTo, one), k);
+}
+
 // A pre-integrated segment's contribution: the segment from the table for a full step; a
 // partial one scales the depth by len/step (Eq. 3) and the colour with its opacity, unless
 // the full step's alpha is too close to 1 to hold its depth: then it is classified at its
@@ -649,7 +712,6 @@ HWY_INLINE void adaptiveSegments(const FrameParams &P, PacketMarch *ms, StepStat
 template <int N>
 HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &totals) {
     const DF df;
-    const DI di;
     const Features &F = P.features;
     const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step), half = hn::Set(df, 0.5f);
     StepState st[N];
@@ -691,13 +753,8 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
             if (!s.anySkipped) continue;
             s.take = hn::AndNot(s.skipped, s.take);
             m.sfStale = hn::Or(m.sfStale, s.skipped);
-            // Later full segments k' whose deciding point (centre t0 + (k' + j − ½)·d, or end
-            // t0 + (k' + j)·d) is before the exit, one fewer for rounding, and ending before
-            // t1: skipped at once instead of one per iteration.
-            const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, m.t0), d), m.j),
-                                                        hn::Set(df, F.preintegrated ? 0.0f : 0.5f))),
-                                      one);
-            s.jumpTo = hn::IfThenElse(s.skipped, hn::Min(byExit, m.lastFull), zero);
+            // Later segments in the empty region: skipped at once instead of one per iteration.
+            s.jumpTo = lastSkipped(m, exit, d, F.preintegrated ? 0.0f : 0.5f, s.skipped);
         }
     }
     for (int p = 0; p < N; ++p) {
@@ -705,13 +762,7 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
         StepState &s = st[p];
         s.any = !hn::AllFalse(df, s.take);
         if (!s.any) continue;
-        const MF truncated = hn::AndNot(hn::RebindMask(df, hn::Lt(m.samples, hn::Set(di, P.maxSamples))), s.take);
-        if (!hn::AllFalse(df, truncated)) {
-            totals.truncated += hn::CountTrue(df, truncated);
-            m.alive = hn::AndNot(truncated, m.alive);
-            s.take = hn::AndNot(truncated, s.take);
-        }
-        m.samples = hn::Add(m.samples, hn::IfThenElseZero(hn::RebindMask(di, s.take), hn::Set(di, 1)));
+        countSample(P, s.take, m.alive, m.samples, totals);
         for (int a = 0; a < 3; ++a) s.q[a] = hn::MulAdd(s.tMid, m.dq[a], m.q0[a]);
         s.weight = one;
     }
@@ -767,19 +818,10 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
         PacketMarch &m = ms[p];
         StepState &s = st[p];
         if (!s.any) continue;
-        // T = exp(−depth), kept by products and made exact every few samples; a refresh due
-        // on a segment that adds nothing is made at the lane's next segment that adds.
-        const VI refresh = hn::And(m.samples, hn::Set(di, int32_t(VC_EXACT_TRANSMITTANCE_EVERY - 1)));
-        const MF due = hn::Or(m.refreshOwed, hn::And(s.take, hn::RebindMask(df, hn::Eq(refresh, hn::Zero(di)))));
-        m.refreshOwed = hn::AndNot(s.adds, due);
-        if (s.anyAdds) {
-            const VF tw = hn::Mul(m.T, s.weight);
-            for (int a = 0; a < 3; ++a)
-                addCompensated(s.adds, m.color[a], m.colorCarry[a], hn::Mul(tw, s.segColor[a]), false);
-            addCompensated(s.adds, m.depth, m.depthCarry, s.segDepth, true);
-            m.T = hn::IfThenElse(s.adds, vcNextTransmittance(m.T, s.alpha, m.depth, m.depthCarry, hn::And(s.adds, due)),
-                                 m.T);
-        }
+        const MF exact = exactTransmittance(s.take, s.adds, m.samples, m.refreshOwed);
+        if (s.anyAdds)
+            composite(s.adds, exact, s.weight, s.segColor, s.alpha, s.segDepth, m.T, m.color, m.colorCarry, m.depth,
+                      m.depthCarry);
         if (F.earlyTermination) {
             const MF stop = hn::And(s.take, hn::Ge(m.depth, hn::Set(df, P.terminationDepth)));
             if (!hn::AllFalse(df, stop)) {
@@ -808,17 +850,7 @@ HWY_INLINE void marchStep(const FrameParams &P, PacketMarch *ms, MarchTotals &to
             }
             continue;
         }
-        if (F.emptySpaceSkipping && s.anySkipped) {
-            // Segments k … jumpTo are skipped; the next to look at is jumpTo + 1.
-            const MF jump = hn::And(m.alive, hn::Ge(s.jumpTo, m.k));
-            // Whole numbers below 2^24 (a ray's segments are bounded by maxSamples): exact in
-            // float and in their int32 sum.
-            const VF count = hn::IfThenElse(jump, hn::Add(hn::Sub(s.jumpTo, m.k), hn::Set(df, 2.0f)),
-                                            hn::IfThenElseZero(s.skipped, one));
-            totals.skipped += uint64_t(hn::GetLane(hn::SumOfLanes(di, hn::ConvertTo(di, count))));
-            m.segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(s.jumpTo, m.j), d, m.t0), m.segStart);
-            m.k = hn::IfThenElse(jump, hn::Add(s.jumpTo, one), m.k);
-        }
+        if (F.emptySpaceSkipping && s.anySkipped) passSkipped(m, d, s.jumpTo, s.skipped, m.alive, m.k, m.segStart, totals);
     }
 }
 
@@ -879,8 +911,6 @@ HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotal
     const DI di;
     const VF zero = hn::Zero(df), one = hn::Set(df, 1.0f), d = hn::Set(df, P.step), half = hn::Set(df, 0.5f);
     const VF unit = hn::Set(df, P.opacityUnit), stopDepth = hn::Set(df, P.terminationDepth);
-    const VI everyMask = hn::Set(di, int32_t(VC_EXACT_TRANSMITTANCE_EVERY - 1));
-    const VI maxSamples = hn::Set(di, P.maxSamples);
     const bool boundarySegment = P.features.boundarySegment, earlyTermination = P.features.earlyTermination;
     SampledLanes L[N];
     for (int p = 0; p < N; ++p) {
@@ -931,9 +961,7 @@ HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotal
                 anySkipped[p] = !hn::AllFalse(df, skipped[p]);
                 if (!anySkipped[p]) continue;
                 take[p] = hn::AndNot(skipped[p], take[p]);
-                const VF exit = cubeExit(P, cube[p], m.q0, m.dq);
-                const VF byExit = hn::Sub(hn::Floor(hn::Add(hn::Sub(hn::Div(hn::Sub(exit, m.t0), d), m.j), half)), one);
-                jumpTo[p] = hn::IfThenElse(skipped[p], hn::Min(byExit, m.lastFull), zero);
+                jumpTo[p] = lastSkipped(m, cubeExit(P, cube[p], m.q0, m.dq), d, 0.5f, skipped[p]);
             }
         }
         // The sample.
@@ -942,13 +970,7 @@ HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotal
             SampledLanes &l = L[p];
             any[p] = !hn::AllFalse(df, take[p]);
             if (!any[p]) continue;
-            const MF truncated = hn::AndNot(hn::RebindMask(df, hn::Lt(l.samples, maxSamples)), take[p]);
-            if (!hn::AllFalse(df, truncated)) {
-                totals.truncated += hn::CountTrue(df, truncated);
-                l.alive = hn::AndNot(truncated, l.alive);
-                take[p] = hn::AndNot(truncated, take[p]);
-            }
-            l.samples = hn::Add(l.samples, hn::IfThenElseZero(hn::RebindMask(di, take[p]), hn::Set(di, 1)));
+            countSample(P, take[p], l.alive, l.samples, totals);
             value[p] = sampleVolume(P, q[p][0], q[p][1], q[p][2]);
         }
         // Its depth, and which lanes it adds to (marchStep's rule).
@@ -964,10 +986,7 @@ HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotal
             segDepth[p] = vcSegmentDepth(tableChannel(P, spot[p], 3), len[p], unit);
             adds[p] = hn::And(take[p], hn::Gt(segDepth[p], zero));
             anyAdds[p] = !hn::AllFalse(df, adds[p]);
-            const VI refresh = hn::And(l.samples, everyMask);
-            const MF due = hn::Or(l.refreshOwed, hn::And(take[p], hn::RebindMask(df, hn::Eq(refresh, hn::Zero(di)))));
-            l.refreshOwed = hn::AndNot(adds[p], due);
-            exact[p] = hn::And(adds[p], due);
+            exact[p] = exactTransmittance(take[p], adds[p], l.samples, l.refreshOwed);
         }
         // Colour, opacity and the sums where it adds.
         for (int p = 0; p < N; ++p) {
@@ -985,11 +1004,9 @@ HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotal
                         segColor[a] = hn::IfThenElse(lit, vcShade(segColor[a], diffuse, specular), segColor[a]);
                 }
             }
-            const VF tw = hn::Mul(l.T, alpha);
-            for (int a = 0; a < 3; ++a)
-                addCompensated(adds[p], l.color[a], l.colorCarry[a], hn::Mul(tw, segColor[a]), false);
-            addCompensated(adds[p], l.depth, l.depthCarry, segDepth[p], true);
-            l.T = hn::IfThenElse(adds[p], vcNextTransmittance(l.T, alpha, l.depth, l.depthCarry, exact[p]), l.T);
+            // weight = alpha: the kernel's T·alpha·rgb, in its order.
+            composite(adds[p], exact[p], alpha, segColor, alpha, segDepth[p], l.T, l.color, l.colorCarry, l.depth,
+                      l.depthCarry);
         }
         // Early termination, and on to the next segment (past the skipped ones).
         for (int p = 0; p < N; ++p) {
@@ -1005,14 +1022,7 @@ HWY_NOINLINE void marchSampled(const FrameParams &P, PacketMarch *ms, MarchTotal
             l.alive = hn::AndNot(hn::Ge(boundary[p], m.t1), l.alive);
             l.segStart = hn::IfThenElse(l.alive, segEnd[p], l.segStart);
             l.k = hn::IfThenElse(l.alive, hn::Add(l.k, one), l.k);
-            if (anySkipped[p]) {
-                const MF jump = hn::And(l.alive, hn::Ge(jumpTo[p], l.k));
-                const VF count = hn::IfThenElse(jump, hn::Add(hn::Sub(jumpTo[p], l.k), hn::Set(df, 2.0f)),
-                                                hn::IfThenElseZero(skipped[p], one));
-                totals.skipped += uint64_t(hn::GetLane(hn::SumOfLanes(di, hn::ConvertTo(di, count))));
-                l.segStart = hn::IfThenElse(jump, hn::MulAdd(hn::Add(jumpTo[p], m.j), d, m.t0), l.segStart);
-                l.k = hn::IfThenElse(jump, hn::Add(jumpTo[p], one), l.k);
-            }
+            if (anySkipped[p]) passSkipped(m, d, jumpTo[p], skipped[p], l.alive, l.k, l.segStart, totals);
         }
     }
     // What MarchTile writes to the pixels: the sums and the samples (every lane has stopped).
