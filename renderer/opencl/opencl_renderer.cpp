@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <mutex>
 #include <string_view>
 
 namespace volcast {
@@ -78,6 +79,12 @@ ReadBack OpenClRenderer::readBack() const {
     const std::string how = v ? v : "";
     if (how == "counters-first") return ReadBack::CountersFirst;
     if (how == "pinned") return ReadBack::Pinned;
+    // A misspelt choice would otherwise measure the default under another name.
+    static std::once_flag warned;
+    if (!how.empty() && how != "direct")
+        std::call_once(warned, [&] {
+            spdlog::warn("VOLCAST_OPENCL_READBACK={} is none of direct, counters-first, pinned: reading back direct", how);
+        });
     return ReadBack::Direct;
 }
 
