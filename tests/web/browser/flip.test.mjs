@@ -7,8 +7,8 @@
 // camera move can), the correction reaches the server as the scene's
 // quality.orientation_correction, camera and transfer function changes keep it, the state and
 // the saved scene hold it, and volcast-render draws the saved scene as the browser showed it.
-// Saves the screenshot web/README.md shows (web/doc/flip.png) into the artifacts, and with
-// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over web/doc/flip.png.
+// Saves the screenshot web/README.md shows (docs/images/web/flip.png) into the artifacts, and with
+// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over docs/images/web/flip.png.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 import { readFileSync, writeFileSync } from "node:fs";

@@ -226,10 +226,16 @@ export const pixelsDiffering = (page, a, b, mirror) => page.evaluate(({ a, b, mi
   return n;
 }, { a, b, mirror });
 
+// The pictures the READMEs show live with the other pages' pictures (docs/images/README.md),
+// outside web/, which the server serves.
+export const DOC_SCREENSHOTS = path.join(REPO, "docs/images/web");
+
 // With VOLCAST_UPDATE_DOC_SCREENSHOTS=1 an artifact web/README.md shows is copied over its
-// web/doc/ file (reviewed in the diff like any change).
+// file in docs/images/web/ (reviewed in the diff like any change).
 export function updateDocScreenshot(artifactName, docName) {
-  if (process.env.VOLCAST_UPDATE_DOC_SCREENSHOTS) copyFileSync(artifact(artifactName), path.join(REPO, "web/doc", docName));
+  if (!process.env.VOLCAST_UPDATE_DOC_SCREENSHOTS) return;
+  mkdirSync(DOC_SCREENSHOTS, { recursive: true });
+  copyFileSync(artifact(artifactName), path.join(DOC_SCREENSHOTS, docName));
 }
 
 export async function screenshot(page, name) {

@@ -1,7 +1,7 @@
 // The compositing selector (MIP, MinIP) and the crop box sliders (web/app/crop_panel.js) in
 // headless Chromium against a real volcast-server: each reaches the server in the quality
 // policy, the state reports it back, and the image changes the way the mode says. Saves the
-// screenshots web/README.md shows (web/doc/mip.png, web/doc/crop.png) into the artifacts.
+// screenshots web/README.md shows (docs/images/web/mip.png, docs/images/web/crop.png) into the artifacts.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 

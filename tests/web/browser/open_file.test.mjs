@@ -7,7 +7,7 @@
 // --token and the page is opened with ?token=: uploads carry it, and one without is refused.
 // On a throttled connection the upload's progress shows over the view.
 // Saves open-file-drop.png (the drop overlay) and open-file.png in the artifacts, and with
-// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over web/doc/open-file-drop.png and open-file-progress.png.
+// VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over docs/images/web/open-file-drop.png and open-file-progress.png.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 

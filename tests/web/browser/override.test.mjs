@@ -4,7 +4,7 @@
 // card says the file's axes were corrected by hand. The volume is not a cube, so a quarter
 // turn changes the box it is drawn in: the clip plane's slider spans that box. The slice
 // panes follow a flip and a turn as the 3D view does.
-// Saves the card's screenshot web/README.md shows (web/doc/orient-override.png) into the
+// Saves the card's screenshot web/README.md shows (docs/images/web/orient-override.png) into the
 // artifacts, and with VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over the doc file.
 import { test } from "node:test";
 import assert from "node:assert/strict";

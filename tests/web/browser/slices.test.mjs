@@ -4,10 +4,8 @@
 // the crosshair point is drawn over the 3D view where the frame's camera projects it.
 import { after, before, test } from "node:test";
 import assert from "node:assert/strict";
-import { copyFileSync } from "node:fs";
-import path from "node:path";
 
-import { ARTIFACTS, REPO, artifact, checkPrerequisites, launchBrowser, openPage, screenshot, startServer, waitForFinal } from "./harness.mjs";
+import { ARTIFACTS, checkPrerequisites, launchBrowser, openPage, screenshot, startServer, updateDocScreenshot, waitForFinal } from "./harness.mjs";
 
 const missing = checkPrerequisites();
 if (missing.length) throw new Error(`cannot run the browser tests:\n  ${missing.join("\n  ")}`);
@@ -125,5 +123,5 @@ test("a screenshot for web/README.md", async () => {
   await page.waitForFunction(() => window.volcast.slices.panes.axial.header?.window === 200, null, { timeout: 30000 });
   await waitSettled(page);
   await screenshot(page, "slices-03-readme.png");
-  if (process.env.VOLCAST_UPDATE_DOC_SCREENSHOTS) copyFileSync(artifact("slices-03-readme.png"), path.join(REPO, "web/doc/slices.png"));
+  updateDocScreenshot("slices-03-readme.png", "slices.png");
 });

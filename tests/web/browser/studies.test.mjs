@@ -10,7 +10,7 @@
 // carries on. The patient's name is shown and
 // never written to the browser's console.
 // Saves studies.png (the panel, the study open, its series drawn) in the artifacts, and
-// with VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over web/doc/studies.png.
+// with VOLCAST_UPDATE_DOC_SCREENSHOTS=1 over docs/images/web/studies.png.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 

@@ -4,7 +4,7 @@
 // panes' window/level, crosshair and a thick slab are set; the link opens a new page that
 // draws the same final frame (to 1/255) and the same three slices, and says the axes were
 // set by hand. With VOLCAST_UPDATE_DOC_SCREENSHOTS=1 the reopened page's screenshot goes
-// over web/doc/view-link.png.
+// over docs/images/web/view-link.png.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
