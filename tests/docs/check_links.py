@@ -82,7 +82,7 @@ def cited_paths(line, top_level):
 def check(root):
     root = os.path.abspath(root)
     top_level = {d for d in os.listdir(root)
-                 if os.path.isdir(os.path.join(root, d)) and d not in SKIPPED_DIRS and not d.startswith(".")}
+                 if os.path.isdir(os.path.join(root, d)) and d not in SKIPPED_DIRS and not d.startswith((".", "build"))}
     problems = []
     pages = markdown_files(root)
     for page in pages:
