@@ -100,7 +100,7 @@ TEST(SecretsNeverLogged, DicomWebCredentialsEchoedByThePacsReachNoClientAndNoLog
     const fs::path folder = fs::temp_directory_path() / ("volcast_secrets_" + std::to_string(::getpid()));
     fs::remove_all(folder);
     fs::create_directories(folder);
-    const std::string authorization = "Basic " + volcast::test::base64("reader:s3cret/P@ss+w=rd!");
+    const std::string authorization = "Basic " + volcast::test::base64("reader:s3cret/P@ss+w=rd!-long-enough-for-a-40-character-quote-to-cut-it");
     std::ofstream(folder / "pacs.auth") << authorization << "\n";
     const std::vector<std::string> echoes = volcast::test::credentialEchoes(authorization);
 
