@@ -41,6 +41,9 @@ packages=(
   # store), libzip for an uploaded .zip of a DICOM series, and a real PACS for the tests:
   # Orthanc with its DICOMweb plugin (docs/data-sources.md)
   libcurl4-openssl-dev libzip-dev orthanc orthanc-dicomweb
+  # SHA-256 of upload ids for the log (server/upload_ids.hpp): OpenSSL's libcrypto, which
+  # libcurl already loads
+  libssl-dev
 )
 # Node.js and npm only where the machine has none: a machine may already carry a newer Node.js
 # (NodeSource's, which bundles npm), and Debian's npm package conflicts with it.

@@ -252,7 +252,8 @@ bool nestingWithin(std::string_view text, int limit) {
 std::string sourceText(const SourceConfig &config) { return "DICOMweb source '" + config.name + "'"; }
 
 // A QIDO-RS answer: a JSON array of datasets. 204 and an empty body are no match.
-json parseDatasets(const SourceConfig &config, const HttpResponse &response, const std::string &url) {
+json parseDatasets(const SourceConfig &config, const CredentialScrubber &scrubber, const HttpResponse &response,
+                   const std::string &url) {
     const std::string what = sourceText(config) + " answered GET " + HttpClient::pathForMessage(url);
     if (response.status == 204 || response.body.empty()) return json::array();
     std::string media;
@@ -262,7 +263,8 @@ json parseDatasets(const SourceConfig &config, const HttpResponse &response, con
     }
     if (media != "application/dicom+json" && media != "application/json")
         throw DicomWebError(ErrorKind::BadResponse,
-                            what + " with Content-Type '" + cleanText(response.contentType) + "', not application/dicom+json");
+                            what + " with Content-Type '" + cleanText(scrubber.withoutCredentials(response.contentType)) +
+                                "', not application/dicom+json");
     if (!nestingWithin(response.body, kMaxJsonDepth))
         throw DicomWebError(ErrorKind::BadResponse, what + " with JSON nested deeper than " + std::to_string(kMaxJsonDepth));
     json parsed = json::parse(response.body, nullptr, false);
@@ -367,7 +369,7 @@ std::string studyQueryString(const StudyQuery &query) {
     return out;
 }
 
-Client::Client(SourceConfig config) : config_(std::move(config)) {
+Client::Client(SourceConfig config) : config_(std::move(config)), scrubber_(config_.authorization) {
     const std::string &url = config_.baseUrl;
     std::string lowered;
     for (char c : url.substr(0, 8)) lowered += char(std::tolower(static_cast<unsigned char>(c)));
@@ -391,9 +393,26 @@ Client::Client(SourceConfig config) : config_(std::move(config)) {
 }
 
 std::vector<StudyRecord> Client::findStudies(const StudyQuery &query) {
+    return scrubbingErrors(scrubber_, [&] { return searchStudies(query); });
+}
+
+SeriesSize Client::seriesSize(const std::string &studyUid, const std::string &seriesUid) {
+    return scrubbingErrors(scrubber_, [&] { return measureSeries(studyUid, seriesUid); });
+}
+
+RetrieveProgress Client::retrieveSeries(const std::string &studyUid, const std::string &seriesUid,
+                                        const std::filesystem::path &folder, uint64_t maxBytes,
+                                        const std::function<void(const RetrieveProgress &)> &progress,
+                                        const std::function<bool()> &cancelled, int64_t expectedInstances) {
+    return scrubbingErrors(scrubber_, [&] {
+        return retrieve(studyUid, seriesUid, folder, maxBytes, progress, cancelled, expectedInstances);
+    });
+}
+
+std::vector<StudyRecord> Client::searchStudies(const StudyQuery &query) {
     const std::string url = base_ + "/studies?" + studyQueryString(query);
     HttpClient http(httpOptions(config_, false));
-    const json studies = parseDatasets(config_, http.get(url, kJson, config_.maxQueryBytes), url);
+    const json studies = parseDatasets(config_, scrubber_, http.get(url, kJson, config_.maxQueryBytes), url);
 
     std::vector<StudyRecord> out;
     size_t skipped = 0;
@@ -420,7 +439,7 @@ std::vector<StudyRecord> Client::findStudies(const StudyQuery &query) {
             base_ + "/studies/" + study.studyUid + "/series?includefield=0008103E&includefield=00201209";
         json series;
         try {
-            series = parseDatasets(config_, http.get(seriesUrl, kJson, config_.maxQueryBytes), seriesUrl);
+            series = parseDatasets(config_, scrubber_, http.get(seriesUrl, kJson, config_.maxQueryBytes), seriesUrl);
         } catch (const DicomWebError &e) {
             if (e.kind != ErrorKind::NotFound) throw;
             continue;  // the study went away between the two requests
@@ -439,7 +458,7 @@ std::vector<StudyRecord> Client::findStudies(const StudyQuery &query) {
     return out;
 }
 
-SeriesSize Client::seriesSize(const std::string &studyUid, const std::string &seriesUid) {
+SeriesSize Client::measureSeries(const std::string &studyUid, const std::string &seriesUid) {
     checkUids(config_, studyUid, seriesUid);
     HttpClient http(httpOptions(config_, false));
     // The size of one image from the first instance's record, the count from the series' own
@@ -450,14 +469,14 @@ SeriesSize Client::seriesSize(const std::string &studyUid, const std::string &se
     // asked for every instance's record.
     const std::string seriesUrl = base_ + "/studies/" + studyUid + "/series?SeriesInstanceUID=" + seriesUid +
                                   "&includefield=00201209";
-    const json series = parseDatasets(config_, http.get(seriesUrl, kJson, config_.maxQueryBytes), seriesUrl);
+    const json series = parseDatasets(config_, scrubber_, http.get(seriesUrl, kJson, config_.maxQueryBytes), seriesUrl);
     std::optional<int64_t> count;
     for (const json &dataset : series)
         if (uidOf(dataset, "0020000E") == seriesUid) count = integerOf(dataset, "00201209");
     const std::string url = base_ + "/studies/" + studyUid + "/series/" + seriesUid + "/instances?" +
                             (count && *count >= 1 ? "limit=1&" : "") +
                             "includefield=00280010&includefield=00280011&includefield=00280008";
-    json instances = parseDatasets(config_, http.get(url, kJson, config_.maxQueryBytes), url);
+    json instances = parseDatasets(config_, scrubber_, http.get(url, kJson, config_.maxQueryBytes), url);
     if (instances.empty())
         throw DicomWebError(ErrorKind::NotFound, sourceText(config_) + " has no instances of series " + seriesUid +
                                                      " in study " + studyUid);
@@ -491,10 +510,10 @@ SeriesSize Client::seriesSize(const std::string &studyUid, const std::string &se
     return size;
 }
 
-RetrieveProgress Client::retrieveSeries(const std::string &studyUid, const std::string &seriesUid,
-                                        const std::filesystem::path &folder, uint64_t maxBytes,
-                                        const std::function<void(const RetrieveProgress &)> &progress,
-                                        const std::function<bool()> &cancelled, int64_t expectedInstances) {
+RetrieveProgress Client::retrieve(const std::string &studyUid, const std::string &seriesUid,
+                                  const std::filesystem::path &folder, uint64_t maxBytes,
+                                  const std::function<void(const RetrieveProgress &)> &progress,
+                                  const std::function<bool()> &cancelled, int64_t expectedInstances) {
     checkUids(config_, studyUid, seriesUid);
     const std::string src = sourceText(config_);
     const std::string url = base_ + "/studies/" + studyUid + "/series/" + seriesUid;
@@ -534,7 +553,7 @@ RetrieveProgress Client::retrieveSeries(const std::string &studyUid, const std::
         }
         if (media != "application/dicom")
             throw DicomWebError(ErrorKind::BadResponse, src + " sent instance " + std::to_string(number) + " of " +
-                                                            seriesText + " as '" + cleanText(type) +
+                                                            seriesText + " as '" + cleanText(scrubber_.withoutCredentials(type)) +
                                                             "', not application/dicom");
         char name[32];
         std::snprintf(name, sizeof name, "instance_%05zu.dcm", number - 1);
@@ -571,7 +590,7 @@ RetrieveProgress Client::retrieveSeries(const std::string &studyUid, const std::
             boundary = multipartBoundary(head.contentType);
         } catch (const MultipartError &e) {
             throw DicomWebError(ErrorKind::BadResponse, src + " answered GET " + HttpClient::pathForMessage(url) +
-                                                            " with Content-Type '" + cleanText(head.contentType) +
+                                                            " with Content-Type '" + cleanText(scrubber_.withoutCredentials(head.contentType)) +
                                                             "': " + e.what());
         }
         reader.emplace(boundary, callbacks, limits);

@@ -1,11 +1,13 @@
 #pragma once
 // A DICOMweb client: QIDO-RS search of studies and series, a series' size from its instances'
 // metadata, and WADO-RS retrieval of a series as DICOM files, streamed to a folder. Knows
-// nothing of the renderer or the protocol. Every failure is a DicomWebError (errors.hpp).
+// nothing of the renderer or the protocol. Every failure is a DicomWebError (errors.hpp), its
+// message scrubbed of the source's credentials (credential_scrubber.hpp).
 //
 // A Client holds only its configuration: its calls may run on several threads at once (each
 // call makes its own HTTP connection).
 
+#include "dicomweb/credential_scrubber.hpp"
 #include "dicomweb/errors.hpp"
 
 #include <cstdint>
@@ -90,7 +92,16 @@ class Client {
     const SourceConfig &config() const { return config_; }
 
   private:
+    // The calls above, whose errors those wrap in scrubbingErrors.
+    std::vector<StudyRecord> searchStudies(const StudyQuery &query);
+    SeriesSize measureSeries(const std::string &studyUid, const std::string &seriesUid);
+    RetrieveProgress retrieve(const std::string &studyUid, const std::string &seriesUid,
+                              const std::filesystem::path &folder, uint64_t maxBytes,
+                              const std::function<void(const RetrieveProgress &)> &progress,
+                              const std::function<bool()> &cancelled, int64_t expectedInstances);
+
     SourceConfig config_;
+    CredentialScrubber scrubber_;
     std::string base_;  // baseUrl without its trailing '/'
 };
 

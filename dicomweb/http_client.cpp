@@ -101,17 +101,6 @@ std::string excerptOf(const std::string &body) {
     return out;
 }
 
-// The Authorization value and its credentials alone ("Basic dXNlcjpw" → "dXNlcjpw"), to be
-// kept out of messages.
-std::vector<std::string> secretsOf(const std::string &authorization) {
-    std::vector<std::string> out;
-    if (authorization.empty()) return out;
-    out.push_back(authorization);
-    const size_t space = authorization.find(' ');
-    if (space != std::string::npos && space + 1 < authorization.size()) out.push_back(authorization.substr(space + 1));
-    return out;
-}
-
 } // namespace
 
 struct HttpClient::Transfer {
@@ -226,7 +215,7 @@ struct HttpClient::Transfer {
     }
 };
 
-HttpClient::HttpClient(HttpOptions options) : options_(std::move(options)) {
+HttpClient::HttpClient(HttpOptions options) : options_(std::move(options)), scrubber_(options_.authorization) {
     initCurlOnce();
     // A CR or LF in the value would let a configuration file add headers of its own.
     if (options_.authorization.find_first_of("\r\n") != std::string::npos)
@@ -251,7 +240,7 @@ std::string HttpClient::pathForMessage(const std::string &url) {
 HttpResponse HttpClient::get(const std::string &url, const std::string &accept, uint64_t maxBodyBytes) {
     Transfer t;
     t.maxBodyBytes = maxBodyBytes;
-    perform("GET", url, accept, nullptr, nullptr, t);
+    scrubbingErrors(scrubber_, [&] { return perform("GET", url, accept, nullptr, nullptr, t); });
     return {t.status, t.contentType, std::move(t.body)};
 }
 
@@ -259,7 +248,7 @@ HttpResponse HttpClient::post(const std::string &url, const std::string &content
                               const std::string &accept, uint64_t maxBodyBytes) {
     Transfer t;
     t.maxBodyBytes = maxBodyBytes;
-    perform("POST", url, accept, &contentType, &body, t);
+    scrubbingErrors(scrubber_, [&] { return perform("POST", url, accept, &contentType, &body, t); });
     return {t.status, t.contentType, std::move(t.body)};
 }
 
@@ -272,7 +261,7 @@ uint64_t HttpClient::getStreaming(const std::string &url, const std::string &acc
     t.onHead = &onHead;
     t.onData = &onData;
     t.cancelled = &cancelled;
-    return perform("GET", url, accept, nullptr, nullptr, t);
+    return scrubbingErrors(scrubber_, [&] { return perform("GET", url, accept, nullptr, nullptr, t); });
 }
 
 uint64_t HttpClient::perform(const std::string &method, const std::string &firstUrl, const std::string &accept,
@@ -340,7 +329,7 @@ uint64_t HttpClient::perform(const std::string &method, const std::string &first
             curl_easy_setopt(curl, CURLOPT_POSTFIELDSIZE_LARGE, curl_off_t(postBody->size()));
         }
         curl_easy_setopt(curl, CURLOPT_HTTPHEADER, headers);
-        spdlog::debug("{}: {} {}", src, method, path);
+        spdlog::debug("{}: {} {}", src, method, scrubber_(path));  // a redirect's path is the server's
         const CURLcode code = curl_easy_perform(curl);
         curl_slist_free_all(headers);
         curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, nullptr);
@@ -410,12 +399,9 @@ uint64_t HttpClient::perform(const std::string &method, const std::string &first
             continue;
         }
         const std::string answered = " (HTTP " + std::to_string(status) + ")";
-        // A hostile server could echo the request's headers back: never quote the credentials.
-        std::string errorBody = t.body;
-        for (const std::string &secret : secretsOf(options_.authorization))
-            for (size_t at = errorBody.find(secret); at != std::string::npos; at = errorBody.find(secret, at))
-                errorBody.replace(at, secret.size(), "[credentials]");
-        const std::string excerpt = excerptOf(errorBody);
+        // A hostile server could echo the request's headers back: scrubbed before the excerpt
+        // is cut, so that no cut leaves part of a credential.
+        const std::string excerpt = excerptOf(scrubber_.withoutCredentials(t.body));
         const std::string details = excerpt.empty() ? "" : ": " + excerpt;
         switch (status) {
         case 401:

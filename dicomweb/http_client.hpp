@@ -3,11 +3,13 @@
 // https only, timeouts on connect, on the whole request and on a stalled transfer, every body
 // bounded, redirects followed by hand only to the same scheme, host and port (at most
 // HttpOptions::maxRedirects). Failures are DicomWebError: the message names the source and the
-// URL's path (never its query, never the Authorization value).
+// URL's path (never its query), and every one leaves through the source's CredentialScrubber,
+// so that no form of the Authorization value a server echoes back is quoted.
 //
 // One HttpClient holds one curl handle, so consecutive requests reuse the connection; it is
 // not shared between threads (make one per thread or per call).
 
+#include "dicomweb/credential_scrubber.hpp"
 #include "dicomweb/errors.hpp"
 
 #include <cstdint>
@@ -59,8 +61,9 @@ class HttpClient {
     // GET streamed: onHead once a 2xx head arrives (it may throw to refuse the response),
     // then onData for each chunk as it arrives; `cancelled` is asked between chunks and while
     // the transfer waits (true: Cancelled). Exceptions thrown by the callbacks end the
-    // transfer and come out of this call unchanged. Non-2xx statuses throw as get() does,
-    // without calling the callbacks. Returns the bytes received.
+    // transfer and come out of this call unchanged (a DicomWebError's message scrubbed).
+    // Non-2xx statuses throw as get() does, without calling the callbacks. Returns the bytes
+    // received.
     uint64_t getStreaming(const std::string &url, const std::string &accept,
                           const std::function<void(const ResponseHead &)> &onHead,
                           const std::function<void(std::string_view)> &onData,
@@ -78,6 +81,7 @@ class HttpClient {
     std::string source() const;
 
     HttpOptions options_;
+    CredentialScrubber scrubber_;
     void *curl_ = nullptr;   // CURL*, kept out of this header
 };
 

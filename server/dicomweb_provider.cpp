@@ -24,14 +24,17 @@ uint64_t folderBytes(const fs::path &folder) {
     return total;
 }
 
-// What a DICOMweb failure means to a user, naming the source's answer, never its credentials.
-std::string explain(const dicomweb::DicomWebError &e) {
+// What a DICOMweb failure means to a user, naming the source's answer, never its credentials:
+// the client scrubbed its message already; scrubbed again here, where it becomes a client's
+// message and a log line, so that no message of the library can skip it.
+std::string explain(const dicomweb::DicomWebError &e, const dicomweb::SourceConfig &config) {
     using dicomweb::ErrorKind;
+    const std::string message = dicomweb::CredentialScrubber(config.authorization)(e.what());
     switch (e.kind) {
     case ErrorKind::Unauthorized:
-        return std::string(e.what()) + " (the server's credentials for this source were refused: --dicomweb-auth)";
-    case ErrorKind::Forbidden: return std::string(e.what()) + " (the source does not allow this server to read it)";
-    default: return e.what();
+        return message + " (the server's credentials for this source were refused: --dicomweb-auth)";
+    case ErrorKind::Forbidden: return message + " (the source does not allow this server to read it)";
+    default: return message;
     }
 }
 
@@ -177,7 +180,7 @@ FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContex
                                    fmt::format("{}: retrieval stopped after the load time limit of {} s (--load-timeout-s)",
                                                name, context.timeLimitSeconds));
         const ErrorCode code = e.kind == dicomweb::ErrorKind::NotFound ? ErrorCode::NotFound : ErrorCode::LoadFailed;
-        throw VolumeFetchError(code, name + ": " + explain(e));
+        throw VolumeFetchError(code, name + ": " + explain(e, config));
     }
 }
 
@@ -228,9 +231,10 @@ void DicomWebProvider::searchLoop() {
         try {
             result = search(next.request);
         } catch (const std::exception &e) {
-            spdlog::error("find_studies on {}: {}", next.request.source, e.what());
-            result = ProtocolError{ErrorCode::Internal, std::string("internal error: ") + e.what(), next.request.id,
-                                   "find_studies"};
+            const dicomweb::SourceConfig *config = source(next.request.source);
+            const std::string what = dicomweb::CredentialScrubber(config ? config->authorization : "")(e.what());
+            spdlog::error("find_studies on {}: {}", next.request.source, what);
+            result = ProtocolError{ErrorCode::Internal, "internal error: " + what, next.request.id, "find_studies"};
         }
         next.done(std::move(result));
     }
@@ -272,8 +276,8 @@ DicomWebProvider::StudiesResult DicomWebProvider::search(const protocol::FindStu
         }
         return m;
     } catch (const dicomweb::DicomWebError &e) {
-        if (e.kind == dicomweb::ErrorKind::BadQuery) return failed(ErrorCode::BadField, e.what());
-        return failed(ErrorCode::SourceFailed, explain(e));
+        if (e.kind == dicomweb::ErrorKind::BadQuery) return failed(ErrorCode::BadField, explain(e, *config));
+        return failed(ErrorCode::SourceFailed, explain(e, *config));
     }
 }
 

@@ -1,6 +1,7 @@
 #include "server/upload_store.hpp"
 
 #include "renderer/io/volume_io.hpp"
+#include "server/upload_ids.hpp"
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
@@ -25,10 +26,15 @@ namespace {
 
 constexpr size_t kIdHexChars = 32;   // 128 bits
 
-bool isId(std::string_view s) {
-    return s.size() == kIdHexChars &&
+bool isHex(std::string_view s, size_t digits) {
+    return s.size() == digits &&
            std::all_of(s.begin(), s.end(), [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
 }
+
+bool isId(std::string_view s) { return isHex(s, kIdHexChars); }
+
+// An upload's folder is named by its id's SHA-256 (upload_ids.hpp), never by the id.
+bool isFolderName(std::string_view s) { return isHex(s, 64); }
 
 std::string newId() {
     unsigned char bytes[kIdHexChars / 2];
@@ -113,7 +119,8 @@ fs::path makeFolder(const fs::path &given, bool &own) {
             fmt::format("cannot make the upload folder {} private: {}", given.string(), std::strerror(errno)));
     // Only what this server would have made there: a given folder may hold other things.
     for (const auto &entry : fs::directory_iterator(given, ec))
-        if (isId(entry.path().filename().string())) removeFolder(entry.path());
+        if (const std::string name = entry.path().filename().string(); isFolderName(name) || isId(name))
+            removeFolder(entry.path());   // isId: a folder of an older server, named by the id itself
     own = false;
     return given;
 }
@@ -207,7 +214,7 @@ void UploadStore::forgetAll(std::vector<std::pair<std::string, Record>> &gone) c
         hook = forget_;
     }
     for (const auto &[id, record] : gone) {
-        spdlog::info("uploads: deleted upload:{}", id);
+        spdlog::info("uploads: deleted {}", hideUploadIds(std::string(kPrefix) + id));
         removeFolder(record.folder);
         if (hook) hook(std::string(kPrefix) + id);
     }
@@ -287,7 +294,7 @@ UploadStore::begin(const std::string &address, const std::string &filename, std:
             pending->address_ = address;
             pending->filename_ = filename;
             pending->reserved_ = need;
-            pending->folder_ = folder_ / pending->id_;
+            pending->folder_ = folder_ / uploadFolderName(pending->id_);
             pending->file_ = pending->folder_ / ("volume" + uploadExtension(filename).value_or(".bin"));
             reserved_ += need;
             ++active_[address];
@@ -410,7 +417,7 @@ UploadStore::Result UploadStore::verify(Job &job) {
     accepted.filename = p.filename_;
     accepted.bytes = job.bytes;
     accepted.expiresInSeconds = ttl_.count();
-    spdlog::info("uploads: kept {} ({} bytes, {} x {} x {} {})", accepted.volume, job.bytes, accepted.dims[0],
+    spdlog::info("uploads: kept {} ({} bytes, {} x {} x {} {})", hideUploadIds(accepted.volume), job.bytes, accepted.dims[0],
                  accepted.dims[1], accepted.dims[2], accepted.voxelType);
     return accepted;
 }

@@ -6,6 +6,7 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/io/volume_source.hpp"
+#include "server/upload_ids.hpp"
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
@@ -122,7 +123,7 @@ std::shared_ptr<VolumeProvider> VolumeRegistry::providerFor(const std::string &n
 void VolumeRegistry::forget(const std::string &name) {
     std::lock_guard lock(mutex_);
     if (auto it = loaded_.find(name); it != loaded_.end()) {
-        spdlog::info("dropping volume {} from memory: its source is gone", name);
+        spdlog::info("dropping volume {} from memory: its source is gone", hideUploadIds(name));
         loaded_.erase(it);
         lastUse_.erase(name);
         publishMemory();
@@ -309,11 +310,11 @@ void VolumeRegistry::loaderLoop() {
                     loaded_[next->name] = entry;
                     lastUse_[next->name] = ++useClock_;
                     metrics_.volumeLoaded(entry->bytes);
-                    spdlog::info("loaded volume {} ({}x{}x{}, {} MiB)", next->name, entry->volume->dims.x,
+                    spdlog::info("loaded volume {} ({}x{}x{}, {} MiB)", hideUploadIds(next->name), entry->volume->dims.x,
                                  entry->volume->dims.y, entry->volume->dims.z, entry->bytes >> 20);
                 } else {
                     const std::string message = roomMessage(next->name, entry->bytes, waiters);
-                    spdlog::warn("loading {}: {}", next->name, message);
+                    spdlog::warn("loading {}: {}", hideUploadIds(next->name), hideUploadIds(message));
                     result = ProtocolError{ErrorCode::LoadFailed, message, nullptr, "open_volume"};
                     entry.reset();
                 }
@@ -330,7 +331,8 @@ void VolumeRegistry::loaderLoop() {
 VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
     using protocol::ProgressStage;
     const auto failed = [&](ErrorCode code, const std::string &message) -> Result {
-        spdlog::warn("loading {}: {}", p.name, message);   // the log keeps the server's paths
+        // The log keeps the server's paths; never an upload's id.
+        spdlog::warn("loading {}: {}", hideUploadIds(p.name), hideUploadIds(message));
         return ProtocolError{code, forClients(message, p), nullptr, "open_volume"};
     };
     try {
@@ -398,10 +400,10 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         progress(p.name, ProgressStage::Uploading, "", 1.0);
         return entry;
     } catch (const VolumeFetchError &e) {
-        spdlog::warn("fetching {}: {}", p.name, e.what());
+        spdlog::warn("fetching {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
         return ProtocolError{e.code, e.what(), nullptr, "open_volume"};
     } catch (const VolumeTooLarge &e) {
-        spdlog::warn("loading {}: {}", p.name, e.what());
+        spdlog::warn("loading {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
         return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, uint64_t(double(e.bytes) * kMemoryFactor)));
     } catch (const VolumeLoadTimeout &e) {
         return failed(ErrorCode::LoadFailed, std::string(e.what()) + " (--load-timeout-s)");
@@ -462,7 +464,7 @@ std::optional<std::vector<std::string>> VolumeRegistry::planRoom(uint64_t bytes,
 
 void VolumeRegistry::evict(const std::vector<std::string> &names) {
     for (const auto &n : names) {
-        spdlog::info("evicting volume {} for the memory budget", n);
+        spdlog::info("evicting volume {} for the memory budget", hideUploadIds(n));
         metrics_.volumeEvicted(loaded_.at(n)->bytes);
         loaded_.erase(n);
         lastUse_.erase(n);

@@ -5,6 +5,7 @@
 #include "renderer/model/presets.hpp"
 #include "renderer/reference/reference_renderer.hpp"
 #include "renderer/model/slice.hpp"
+#include "server/upload_ids.hpp"
 
 #include <boost/asio/post.hpp>
 #include <spdlog/fmt/fmt.h>
@@ -67,7 +68,7 @@ void WebsocketSession::guarded(const char *where, F &&f, const nlohmann::json &i
 
 void WebsocketSession::internalError(const char *where, const std::string &what, const nlohmann::json &id) noexcept {
     try {
-        spdlog::error("session {}: internal error in {}: {}", slot_, where, what);
+        spdlog::error("session {}: internal error in {}: {}", slot_, where, hideUploadIds(what));
         sendError({ErrorCode::Internal, std::string("internal error (") + where + "): " + protocol::quotableText(what, 500),
                    id, ""});
     } catch (...) {

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <mutex>
 #include <stdexcept>
@@ -108,6 +109,80 @@ inline std::string httpResponse(int status, const std::string &contentType, cons
     std::string head = "HTTP/1.1 " + std::to_string(status) + " X\r\nConnection: close\r\n";
     if (!contentType.empty()) head += "Content-Type: " + contentType + "\r\n";
     return head + extraHeaders + "Content-Length: " + std::to_string(body.size()) + "\r\n\r\n" + body;
+}
+
+// The Authorization value of a request head ("" if none).
+inline std::string authorizationIn(const std::string &request) {
+    const std::string name = "\r\nAuthorization: ";
+    const size_t at = request.find(name);
+    if (at == std::string::npos) return {};
+    const size_t from = at + name.size();
+    return request.substr(from, request.find("\r\n", from) - from);
+}
+
+// Every form in which a server could echo an Authorization value back: as sent, its
+// credentials alone, for Basic the decoded "user:password" and the password alone, and each
+// of these percent-encoded with upper- and with lower-case hex; the value with '+' for its
+// space (form encoding). What a hostile PACS in these tests sends back, and what no message
+// may hold.
+inline std::vector<std::string> credentialEchoes(const std::string &authorization) {
+    const auto percentEncoded = [](const std::string &text, bool upper) {
+        const char *hex = upper ? "0123456789ABCDEF" : "0123456789abcdef";
+        std::string out;
+        for (const char c : text) {
+            const auto u = static_cast<unsigned char>(c);
+            if ((u >= 'A' && u <= 'Z') || (u >= 'a' && u <= 'z') || (u >= '0' && u <= '9') || c == '-' || c == '.' ||
+                c == '_' || c == '~') {
+                out += c;
+            } else {
+                out += '%';
+                out += hex[u >> 4];
+                out += hex[u & 15];
+            }
+        }
+        return out;
+    };
+    const auto base64Decoded = [](const std::string &text) {
+        static const std::string alphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        std::string out;
+        uint32_t bits = 0;
+        int count = 0;
+        for (const char c : text) {
+            const size_t v = alphabet.find(c);
+            if (v == std::string::npos) break;   // '=' padding
+            bits = (bits << 6) | uint32_t(v);
+            count += 6;
+            if (count >= 8) {
+                count -= 8;
+                out += char((bits >> count) & 0xFF);
+            }
+        }
+        return out;
+    };
+    std::vector<std::string> plain{authorization};
+    const size_t space = authorization.find(' ');
+    const std::string credentials = authorization.substr(space + 1);
+    plain.push_back(credentials);
+    if (authorization.rfind("Basic ", 0) == 0) {
+        const std::string userAndPassword = base64Decoded(credentials);
+        plain.push_back(userAndPassword);
+        plain.push_back(userAndPassword.substr(userAndPassword.find(':') + 1));
+    }
+    std::vector<std::string> out = plain;
+    for (const std::string &p : plain)
+        for (const bool upper : {true, false}) out.push_back(percentEncoded(p, upper));
+    std::string formEncoded = authorization;
+    formEncoded[space] = '+';
+    out.push_back(formEncoded);
+    return out;
+}
+
+// The first of `echoes` that `text` holds, whole or its first 16 characters (a quote cut
+// short), or "" when it holds none.
+inline std::string echoIn(const std::string &text, const std::vector<std::string> &echoes) {
+    for (const std::string &echo : echoes)
+        if (text.find(echo.substr(0, 16)) != std::string::npos) return echo;
+    return {};
 }
 
 } // namespace volcast::test

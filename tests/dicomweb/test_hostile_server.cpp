@@ -12,6 +12,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <string>
 
 using namespace volcast::dicomweb;
@@ -296,6 +297,78 @@ TEST(DicomWebHostile, StatusesMapToTheirKindsAndTheCredentialsAreNeverQuoted) {
         EXPECT_EQ(std::string(e.what()).find("hostile-test-token"), std::string::npos) << e.what();
         EXPECT_EQ(std::string(e.what()).find("PatientName"), std::string::npos)
             << "the query string is not quoted: " << e.what();
+    }
+}
+
+// A PACS that echoes the Authorization value it received, in each form (hostile_server.hpp's
+// credentialEchoes), in each place the client quotes what a server sent: a QIDO answer's
+// Content-Type, the series-size metadata answer's, a WADO answer's, one multipart part's, and
+// an error body (plain and Orthanc's JSON "Details"). The message must say what was wrong and
+// hold no form of the credentials.
+TEST(DicomWebHostile, CredentialsEchoedInAnyFormAndPlaceAreNeverQuoted) {
+    const std::string authorization = "Basic " + volcast::test::base64("reader:s3cret/P@ss+w=rd!-long-enough-for-a-40-character-quote-to-cut-it");
+    const auto echoesOf = [](const std::string &request) {
+        return volcast::test::credentialEchoes(volcast::test::authorizationIn(request));
+    };
+    const size_t forms = volcast::test::credentialEchoes(authorization).size();
+    const std::string instanceJson = R"([{"00280010": {"vr": "US", "Value": [4]}, "00280011": {"vr": "US", "Value": [4]}}])";
+    struct Place {
+        std::string name;
+        std::string says;   // what the message must still say
+        std::function<std::string(const std::string &echo, const std::string &request)> answer;
+        std::function<void(Client &, const fs::path &)> call;
+    };
+    const auto search = [](Client &c, const fs::path &) { c.findStudies({}); };
+    const auto measure = [](Client &c, const fs::path &) { c.seriesSize(kStudy, kSeries); };
+    const auto retrieve = [](Client &c, const fs::path &folder) { c.retrieveSeries(kStudy, kSeries, folder, 1 << 20, {}, {}); };
+    const std::vector<Place> places{
+        {"a QIDO answer's Content-Type", "Content-Type",
+         [](const std::string &echo, const std::string &) { return httpResponse(200, "text/plain; echo=" + echo, "[]"); },
+         search},
+        {"the series-size metadata answer's Content-Type", "Content-Type",
+         [&](const std::string &echo, const std::string &request) {
+             if (request.find("/instances?") != std::string::npos) return httpResponse(200, "application/dicom+json", instanceJson);
+             return httpResponse(200, echo + "; type=json", "[]");
+         },
+         measure},
+        {"a WADO answer's Content-Type", "Content-Type",
+         [](const std::string &echo, const std::string &) { return httpResponse(200, echo, "--xyz--\r\n"); }, retrieve},
+        {"a multipart part's Content-Type", "instance 1",
+         [](const std::string &echo, const std::string &) {
+             return multipartAnswer("--xyz\r\nContent-Type: " + echo + "\r\n\r\nDICM\r\n--xyz--\r\n");
+         },
+         retrieve},
+        {"an error body", "HTTP 500",
+         [](const std::string &echo, const std::string &) { return httpResponse(500, "text/plain", "you sent: " + echo); },
+         search},
+        {"an error body's JSON Details", "HTTP 403",
+         [](const std::string &echo, const std::string &) {
+             return httpResponse(403, "application/json", R"({"Message": "no", "Details": ")" + echo + "\"}");
+         },
+         retrieve},
+    };
+    for (const Place &place : places) {
+        for (size_t form = 0; form < forms; ++form) {
+            HostileServer server([&](int, const std::string &request) {
+                return place.answer(echoesOf(request).at(form), request);
+            });
+            SourceConfig config = configFor(server);
+            config.authorization = authorization;
+            Client client(config);
+            Folder folder;
+            std::string message;
+            try {
+                place.call(client, folder.path);
+                ADD_FAILURE() << place.name << ", form " << form << ": the call succeeded";
+            } catch (const DicomWebError &e) {
+                message = e.what();
+            }
+            const std::string echo = volcast::test::echoIn(message, volcast::test::credentialEchoes(authorization));
+            EXPECT_EQ(echo, "") << place.name << " quoted the credentials (form " << form << "): " << message;
+            EXPECT_EQ(message.find("s3cret"), std::string::npos) << place.name << ": " << message;
+            EXPECT_NE(message.find(place.says), std::string::npos)
+                << place.name << ": the message no longer says what was wrong: " << message;
+        }
     }
 }
 
