@@ -565,4 +565,28 @@ TEST(UploadParts, FilenameRulesAndExtensions) {
     EXPECT_FALSE(volcast::server::uploadNameOf("/api/volumes", "", false).name);
 }
 
+// Python's zipfile.writestr gives each entry the mode 0600 and no file-type bits: a regular
+// file, not "a symbolic link or special file". The series in such a zip loads.
+TEST_F(ZipParts, EntriesWithoutFileTypeBitsAreRegularFilesAndTheSeriesLoads) {
+    volcast::saveDicomSeries(testVolume(), dir / "series", volcast::VoxelType::Int16);
+    std::vector<std::pair<std::string, std::string>> files;
+    for (const auto &e : fs::directory_iterator(dir / "series"))
+        files.emplace_back(e.path().filename().string(), readFile(e.path()));
+    writeZip(dir / "python.zip", files);
+    int error = 0;
+    zip_t *z = zip_open((dir / "python.zip").c_str(), 0, &error);
+    ASSERT_NE(z, nullptr);
+    for (zip_uint64_t i = 0; i < files.size(); ++i)
+        ASSERT_EQ(zip_file_set_external_attributes(z, i, 0, ZIP_OPSYS_UNIX, 0600u << 16), 0) << zip_strerror(z);
+    ASSERT_EQ(zip_close(z), 0);
+    EXPECT_EQ(refusal(dir / "python.zip"), "");
+    std::string refused;
+    try {
+        EXPECT_EQ(volcast::loadVolume(dir / "python.zip").dims, kDims);
+    } catch (const volcast::VolumeLoadError &e) {
+        refused = e.what();
+    }
+    EXPECT_EQ(refused, "");
+}
+
 } // namespace
