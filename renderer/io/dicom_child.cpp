@@ -577,6 +577,9 @@ int runDicomCheck(int argc, char **argv) {
         return kCheckUsage;
     }
     LoadOptions options;
+    // Only files from outside (LoadOptions::parseInChild) and DICOM, which names no data files
+    // beside it, are sent here: the rules for a file from outside hold (an upload carries its data).
+    options.parseInChild = true;
     try {
         options.maxBytes = std::stoull(argv[2]);
         options.maxDimension = std::stoll(argv[3]);

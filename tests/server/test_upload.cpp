@@ -763,4 +763,15 @@ TEST_F(ZipParts, EntriesWithoutFileTypeBitsAreRegularFilesAndTheSeriesLoads) {
     EXPECT_EQ(refused, "");
 }
 
+// An upload must carry its data: a NRRD naming a data file is refused, whether it names the
+// file itself (the server keeps an upload as "volume.nrrd"; its last 8 bytes would be the
+// voxels) or any other.
+TEST_F(Upload, NrrdNamingADataFileIs422AnUploadCarriesItsData) {
+    for (const std::string dataFile : {"volume.nrrd", "other.raw"}) {
+        const std::string nrrd = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nbyte skip: -1\n"
+                                 "data file: " + dataFile + "\n\n" + std::string(8, '\1');
+        expectRefused(upload("detached.nrrd", nrrd), 422, "an upload must carry its data");
+    }
+}
+
 } // namespace
