@@ -4,6 +4,7 @@
 #include "renderer/io/dicom_child.hpp"
 #include "renderer/io/dicom_check.hpp"
 #include "renderer/io/dicom_series.hpp"
+#include "util/utf8.hpp"
 
 #include <itkMetaImageIO.h>
 #include <itkNiftiImageIO.h>
@@ -22,6 +23,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -49,14 +51,15 @@ namespace volcast::io {
 // from inside ITK's CanReadFile, before any check of ours can look at the bytes (fuzz/README.md,
 // finding 7); the next such assertion or crash would do the same. So every load that will reach
 // GDCM runs first, whole, in a child process with its own memory and CPU limits; a child that
-// dies by a signal or runs out of memory means the file is refused, and only a file the child
-// loaded (or refused with an ordinary VolumeLoadError) is loaded here.
+// dies by a signal or runs out of memory means the file is refused; a file it refused with an
+// ordinary VolumeLoadError is refused here in the child's words (never parsed again here), and
+// only what it loaded is taken, from its hand-back.
 
 namespace {
 
 // The DICOM checker's exit statuses.
 constexpr int kCheckLoaded = 0;
-constexpr int kCheckRefused = 1;      // a VolumeLoadError: the load here repeats it, same words, same type
+constexpr int kCheckRefused = 1;      // a VolumeLoadError, its words and kind in a refusal line
 constexpr int kCheckUsage = 2;
 constexpr int kCheckOutOfMemory = 3;  // past its RLIMIT_AS
 constexpr int kCheckFailed = 4;       // anything else thrown
@@ -142,6 +145,64 @@ std::string quotableTask(std::string_view text) {
     for (char c : text)
         if (c >= 0x20 && c < 0x7f && out.size() < 64) out += c;
     return out;
+}
+
+// The checker's refusal, so that the caller never parses the file itself for its words: one
+// line, the mark, the kind (kRefusedPlainly, kRefusedTooLarge with the volume's float32 bytes,
+// kRefusedTimeLimit), a space, that number, a space, the message (a VolumeLoadError's what()).
+constexpr char kRefusalMark = '\x1f';
+constexpr char kRefusedPlainly = 'R';
+constexpr char kRefusedTooLarge = 'L';
+constexpr char kRefusedTimeLimit = 'T';
+// A line from the child is cut here (a refusal's message with it); what it says besides its
+// refusal is kept for the log up to kMaxSaidBytes.
+constexpr size_t kMaxLineBytes = 4096;
+constexpr size_t kMaxSaidBytes = 4096;
+constexpr size_t kMaxRefusalBytes = 2048;
+
+// The checker's side: its refusal as that line (newlines in ITK's messages become spaces).
+int writeRefusal(char kind, uint64_t bytes, const std::exception &e) {
+    std::string message = e.what();
+    std::replace_if(message.begin(), message.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
+    std::fprintf(stderr, "%c%c %llu %s\n", kRefusalMark, kind, static_cast<unsigned long long>(bytes),
+                 message.c_str());
+    std::fflush(stderr);
+    return kCheckRefused;
+}
+
+// The caller's side: the refusal line (without its newline) as the error the load throws.
+// The child parsed hostile bytes and may be under their control, so the line is read as
+// hostile too: its message bounded, invalid UTF-8 and control characters replaced, and made to
+// start with the path the caller gave (as every VolumeLoadError does); the time limit is the
+// caller's own. A missing or malformed line still refuses the file, in general words.
+[[noreturn]] void throwRefusal(const fs::path &path, const LoadOptions &options, const std::string &line) {
+    // The mark, the kind, a space, the number's digits, a space, the message.
+    const size_t numberEnd = line.find(' ', 3);
+    uint64_t bytes = 0;
+    const bool wellFormed =
+        line.size() > 3 && line[0] == kRefusalMark && line[2] == ' ' && numberEnd != std::string::npos &&
+        numberEnd > 3 && numberEnd + 1 < line.size() &&
+        std::from_chars(line.data() + 3, line.data() + numberEnd, bytes).ptr == line.data() + numberEnd;
+    if (!wellFormed) fail(path, "was refused by the parser in its separate process; it is not loaded");
+    const char kind = line[1];
+    const std::string_view said = std::string_view(line).substr(numberEnd + 1);
+    std::string text = said.starts_with(path.string()) ? "" : path.string() + ": ";
+    for (size_t i = 0; i < said.size(); ++i) {
+        const auto byte = [&](size_t k) { return static_cast<unsigned char>(said[k]); };
+        // C0 controls and DEL, and C1 controls (U+0080..U+009F: C2 80..C2 9F in UTF-8).
+        const bool c1 = byte(i) == 0xC2 && i + 1 < said.size() && byte(i + 1) >= 0x80 && byte(i + 1) <= 0x9F;
+        if (byte(i) < 0x20 || byte(i) == 0x7F || c1) {
+            text += "\xEF\xBF\xBD";  // U+FFFD
+            i += c1 ? 1 : 0;
+        } else {
+            text += said[i];
+        }
+    }
+    // Invalid UTF-8 replaced too, and the whole bounded.
+    const std::string message = json_fields::quotableText(text, kMaxRefusalBytes);
+    if (kind == kRefusedTooLarge) throw VolumeTooLarge(message, bytes);
+    if (kind == kRefusedTimeLimit) throw VolumeLoadTimeout(message, options.timeLimitSeconds);
+    throw VolumeLoadError(message);
 }
 
 // What the checker hands back: the volume it loaded, so that the file is parsed once, in the
@@ -378,9 +439,9 @@ Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadO
 }
 
 // Parses the file in the checker process, which writes what it loaded to `result` (a file the
-// caller made): true when it did, false when it refused the file (the caller then repeats the
-// load here for the refusal's own words); any other end of the child fails the load.
-bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
+// caller made). Returns when it loaded the file; throws its refusal in its own words and kind
+// (throwRefusal) when it refused it, and a VolumeLoadError saying how it ended otherwise.
+void runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
                 const fs::path &result, bool planAllowed) {
     const auto checker = dicomCheckerPath();
     if (!checker)
@@ -426,7 +487,7 @@ bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
 
     // Wait, reading what it writes (GDCM's assertion, say) for the log; the progress call is
     // where the load's time limit and a stop request end the wait, and the child with it.
-    std::string said, line;
+    std::string said, line, refusal;
     std::string task = dicom ? "checking DICOM in a separate process" : "checking the file in a separate process";
     double fraction = 0;
     int status = 0;
@@ -439,11 +500,14 @@ bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
                 const ssize_t n = ::read(child.output, buffer, sizeof buffer);
                 if (n > 0) {
                     // Lines starting with kProgressMark are the child's progress (its own
-                    // steps, slice by slice), passed on; the rest is what it said, for the log.
+                    // steps, slice by slice), passed on; one starting with kRefusalMark its
+                    // refusal, kept; the rest is what it said, for the log.
                     for (ssize_t i = 0; i < n; ++i) {
                         line += buffer[i];
-                        if (buffer[i] != '\n' && line.size() < 512) continue;
-                        if (line.starts_with(kProgressMark)) {
+                        if (buffer[i] != '\n' && line.size() < kMaxLineBytes) continue;
+                        if (line.starts_with(kRefusalMark)) {
+                            if (refusal.empty()) refusal = line.substr(0, line.find('\n'));
+                        } else if (line.starts_with(kProgressMark)) {
                             char *end = nullptr;
                             const double f = std::strtod(line.c_str() + 1, &end);
                             if (end && *end == ' ' && std::isfinite(f)) {
@@ -456,7 +520,7 @@ bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
                         }
                         line.clear();
                     }
-                    if (said.size() > 4096) said.erase(0, said.size() - 4096);
+                    if (said.size() > kMaxSaidBytes) said.erase(0, said.size() - kMaxSaidBytes);
                 } else if (n == 0) {
                     ::close(child.output);
                     child.output = -1;
@@ -475,8 +539,8 @@ bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
             fail(path, fmt::format("lost the DICOM checker: {}", std::strerror(errno)));
         }
     }
-    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckRefused) return false;
-    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckLoaded) return true;
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckLoaded) return;
+    if (WIFEXITED(status) && WEXITSTATUS(status) == kCheckRefused) throwRefusal(path, options, refusal);
     while (!said.empty() && std::isspace(static_cast<unsigned char>(said.back()))) said.pop_back();
     spdlog::warn("{}: the checker ({}) {}; it said: {}", path.string(), checker->string(),
                  WIFSIGNALED(status) ? "ended with " + signalName(WTERMSIG(status))
@@ -513,6 +577,9 @@ int runDicomCheck(int argc, char **argv) {
         return kCheckUsage;
     }
     LoadOptions options;
+    // Only files from outside (LoadOptions::parseInChild) and DICOM, which names no data files
+    // beside it, are sent here: the rules for a file from outside hold (an upload carries its data).
+    options.parseInChild = true;
     try {
         options.maxBytes = std::stoull(argv[2]);
         options.maxDimension = std::stoll(argv[3]);
@@ -554,9 +621,12 @@ int runDicomCheck(int argc, char **argv) {
     } catch (const LoadOutOfMemory &e) {
         std::fprintf(stderr, "%s\n", e.what());
         return kCheckOutOfMemory;
+    } catch (const VolumeTooLarge &e) {
+        return writeRefusal(kRefusedTooLarge, e.bytes, e);
+    } catch (const VolumeLoadTimeout &e) {
+        return writeRefusal(kRefusedTimeLimit, 0, e);
     } catch (const VolumeLoadError &e) {
-        std::fprintf(stderr, "%s\n", e.what());
-        return kCheckRefused;
+        return writeRefusal(kRefusedPlainly, 0, e);
     } catch (const std::exception &e) {
         std::fprintf(stderr, "%s\n", e.what());
         return kCheckFailed;

@@ -42,11 +42,14 @@ struct CheckedResultFile {
     CheckedResultFile &operator=(const CheckedResultFile &) = delete;
 };
 
-// Parses the file in the checker process: true when it loaded it (its volume, or with
-// planAllowed and a folder it reads directly, its plan, is in `result`), false when it refused
-// it; any other end of the child fails the load. planAllowed only where the folder outlives
+// Parses the file in the checker process. Returns when it loaded it (its volume, or with
+// planAllowed and a folder it reads directly, its plan, is in `result`). When it refused it,
+// throws the checker's own refusal: its words (read as hostile: one line, bounded, control
+// characters and invalid UTF-8 replaced) and its kind (VolumeTooLarge, VolumeLoadTimeout or
+// VolumeLoadError); the file is never parsed here. Any other end of the child (a signal, its
+// memory limit) throws a VolumeLoadError saying so. planAllowed only where the folder outlives
 // the reading of the result (never for a kept parse or an unpacked archive).
-bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
+void runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
                 const fs::path &result, bool planAllowed = false);
 
 // The load in this process (volume_io.cpp): the checker's own load, with dicomInChild false.

@@ -260,16 +260,30 @@ Volume loadImageFile(const fs::path &path, const LoadOptions &options, LoadProgr
     std::optional<NrrdLayout> nrrd;
     std::optional<MetaLayout> meta;
     std::optional<NiftiHeader> nifti;
+    // A file from outside (LoadOptions::parseInChild) comes alone: nothing beside it is its data.
+    const auto carried = [&](const std::string &name) {
+        if (options.parseInChild)
+            fail(path, fmt::format("an upload must carry its data: the header names a separate data file '{}'; "
+                                   "send one file that holds its voxels (.nrrd, .mha or .nii)",
+                                   name));
+    };
     if (ioName == "NrrdImageIO") {
         nrrd = scanNrrdHeader(path);
         if (nrrd)
-            for (const auto &name : nrrd->dataFiles) confinedDataFile(path, name);
+            for (const auto &name : nrrd->dataFiles) {
+                carried(name);
+                confinedDataFile(path, name);
+            }
     } else if (ioName == "MetaImageIO") {
         meta = scanMetaHeader(path);
         if (meta)
-            for (const auto &name : meta->dataFiles) confinedDataFile(path, name);
+            for (const auto &name : meta->dataFiles) {
+                carried(name);
+                confinedDataFile(path, name);
+            }
     } else if (ioName == "NiftiImageIO") {
         nifti = readNiftiHeader(path);  // fields checked before niftilib trusts them
+        if (!nifti->singleFile) carried(path.stem().string() + ".img");
     }
 
     TemporaryLink alias;

@@ -71,6 +71,8 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
     int datatype = 0;
     std::array<double, 8> pixdim{};
     int64_t rawOffset = 0;
+    std::string offsetAsWritten;   // vox_offset as the header holds it, for the messages
+    std::string offsetProblem;     // why it cannot be a byte offset at all, if it cannot
     uint64_t headerBytes = 352;
     int qformCode = 0, sformCode = 0;
     std::array<double, 6> quatern{};  // quatern_b, _c, _d, qoffset_x, _y, _z
@@ -81,7 +83,11 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
         n.bitpix = readScalar<int16_t>(h.data() + 72, swap);
         for (size_t i = 0; i < 8; ++i) pixdim[i] = readScalar<float>(h.data() + 76 + 4 * i, swap);
         const float off = readScalar<float>(h.data() + 108, swap);
-        rawOffset = std::isfinite(off) && off > 0 && off < 9e18f ? int64_t(off) : -1;
+        offsetAsWritten = fmt::format("{}", off);
+        if (!std::isfinite(off)) offsetProblem = "it must be a finite number of bytes";
+        else if (off < 0) offsetProblem = "a byte offset cannot be negative";
+        else if (off >= 9e18f) offsetProblem = "no file is that large";
+        rawOffset = offsetProblem.empty() ? int64_t(off) : -1;
         n.singleFile = std::memcmp(h.data() + 344, "n+1", 4) == 0;
         qformCode = readScalar<int16_t>(h.data() + 252, swap);
         sformCode = readScalar<int16_t>(h.data() + 254, swap);
@@ -93,6 +99,8 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
         n.bitpix = readScalar<int16_t>(h.data() + 14, swap);
         for (size_t i = 0; i < 8; ++i) pixdim[i] = readScalar<double>(h.data() + 104 + 8 * i, swap);
         rawOffset = readScalar<int64_t>(h.data() + 168, swap);
+        offsetAsWritten = std::to_string(rawOffset);
+        if (rawOffset < 0) offsetProblem = "a byte offset cannot be negative";
         n.singleFile = std::memcmp(h.data() + 4, "n+2", 4) == 0;
         headerBytes = 544;
         qformCode = readScalar<int32_t>(h.data() + 344, swap);
@@ -144,10 +152,13 @@ NiftiHeader readNiftiHeader(const fs::path &path) {
     if (sformCode > 0)
         for (size_t i = 0; i < 12; ++i)
             checkFinite(fmt::format("srow_{}[{}]", "xyz"[i / 4], i % 4), srow[i]);
-    if (n.singleFile && (rawOffset < 0 || uint64_t(rawOffset) < headerBytes))
+    if (!offsetProblem.empty())
+        fail(path, fmt::format("NIfTI header's vox_offset (where the voxels start) is {}; {}", offsetAsWritten,
+                               offsetProblem));
+    if (n.singleFile && uint64_t(rawOffset) < headerBytes)
         fail(path, fmt::format("NIfTI header's vox_offset is {}; in a single-file NIfTI the voxels start after "
                                "the {}-byte header",
-                               rawOffset, headerBytes));
+                               offsetAsWritten, headerBytes));
     n.voxOffset = uint64_t(std::max<int64_t>(rawOffset, 0));
     std::optional<uint64_t> bytes = uint64_t(n.bitpix / 8);
     for (int64_t i = 1; i <= n.dim[0]; ++i) {

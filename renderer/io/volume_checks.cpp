@@ -124,6 +124,9 @@ fs::path confinedDataFile(const fs::path &header, const std::string &name) {
     if (ec) refuse("cannot be checked: " + ec.message());
     if (fs::is_directory(status)) refuse("is a folder, not a data file");
     if (!fs::is_regular_file(status)) refuse("is not a regular file (a FIFO, socket or device)");
+    // The header read again as its own voxels: never what was meant (a file holding both says
+    // so otherwise: NRRD's attached data, MetaImage's LOCAL).
+    if (fs::equivalent(resolved, header, ec)) refuse("is the header's own file; the data cannot be the header itself");
     return resolved;
 }
 

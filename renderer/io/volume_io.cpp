@@ -40,15 +40,18 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
         const bool zip = !folder && isZipName(path);
         std::optional<Volume> checked;
         if (dicomInChild) {
-            const bool dicom = folder || zip || (fileSize(path).value_or(0) > 0 && reachesGdcm(path));
+            // A file from outside is not even sniffed here (ITK's CanReadFile reads, and for a
+            // .nii.gz inflates, its start): it goes to the checker whatever it is.
+            const bool dicom = folder || zip ||
+                               (!options.parseInChild && fileSize(path).value_or(0) > 0 && reachesGdcm(path));
             if (dicom || options.parseInChild) {
                 const CheckedResultFile result;
                 // A folder's uncompressed series may come back as a plan: its pixels copied
-                // here from the files, straight into the volume.
-                if (runChecker(path, options, progress, dicom, result.path, folder)) {
-                    progress(0.8, "reading the parsed volume");
-                    checked = readCheckedVolume(path, result.path, options, true, &progress);
-                }
+                // here from the files, straight into the volume. A refusal throws the
+                // checker's own words: the file is never parsed in this process.
+                runChecker(path, options, progress, dicom, result.path, folder);
+                progress(0.8, "reading the parsed volume");
+                checked = readCheckedVolume(path, result.path, options, true, &progress);
             }
         }
         Volume v = checked ? std::move(*checked)
@@ -107,13 +110,10 @@ ParsedVolumeSummary parseToKeep(const fs::path &path, const fs::path &keep, cons
         if (!fs::exists(status)) fail(path, "file not found");
         if (!fs::is_regular_file(status) && !fs::is_directory(status))
             fail(path, "is not a regular file or a folder (a FIFO, socket or device); it is not loaded");
-        const bool dicom = fs::is_directory(status) || isZipName(path) ||
-                           (fileSize(path).value_or(0) > 0 && reachesGdcm(path));
-        if (!runChecker(path, options, progress, dicom, keep)) {
-            // The child refused it and survived: the same parse here gives the refusal's own words.
-            loadVolumeHere(path, options, false);
-            fail(path, "was refused by the parser in its separate process; it is not loaded");
-        }
+        // Not sniffed here (see loadVolumeHere): only a folder or a .zip is taken for DICOM.
+        const bool dicom = fs::is_directory(status) || isZipName(path);
+        // A refusal throws the checker's own words: the file is never parsed in this process.
+        runChecker(path, options, progress, dicom, keep);
         const Volume v = readCheckedVolume(path, keep, options, false);
         progress(1, "parsed");
         guard.kept = true;

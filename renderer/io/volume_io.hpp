@@ -19,7 +19,8 @@
 //   the type ITK reports for the rescaled values (float32 for a scaled NIfTI).
 // - Detached data files (NRRD `data file:` in each of its forms, MetaImage
 //   `ElementDataFile`, a NIfTI .img) must lie in the header's folder once symbolic links
-//   are resolved (no absolute name, no `..`, no link out) and be regular files; the file or
+//   are resolved (no absolute name, no `..`, no link out), be regular files and not the
+//   header's own file; a file from outside (parseInChild) may name none at all. The file or
 //   folder given must be a regular file or a folder. This is checked with stat() before
 //   anything is opened, so a FIFO never blocks the loader.
 // - NIfTI headers are checked against the specification (sizeof_hdr, dim, datatype and
@@ -67,9 +68,11 @@ struct LoadOptions {
     // Asked at every progress step; true ends the load with VolumeLoadError (a server
     // shutting down).
     std::function<bool()> stopRequested;
-    // Every file, whatever its format, is parsed first in the checker process, not only what
+    // Every file, whatever its format, is parsed in the checker process only, not only what
     // reaches GDCM (dicom_check.hpp): for bytes from a browser or a PACS, hostile until a parse
-    // has survived. A crash or runaway parse then ends the child and the load fails saying so.
+    // has survived. A crash or runaway parse then ends the child and the load fails saying so;
+    // a file the checker refuses fails with the checker's own words, and this process never
+    // parses it (nor sniffs its format). A header naming a separate data file is refused.
     bool parseInChild = false;
     // A .zip (a DICOM series) unpacks to at most this many bytes (zip_extract.hpp).
     uint64_t maxArchiveBytes = uint64_t(8) << 30;

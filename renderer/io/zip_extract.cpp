@@ -87,7 +87,9 @@ int64_t extractZip(const fs::path &archive, const fs::path &folder, const ZipLim
             opsys == ZIP_OPSYS_UNIX) {
             const mode_t mode = mode_t(attributes >> 16);
             if (S_ISDIR(mode)) continue;
-            if (mode != 0 && !S_ISREG(mode))
+            // No file-type bits at all (Python's zipfile.writestr writes just 0600) is a
+            // regular file; a type that is not a regular file is a link or a device.
+            if ((mode & S_IFMT) != 0 && !S_ISREG(mode))
                 throw refuse(fmt::format("entry {} is a symbolic link or special file, not a regular file", i));
         }
         if ((st.valid & ZIP_STAT_ENCRYPTION_METHOD) && st.encryption_method != ZIP_EM_NONE)

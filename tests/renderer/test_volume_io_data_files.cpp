@@ -135,6 +135,20 @@ TEST_F(VolumeIoDataFiles, MetaImageDataFileOutsideOrAbsoluteOrFifoIsRefused) {
     expectRefusedWithoutBlocking(metaHeader("fifo.mhd", "fifo.raw"), dir / "sub" / "fifo.raw",
                                  {"fifo.raw", "regular file"});
 }
+// The header as its own data (its last 8 bytes read as the voxels): never meant, refused.
+TEST_F(VolumeIoDataFiles, NrrdDataFileThatIsTheHeaderItselfIsRefused) {
+    writeFile(dir / "sub" / "self.nhdr", "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n"
+                                         "byte skip: -1\ndata file: self.nhdr\n\n" + std::string(8, '\1'));
+    expectLoadError(dir / "sub" / "self.nhdr", {"self.nhdr", "header's own file"});
+}
+// A file from outside (an upload) comes alone: a header naming any data file is refused.
+TEST_F(VolumeIoDataFiles, DetachedDataFileOfAFileFromOutsideIsRefused) {
+    writeFile(dir / "sub" / "in.raw", std::string(8, '\2'));
+    LoadOptions options;
+    options.parseInChild = true;
+    expectLoadError(header("ok.nhdr", "in.raw"), {"an upload must carry its data", "in.raw"}, options);
+    expectLoadError(metaHeader("ok.mhd", "in.raw"), {"an upload must carry its data", "in.raw"}, options);
+}
 TEST_F(VolumeIoDataFiles, HeaderThatIsAFifoIsRefusedBeforeOpening) {
     ASSERT_EQ(::mkfifo((dir / "pipe.nrrd").c_str(), 0600), 0) << std::strerror(errno);
     expectRefusedWithoutBlocking(dir / "pipe.nrrd", dir / "pipe.nrrd", {"regular file"});

@@ -164,6 +164,13 @@ TEST_F(VolumeIoNiftiHeader, UnknownDatatype) {
 TEST_F(VolumeIoNiftiHeader, VoxOffsetInsideTheHeader) {
     expectLoadError(writeWith("early_data.nii", 108, 100.0f), {"vox_offset", "100"});
 }
+// Each named as written, with why it cannot be where the voxels start (not as one made-up -1).
+TEST_F(VolumeIoNiftiHeader, VoxOffsetNotAByteOffsetIsNamedAsWritten) {
+    expectLoadError(writeWith("huge_offset.nii", 108, 1e30f), {"vox_offset", "1e+30", "no file is that large"});
+    expectLoadError(writeWith("nan_offset.nii", 108, std::numeric_limits<float>::quiet_NaN()),
+                    {"vox_offset", "nan", "finite"});
+    expectLoadError(writeWith("negative_offset.nii", 108, -4096.0f), {"vox_offset", "-4096", "negative"});
+}
 TEST_F(VolumeIoNiftiHeader, ZeroPixdim) {
     expectLoadError(writeWith("zero_spacing.nii", 80, 0.0f), {"pixdim[1]"});
 }

@@ -440,15 +440,18 @@ TEST(ModalityPresets, GreyValueCtGetsTheCtWindowsOnItsRobustRange) {
 }
 
 // An NRRD header over 8³ int16 zeros but for a bright cube, with `extra` header lines.
-fs::path writeNrrd(const fs::path &dir, const std::string &name, const std::string &extra) {
+// `attached`: one .nrrd holding its data, as a file from outside must (an upload).
+fs::path writeNrrd(const fs::path &dir, const std::string &name, const std::string &extra, bool attached = false) {
     std::vector<int16_t> values(8 * 8 * 8, 0);
     for (size_t i = 0; i < values.size(); i += 3) values[i] = 200;
-    std::ofstream(dir / (name + ".raw"), std::ios::binary)
+    const fs::path file = dir / (name + (attached ? ".nrrd" : ".nhdr"));
+    std::ofstream(file) << "NRRD0004\ntype: int16\ndimension: 3\nsizes: 8 8 8\n"
+                           "spacings: 1 1 1\nendian: little\nencoding: raw\n"
+                        << extra << (attached ? "" : "data file: " + name + ".raw\n") << "\n";
+    const auto dataMode = std::ios::binary | (attached ? std::ios::app : std::ios::trunc);
+    std::ofstream(attached ? file : dir / (name + ".raw"), dataMode)
         .write(reinterpret_cast<const char *>(values.data()), std::streamsize(values.size() * 2));
-    std::ofstream(dir / (name + ".nhdr")) << "NRRD0004\ntype: int16\ndimension: 3\nsizes: 8 8 8\n"
-                                             "spacings: 1 1 1\nendian: little\nencoding: raw\n"
-                                          << extra << "data file: " << name << ".raw\n\n";
-    return dir / (name + ".nhdr");
+    return file;
 }
 
 TEST(ModalityPresets, TheFileStatesTheModalityBeforeAnyGuess) {
@@ -496,7 +499,7 @@ TEST(ModalityPresets, TheFileStatesTheModalityBeforeAnyGuess) {
 TEST(ModalityPresets, TheModalityTravelsThroughTheParserProcess) {
     // A file parsed in the separate checker process hands its modality statement back.
     TempDir dir;
-    const fs::path file = writeNrrd(dir.path, "checked", "content: MRI of the knee\n");
+    const fs::path file = writeNrrd(dir.path, "checked", "content: MRI of the knee\n", true);
     LoadOptions options;
     options.parseInChild = true;
     const Volume checked = loadVolume(file, options);

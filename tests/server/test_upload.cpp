@@ -11,7 +11,9 @@
 #include "server/http_session.hpp"
 #include "server/server.hpp"
 #include "server/upload_store.hpp"
+#include "tests/server/child_process.hpp"
 #include "tests/server/server_fixture.hpp"
+#include "util/utf8.hpp"
 
 #include <gtest/gtest.h>
 #include <spdlog/fmt/fmt.h>
@@ -19,6 +21,7 @@
 
 #include <boost/asio/write.hpp>
 
+#include <csignal>
 #include <cstring>
 #include <fstream>
 #include <regex>
@@ -563,6 +566,212 @@ TEST(UploadParts, FilenameRulesAndExtensions) {
     EXPECT_EQ(volcast::server::uploadNameOf("/api/volumes?x=1&filename=a%20b+c.nrrd", "", false).name, "a b c.nrrd");
     EXPECT_EQ(volcast::server::uploadNameOf("/api/volumes?filename=q.nrrd", "h.nrrd", true).name, "h.nrrd");
     EXPECT_FALSE(volcast::server::uploadNameOf("/api/volumes", "", false).name);
+}
+
+// ---- a refused file is parsed in the checker only -------------------------------------
+
+// A NRRD of float32 `sizes` whose bzip2 data is a stream of 1 MiB of zeros (45 bytes, from
+// Python's bz2.compress(bytes(1 << 20), 9)). The loader counts a gzip stream's bytes before
+// reading (and refuses a short one), but not bzip2's: ITK takes and fills room for the whole
+// volume before NrrdIO says it cannot decode bzip2. With sizes 1024 1024 680: 2.7 GiB from
+// 132 bytes.
+std::string bzip2BombNrrd(const std::string &sizes) {
+    static const unsigned char kZeros[] = {
+        0x42, 0x5a, 0x68, 0x39, 0x31, 0x41, 0x59, 0x26, 0x53, 0x59, 0x38, 0x57, 0x1c, 0xe5, 0x00,
+        0x08, 0x08, 0x40, 0x00, 0xc0, 0x04, 0x00, 0x08, 0x20, 0x00, 0x30, 0xcc, 0x05, 0x29, 0xa6,
+        0x08, 0x06, 0xc4, 0x20, 0x1e, 0x2e, 0xe4, 0x8a, 0x70, 0xa1, 0x20, 0x70, 0xae, 0x39, 0xca};
+    return "NRRD0004\ntype: float\ndimension: 3\nsizes: " + sizes + "\nendian: little\nencoding: bzip2\n\n" +
+           std::string(reinterpret_cast<const char *>(kZeros), sizeof kZeros);
+}
+
+// A memory figure of a process from /proc/PID/status ("VmHWM": its peak resident set,
+// "VmRSS"), in KiB; -1 when not found.
+int64_t statusKiB(pid_t pid, const std::string &field) {
+    std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+    for (std::string line; std::getline(in, line);)
+        if (line.starts_with(field + ":")) return std::stoll(line.substr(field.size() + 1));
+    return -1;
+}
+
+// The process's peak resident set from now on: Linux resets VmHWM to VmRSS on "5" written to
+// clear_refs; where that is not allowed, the peak so far (a test that then cannot see a rise
+// below it, but never fails wrongly).
+int64_t peakFromNow(pid_t pid) {
+    std::ofstream("/proc/" + std::to_string(pid) + "/clear_refs") << "5";
+    return statusKiB(pid, "VmHWM");
+}
+
+// What the caller may add to its peak while the checker parses and refuses a file: a pipe's
+// reads and a few small allocations, KiB; 64 MiB is a quarter of the smallest volume parsed
+// below, so a parse of it in the caller cannot hide under it.
+constexpr int64_t kCallerSlackKiB = 64 * 1024;
+
+// The checker refuses the bomb; the caller throws the checker's words and never parses the
+// file itself, so its own peak memory stays where it was. A refusal's words are the same as
+// the load in this process gives (the loader's own, through the checker).
+TEST(UploadParts, ARefusedFileIsNotParsedAgainByTheCaller) {
+    const fs::path dir = fs::temp_directory_path() / ("volcast_refused_once_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    std::ofstream(dir / "bomb.nrrd", std::ios::binary) << bzip2BombNrrd("512 512 256");  // 256 MiB as float32
+    volcast::LoadOptions options;
+    options.parseInChild = true;
+    const int64_t before = peakFromNow(::getpid());
+    std::string message;
+    try {
+        volcast::parseToKeep(dir / "bomb.nrrd", dir / "kept", options);
+    } catch (const volcast::VolumeLoadError &e) {
+        message = e.what();
+    }
+    const int64_t after = statusKiB(::getpid(), "VmHWM");
+    ASSERT_GT(before, 0) << "no VmHWM in /proc/self/status";
+    EXPECT_LE(after - before, kCallerSlackKiB)
+        << "this process's peak grew by " << (after - before) << " KiB while a 256 MiB volume was refused: it "
+        << "parsed the file itself";
+    EXPECT_TRUE(message.starts_with((dir / "bomb.nrrd").string() + ": ")) << message;
+    EXPECT_NE(message.find("bzip2"), std::string::npos) << "the refusal does not name the problem: " << message;
+    EXPECT_FALSE(fs::exists(dir / "kept"));
+
+    std::ofstream(dir / "bad.nrrd") << "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4\n\n";
+    std::string inChild, here;
+    try {
+        volcast::parseToKeep(dir / "bad.nrrd", dir / "kept", options);
+    } catch (const volcast::VolumeLoadError &e) {
+        inChild = e.what();
+    }
+    try {
+        volcast::loadVolume(dir / "bad.nrrd");
+    } catch (const volcast::VolumeLoadError &e) {
+        here = e.what();
+    }
+    fs::remove_all(dir);
+    EXPECT_FALSE(here.empty());
+    EXPECT_EQ(inChild, here) << "the checker's refusal is not the loader's own words";
+}
+
+// A checker that refuses everything (exit status 1): the file is refused, never loaded here
+// instead; a refusal line is taken as the hostile text it may be (one line, bounded, no
+// control characters, valid UTF-8, starting with the file's path) and keeps its kind.
+TEST(UploadParts, TheCheckersRefusalIsReadAsHostileTextAndTheFileIsNotLoadedHere) {
+    const fs::path dir = fs::temp_directory_path() / ("volcast_refusal_text_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    volcast::saveVolume(testVolume(), dir / "v.nrrd", {volcast::VoxelType::Int16, false});
+    volcast::LoadOptions options;
+    options.parseInChild = true;
+    const auto refusal = [&](const std::string &script) -> std::pair<std::string, uint64_t> {
+        const fs::path checker = dir / "refusing-checker.sh";
+        fs::remove(checker);
+        std::ofstream(checker) << "#!/bin/sh\n" << script << "\nexit 1\n";
+        fs::permissions(checker, fs::perms::owner_all);
+        ::setenv("VOLCAST_DICOM_CHECK", checker.c_str(), 1);
+        std::pair<std::string, uint64_t> got{"(loaded)", 0};
+        try {
+            volcast::loadVolume(dir / "v.nrrd", options);
+        } catch (const volcast::VolumeTooLarge &e) {
+            got = {e.what(), e.bytes};
+        } catch (const volcast::VolumeLoadError &e) {
+            got = {e.what(), 0};
+        }
+        ::unsetenv("VOLCAST_DICOM_CHECK");
+        return got;
+    };
+    const auto silent = refusal("");
+    const auto hostile =
+        refusal(R"(printf '\037L 123456 %s: too large\033[2J\tto \302\233 load \377 here\nsecond line\n' "$1" >&2)");
+    const auto anonymous = refusal(R"(printf '\037R 0 no path here\n' >&2)");
+    const auto endless = refusal(R"(printf '\037R 0 ' >&2; head -c 100000 /dev/zero | tr '\0' x >&2)");
+    fs::remove_all(dir);
+
+    EXPECT_NE(silent.first.find("was refused by the parser in its separate process"), std::string::npos)
+        << "a file the checker refused was not refused: " << silent.first;
+    const std::string &m = hostile.first;
+    EXPECT_EQ(hostile.second, 123456u) << "the kind of the refusal was lost: " << m;
+    EXPECT_TRUE(m.starts_with((dir / "v.nrrd").string() + ": too large")) << m;
+    EXPECT_NE(m.find("load"), std::string::npos) << m;
+    EXPECT_NE(m.find("here"), std::string::npos) << m;
+    EXPECT_EQ(m.find("second line"), std::string::npos) << "more than the refusal's line: " << m;
+    EXPECT_EQ(m.find("\xC2\x9B"), std::string::npos) << "a C1 control character in: " << m;
+    EXPECT_TRUE(volcast::json_fields::isValidUtf8(m)) << m;
+    for (char c : m) EXPECT_FALSE(static_cast<unsigned char>(c) < 0x20 || c == 0x7f) << "a control character in: " << m;
+    EXPECT_TRUE(anonymous.first.starts_with((dir / "v.nrrd").string() + ": no path here")) << anonymous.first;
+    // 2 KiB (the caller's bound on a refusal) with the path and the ellipsis.
+    EXPECT_LE(endless.first.size(), 2048u + 3u) << "an unbounded refusal: " << endless.first.size() << " bytes";
+    EXPECT_NE(endless.first.find("xxxx"), std::string::npos) << endless.first.substr(0, 200);
+}
+
+// The 132-byte bzip2 NRRD of a 2.7 GiB volume, uploaded to the real server executable: the
+// checker refuses it and the server process's own peak memory stays where it was (before, the
+// server parsed a refused file again for its words: 2.8 GiB and 2.2 s of its CPU).
+TEST(UploadServerProcess, ARefusedBombIsParsedInTheCheckerNotInTheServer) {
+    const fs::path tmp = fs::temp_directory_path() / ("volcast_upload_process_" + std::to_string(::getpid()));
+    fs::remove_all(tmp);
+    fs::create_directories(tmp);
+    const fs::path portFile = tmp / "port";
+    const pid_t pid = volcast::test::startServerProcess(
+        {"--port", "0", "--port-file", portFile.string(), "--default-volume", "", "--device", "cpu",
+         "--error-calibration", "false", "--memory-budget-mib", "4096", "--upload-dir", (tmp / "uploads").string()},
+        tmp / "log.txt");
+    ASSERT_GT(pid, 0);
+    const uint16_t port = volcast::test::waitForPort(portFile, std::chrono::milliseconds(kStartTimeout));
+    if (port == 0) ::kill(pid, SIGKILL);
+    ASSERT_NE(port, 0) << "the server did not start: " << volcast::test::readAll(tmp / "log.txt");
+    const auto deadline = std::chrono::steady_clock::now() + kStartTimeout;
+    while (volcast::test::httpGet(port, "/healthz").status != 200 && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(50ms);
+
+    const std::string bomb = bzip2BombNrrd("1024 1024 680");
+    const int64_t before = peakFromNow(pid);
+    const auto x = rawExchange(port, uploadHead("bomb.nrrd", bomb.size(), "") + bomb, kUploadTimeout);
+    const int64_t after = statusKiB(pid, "VmHWM");
+    ::kill(pid, SIGTERM);
+    if (volcast::test::waitForExit(pid, std::chrono::milliseconds(10s)) == -1) {
+        ::kill(pid, SIGKILL);
+        ::waitpid(pid, nullptr, 0);
+    }
+    const std::string log = volcast::test::readAll(tmp / "log.txt");
+    fs::remove_all(tmp);
+    ASSERT_EQ(statusOf(x), 422) << describe(x) << "\n" << log;
+    EXPECT_NE(x.response->body().find("bomb.nrrd: "), std::string::npos) << x.response->body();
+    EXPECT_NE(x.response->body().find("bzip2"), std::string::npos) << "the problem is not named: " << x.response->body();
+    ASSERT_GT(before, 0);
+    EXPECT_LE(after - before, kCallerSlackKiB) << "the server's peak grew by " << (after - before)
+                                               << " KiB while it refused a 2.7 GiB volume: it parsed the file itself";
+}
+
+// Python's zipfile.writestr gives each entry the mode 0600 and no file-type bits: a regular
+// file, not "a symbolic link or special file". The series in such a zip loads.
+TEST_F(ZipParts, EntriesWithoutFileTypeBitsAreRegularFilesAndTheSeriesLoads) {
+    volcast::saveDicomSeries(testVolume(), dir / "series", volcast::VoxelType::Int16);
+    std::vector<std::pair<std::string, std::string>> files;
+    for (const auto &e : fs::directory_iterator(dir / "series"))
+        files.emplace_back(e.path().filename().string(), readFile(e.path()));
+    writeZip(dir / "python.zip", files);
+    int error = 0;
+    zip_t *z = zip_open((dir / "python.zip").c_str(), 0, &error);
+    ASSERT_NE(z, nullptr);
+    for (zip_uint64_t i = 0; i < files.size(); ++i)
+        ASSERT_EQ(zip_file_set_external_attributes(z, i, 0, ZIP_OPSYS_UNIX, 0600u << 16), 0) << zip_strerror(z);
+    ASSERT_EQ(zip_close(z), 0);
+    EXPECT_EQ(refusal(dir / "python.zip"), "");
+    std::string refused;
+    try {
+        EXPECT_EQ(volcast::loadVolume(dir / "python.zip").dims, kDims);
+    } catch (const volcast::VolumeLoadError &e) {
+        refused = e.what();
+    }
+    EXPECT_EQ(refused, "");
+}
+
+// An upload must carry its data: a NRRD naming a data file is refused, whether it names the
+// file itself (the server keeps an upload as "volume.nrrd"; its last 8 bytes would be the
+// voxels) or any other.
+TEST_F(Upload, NrrdNamingADataFileIs422AnUploadCarriesItsData) {
+    for (const std::string dataFile : {"volume.nrrd", "other.raw"}) {
+        const std::string nrrd = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nbyte skip: -1\n"
+                                 "data file: " + dataFile + "\n\n" + std::string(8, '\1');
+        expectRefused(upload("detached.nrrd", nrrd), 422, "an upload must carry its data");
+    }
 }
 
 } // namespace
