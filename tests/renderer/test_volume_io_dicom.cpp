@@ -1,7 +1,8 @@
 // Tests of DICOM series loading (renderer/io/dicom_series.*, dicom_uncompressed.*): a series
 // written by saveDicomSeries, a single slice, progress slice by slice, two series in one
-// folder, damaged series, and uncompressed series read straight from their files against the
-// same series read through GDCM.
+// folder, damaged series, uncompressed series read straight from their files against the
+// same series read through GDCM, and series whose instances are not one series of one
+// patient in one stack (tags altered with GDCM, tests/dicom_tags.hpp).
 
 #include "volume_io_test_helpers.hpp"
 
