@@ -110,7 +110,7 @@ FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContex
         if (auto it = cache_.find(key); it != cache_.end()) {
             it->second.lastUse = ++useClock_;
             spdlog::debug("{}: retrieved before, loaded from the cache", name);
-            return {it->second.folder};
+            return {it->second.folder, FetchedVolume::Form::Source, SeriesIdentity{series.studyUid, series.seriesUid}};
         }
     }
     const dicomweb::SourceConfig &config = *source(series.source);
@@ -171,7 +171,7 @@ FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContex
         }
         spdlog::info("{}: retrieved {} instances, {} MiB in {:.2f} s", name, got.instancesDone, bytes >> 20,
                      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
-        return {folder};
+        return {folder, FetchedVolume::Form::Source, SeriesIdentity{series.studyUid, series.seriesUid}};
     } catch (const dicomweb::DicomWebError &e) {
         if (e.kind == dicomweb::ErrorKind::Cancelled && context.stopRequested())
             throw VolumeFetchError(ErrorCode::Busy, name + ": the server is shutting down");

@@ -7,6 +7,7 @@
 // parseInChild): bytes from a browser or a PACS are hostile until a parse has survived.
 
 #include "protocol/errors.hpp"
+#include "renderer/io/volume_io.hpp"
 
 #include <cstdint>
 #include <filesystem>
@@ -53,6 +54,9 @@ struct FetchedVolume {
     enum class Form { Source, Parsed };
     std::filesystem::path path;
     Form form = Form::Source;
+    // A series retrieved as this study and series: the load refuses it unless every instance
+    // is theirs (LoadOptions::expectedSeries).
+    std::optional<SeriesIdentity> expectedSeries = std::nullopt;
 };
 
 class VolumeProvider {

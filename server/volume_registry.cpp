@@ -375,6 +375,7 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
             FetchedVolume fetched = p.provider->fetch(p.name, context);
             p.path = std::move(fetched.path);
             p.form = fetched.form;
+            options.expectedSeries = std::move(fetched.expectedSeries);
             options.parseInChild = true;
             progress(p.name, ProgressStage::Loading, "", 0.0);
         }

@@ -473,6 +473,8 @@ void runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
                                      std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds),
                                      std::to_string(options.maxArchiveBytes), result.string()};
     if (planAllowed) args.push_back("plan");
+    if (options.expectedSeries)
+        args.insert(args.end(), {"expect-series", options.expectedSeries->studyUid, options.expectedSeries->seriesUid});
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -565,14 +567,28 @@ namespace volcast {
 
 int runDicomCheck(int argc, char **argv) {
     using namespace io; // the checker's limits and statuses, and the load (dicom_child.hpp)
-    const bool planAllowed = argc == 8 && std::strcmp(argv[7], "plan") == 0;
-    if (argc < 5 || argc > 8 || (argc == 8 && !planAllowed)) {
-        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT [plan]]]\n"
+    // After RESULT: "plan", and "expect-series STUDY SERIES" (LoadOptions::expectedSeries).
+    bool planAllowed = false, usage = argc < 5;
+    std::optional<SeriesIdentity> expectedSeries;
+    for (int i = 7; i < argc && !usage; ++i) {
+        if (std::strcmp(argv[i], "plan") == 0) {
+            planAllowed = true;
+        } else if (std::strcmp(argv[i], "expect-series") == 0 && i + 2 < argc) {
+            expectedSeries = SeriesIdentity{argv[i + 1], argv[i + 2]};
+            i += 2;
+        } else {
+            usage = true;
+        }
+    }
+    if (usage) {
+        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT "
+                             "[plan] [expect-series STUDY-UID SERIES-UID]]]\n"
                              "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
                              "files from outside away from the server), and writes what it loaded to the existing "
                              "file RESULT; with 'plan', an uncompressed DICOM series in a folder is handed back as "
-                             "where its slices' pixels lie rather than as samples. Exit status 0 loaded, 1 refused, "
-                             "3 out of memory.\n",
+                             "where its slices' pixels lie rather than as samples; with 'expect-series', a DICOM "
+                             "folder is refused unless every instance is of that study and series. Exit status 0 "
+                             "loaded, 1 refused, 3 out of memory.\n",
                      kCheckerName);
         return kCheckUsage;
     }
@@ -580,6 +596,7 @@ int runDicomCheck(int argc, char **argv) {
     // Only files from outside (LoadOptions::parseInChild) and DICOM, which names no data files
     // beside it, are sent here: the rules for a file from outside hold (an upload carries its data).
     options.parseInChild = true;
+    options.expectedSeries = std::move(expectedSeries);
     try {
         options.maxBytes = std::stoull(argv[2]);
         options.maxDimension = std::stoll(argv[3]);
@@ -608,7 +625,7 @@ int runDicomCheck(int argc, char **argv) {
             // need no parsing, left for the caller to copy from the files.
             LoadProgress progress(options, argv[1]);
             progress(0, "reading header");
-            checkDicomFolderEntries(argv[1]);
+            checkDicomFolder(argv[1], options, progress);
             Volume placed;
             if (const auto series = placedUncompressedSeries(argv[1], options, progress, placed)) {
                 writeSeriesPlan(placed, *series, argv[6]);

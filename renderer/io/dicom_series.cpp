@@ -1,6 +1,7 @@
 // DICOM series: the folder, the slices, the stack (dicom_series.hpp).
 
 #include "renderer/io/dicom_series.hpp"
+#include "renderer/io/dicom_identity.hpp"
 #include "renderer/io/dicom_uncompressed.hpp"
 #include "renderer/io/itk_reading.hpp"
 #include "renderer/io/zip_extract.hpp"
@@ -44,6 +45,11 @@ void checkDicomFolderEntries(const fs::path &dir) {
         if (!ec2 && !fs::is_regular_file(status) && !fs::is_directory(status))
             fail(dir, fmt::format("'{}' in the folder is not a regular file (a FIFO, socket or device)", name));
     }
+}
+
+void checkDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
+    checkDicomFolderEntries(dir);
+    checkSeriesIdentity(dir, readInstanceHeaders(dir, progress), options.expectedSeries);
 }
 
 namespace {
@@ -264,7 +270,7 @@ void readSeriesSamples(const fs::path &dir, itk::GDCMImageIO *io, const std::vec
 }
 
 Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
-    checkDicomFolderEntries(dir);
+    checkDicomFolder(dir, options, progress);
     // Uncompressed slices of one series are read straight from their files; any other
     // series through ITK and GDCM, below.
     Volume v;
@@ -279,9 +285,12 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     if (uids.empty()) fail(dir, "folder holds no DICOM series (no DICOM image files were found in it)");
     const std::vector<std::string> files = names->GetFileNames(uids.front());
     if (files.empty()) fail(dir, "folder holds no DICOM image files");
+    // checkDicomFolder let one series through; GDCM's scan splits it further by series
+    // number, sequence name and slice thickness, and loading one part would be a silent subset.
     if (uids.size() > 1)
-        spdlog::info("{}: folder holds {} DICOM series; loading the first ({}, {} files)", dir.string(), uids.size(),
-                     uids.front(), files.size());
+        fail(dir, fmt::format("the series' slices differ in series number, sequence name or slice thickness, "
+                              "which splits them into {} stacks; one volume shows one stack, and it is not loaded",
+                              uids.size()));
     // One file may be a multi-frame volume on its own.
     if (files.size() == 1) {
         try {

@@ -27,6 +27,11 @@ SliceGeometry checkDicomSlice(const fs::path &dir, const fs::path &file, uint64_
 // Every entry of the folder a regular file or a folder inside it (GDCM would block on a FIFO).
 void checkDicomFolderEntries(const fs::path &dir);
 
+// What every DICOM folder meets before either read path: its entries (checkDicomFolderEntries),
+// then its instances' headers, one series of one patient in one stack, of the requested
+// series where LoadOptions::expectedSeries names one (dicom_identity.hpp).
+void checkDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress);
+
 // The folder's series when the direct reader takes it (dicom_uncompressed.hpp), checked as
 // any series is (its shape against the budget, its slices' geometry) and v placed; no
 // samples yet. Nothing when the series goes through GDCM.
@@ -36,7 +41,7 @@ std::optional<UncompressedSeries> placedUncompressedSeries(const fs::path &dir, 
 // Bytes of one stored DICOM pixel (before ITK applies the rescale slope and intercept).
 uint64_t storedDicomSize(itk::GDCMImageIO &io);
 
-// The first series in the folder (logged when there are several), every check first.
+// The folder's one series (checkDicomFolder), every check first.
 Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress);
 
 // A DICOM series packed as a .zip: unpacked into a fresh folder beside it (private to the

@@ -35,8 +35,14 @@
 //   files into garbage, so the loader checks the byte counts itself before reading.
 // - x.nii.gz lying beside an x.nii is read through a temporary link: niftilib, given
 //   x.nii.gz, would take its header but x.nii's voxels.
-// - A folder is read as a DICOM series; if it holds several, the first one (in the order
-//   ITK's GDCMSeriesFileNames lists them) is loaded and the choice is logged.
+// - A folder is read as a DICOM series, and it must hold one series of one patient that one
+//   volume can show (dicom_identity.hpp), else it is refused naming the first instance that
+//   differs and the field: one PatientID (and PatientName, IssuerOfPatientID where stated), one
+//   study, one series, one frame of reference, no SOPInstanceUID twice, one size and
+//   orientation (a localizer or a second stack is refused naming the stacks, never a subset
+//   loaded), finite image orientation and position where stated; with
+//   LoadOptions::expectedSeries, every instance of the requested study and series. A folder
+//   holding several series is refused naming how many.
 // - A .zip file is a DICOM series packed: unpacked (zip_extract.hpp: entry names ignored,
 //   links refused, entries, bytes and ratio bounded) into a fresh folder beside it, loaded as
 //   a folder, and the folder removed. Like every folder it is parsed first in the checker.
@@ -47,10 +53,18 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <optional>
+#include <string>
 #include <string_view>
 #include <stdexcept>
 
 namespace volcast {
+
+// The study and series a series was asked for by (a PACS's answer is checked against them).
+struct SeriesIdentity {
+    std::string studyUid;    // (0020,000D) StudyInstanceUID
+    std::string seriesUid;   // (0020,000E) SeriesInstanceUID
+};
 
 struct LoadOptions {
     uint64_t maxBytes = uint64_t(8) << 30;  // in-memory size (float32 voxels) allowed, bytes
@@ -76,6 +90,9 @@ struct LoadOptions {
     bool parseInChild = false;
     // A .zip (a DICOM series) unpacks to at most this many bytes (zip_extract.hpp).
     uint64_t maxArchiveBytes = uint64_t(8) << 30;
+    // A DICOM folder retrieved as this study and series: every instance must belong to them,
+    // or the load is refused (a PACS that answered another series, or mixed one in).
+    std::optional<SeriesIdentity> expectedSeries;
 };
 
 // Every failure to load: the message starts with the file's path and names the problem.

@@ -1,13 +1,15 @@
 // Tests of DICOM series loading (renderer/io/dicom_series.*, dicom_uncompressed.*): a series
 // written by saveDicomSeries, a single slice, progress slice by slice, two series in one
-// folder, damaged series, and uncompressed series read straight from their files against the
-// same series read through GDCM.
+// folder, damaged series, uncompressed series read straight from their files against the
+// same series read through GDCM, and series whose instances are not one series of one
+// patient in one stack (tags altered with GDCM, tests/dicom_tags.hpp).
 
 #include "volume_io_test_helpers.hpp"
 
 #include "renderer/io/dicom_child.hpp"
 #include "renderer/io/dicom_uncompressed.hpp"
 #include "renderer/io/volume_io.hpp"
+#include "tests/dicom_tags.hpp"
 
 #include <gtest/gtest.h>
 #include <zlib.h>
@@ -84,9 +86,9 @@ TEST_F(VolumeIoTest, ProgressOfADicomSeriesAdvancesSliceBySlice) {
     EXPECT_GE(slices.size(), 6u) << "12 slices should advance the bar in several steps";
 }
 
-TEST_F(VolumeIoTest, DicomFolderWithTwoSeriesLoadsOne) {
-    // Two series of different sizes in one folder: the loader takes one of them whole (the
-    // first GDCM lists, logged) rather than mixing slices of both.
+TEST_F(VolumeIoTest, DicomFolderWithTwoSeriesIsRefusedCountingThem) {
+    // Two series of different sizes in one folder: loading one of them would show a subset of
+    // what the folder holds without a word, so the folder is refused, counting the series.
     Volume a, b;
     a.dims = {6, 5, 4};
     b.dims = {3, 3, 2};
@@ -99,10 +101,7 @@ TEST_F(VolumeIoTest, DicomFolderWithTwoSeriesLoadsOne) {
     saveDicomSeries(b, dir / "b", VoxelType::Int16);
     for (const auto &entry : fs::directory_iterator(dir / "b"))
         fs::rename(entry.path(), dir / "both" / ("b_" + entry.path().filename().string()));
-    const Volume v = loadVolume(dir / "both");
-    const Volume &expected = v.dims == a.dims ? a : b;
-    EXPECT_EQ(v.dims, expected.dims);
-    EXPECT_EQ(v.samples().toFloats(), expected.voxels);
+    expectLoadError(dir / "both", {"2 series", "2 instances and 4 instances", "one volume shows one series"});
 }
 
 TEST_F(VolumeIoTest, FolderWithoutDicom) {
@@ -152,7 +151,8 @@ TEST_F(VolumeIoTest, DicomSeriesWithAMissingSliceIsRefusedNamingTheGap) {
 TEST_F(VolumeIoTest, DicomSeriesWithASliceTwiceIsRefused) {
     saveDicomSeries(obliqueSeriesVolume(), dir / "series", VoxelType::Int16);
     fs::copy_file(dir / "series" / "slice_0004.dcm", dir / "series" / "slice_0004_again.dcm");
-    expectLoadError(dir / "series", {"same position"});
+    expectLoadError(dir / "series", {"instance 5 ('slice_0004_again.dcm')", "same instance as instance 5 ('slice_0004.dcm')",
+                                     "sopinstanceuid", "twice"});
 }
 
 // ---------------------------------------------------------------------------------------
@@ -377,6 +377,130 @@ TEST_F(VolumeIoTest, ASeriesPlanFromTheCheckerIsReadAsUntrusted) {
     refused(far, series, true, {"slice_0003.dcm", "no longer holds"});
     refused(original.substr(0, original.size() - 1), series, true, {"damaged plan"});
     refused(original, series, false, {"damaged plan", "samples"});
+}
+
+// ---------------------------------------------------------------------------------------
+// One series of one patient, one stack (renderer/io/dicom_identity.hpp): checked in the checker
+// before either read path, the direct reader's plan and ITK's series reader.
+
+// A series of `slices` slices of `size` x `size` pixels, 2 mm apart from z = z0.
+void writeSeries(const fs::path &folder, int64_t slices, int64_t size = 16, double z0 = 0) {
+    Volume v;
+    v.dims = {size, size, slices};
+    v.spacing = {1, 1, 2};
+    v.origin = {0, 0, z0};
+    v.voxels.resize(v.voxelCount());
+    for (size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(int(i % 500) - 250);
+    saveDicomSeries(v, folder, VoxelType::Int16);
+}
+
+// Every file of the folder given one study, series and frame of reference (saveDicomSeries
+// makes new ones each time), as one series that PACS or scanner put together.
+void makeOneSeries(const fs::path &folder) {
+    using namespace dicom_tags;
+    for (const auto &e : fs::directory_iterator(folder))
+        setTags(e.path(), {{kStudyUid, "1.2.826.0.1.3680043.2.1125.1"}, {kSeriesUid, "1.2.826.0.1.3680043.2.1125.1.2"},
+                           {kFrameOfReferenceUid, "1.2.826.0.1.3680043.2.1125.1.3"}});
+}
+
+// The refusal's message, which must not quote the other patient's name or ID.
+void expectNoPatientQuoted(const fs::path &series) {
+    try {
+        loadVolume(series);
+    } catch (const VolumeLoadError &e) {
+        const std::string message = e.what();
+        EXPECT_EQ(message.find("OTHER-PATIENT-7"), std::string::npos) << "quotes a PatientID: " << message;
+        EXPECT_EQ(message.find("Other^Patient"), std::string::npos) << "quotes a PatientName: " << message;
+    }
+}
+
+TEST_F(VolumeIoTest, ASeriesWithAnotherPatientsInstanceIsRefusedNamingIt) {
+    writeSeries(dir / "series", 8);
+    ASSERT_EQ(loadVolume(dir / "series").dims.z, 8) << "the clean series loads";
+    dicom_tags::makeAnotherPatients(dir / "series" / "slice_0004.dcm");
+    expectLoadError(dir / "series", {"instance 5 ('slice_0004.dcm') belongs to another patient",
+                                     "patientid differs from the series' first instance, instance 1 ('slice_0000.dcm')"});
+    expectNoPatientQuoted(dir / "series");
+    // Through ITK's series reader as well (a file beside the slices that the direct reader
+    // does not take): the same check, before it.
+    fs::copy(dir / "series", dir / "gdcm");
+    writeFile(dir / "gdcm" / "notes.txt", "not DICOM\n");
+    expectLoadError(dir / "gdcm", {"instance 5 ('slice_0004.dcm') belongs to another patient", "patientid differs"});
+}
+
+TEST_F(VolumeIoTest, ASeriesWithAnotherPatientNameOnlyIsRefusedNamingTheField) {
+    writeSeries(dir / "series", 4);
+    dicom_tags::setTags(dir / "series" / "slice_0000.dcm", {{dicom_tags::kPatientName, "First^Patient"}});
+    dicom_tags::setTags(dir / "series" / "slice_0002.dcm", {{dicom_tags::kPatientName, "Other^Patient"}});
+    expectLoadError(dir / "series", {"instance 3 ('slice_0002.dcm') belongs to another patient", "patientname differs"});
+    expectNoPatientQuoted(dir / "series");
+}
+
+TEST_F(VolumeIoTest, ASeriesOfAnotherSeriesThanRequestedIsRefusedNamingIt) {
+    writeSeries(dir / "series", 4);
+    makeOneSeries(dir / "series");
+    LoadOptions asked;
+    asked.expectedSeries = SeriesIdentity{"1.2.826.0.1.3680043.2.1125.1", "1.2.826.0.1.3680043.2.1125.1.2"};
+    ASSERT_EQ(loadVolume(dir / "series", asked).dims.z, 4) << "the series requested loads";
+    asked.expectedSeries->seriesUid = "1.2.826.0.1.3680043.2.1125.1.9";
+    expectLoadError(dir / "series", {"instance 1 ('slice_0000.dcm') is not of the requested series",
+                                     "seriesinstanceuid"}, asked);
+    asked.expectedSeries = SeriesIdentity{"1.2.826.0.1.3680043.2.1125.7", "1.2.826.0.1.3680043.2.1125.1.2"};
+    expectLoadError(dir / "series", {"instance 1 ('slice_0000.dcm') is not of the requested study",
+                                     "studyinstanceuid"}, asked);
+}
+
+TEST_F(VolumeIoTest, ASeriesAlternatingTwoSizesIsRefusedNamingTheStacks) {
+    // Slices of 16 x 16 at z = 0, 2, 4, 6 and of 32 x 32 at z = 1, 3, 5, 7, all in one series.
+    writeSeries(dir / "series", 4, 16, 0);
+    writeSeries(dir / "large", 4, 32, 1);
+    for (const auto &e : fs::directory_iterator(dir / "large"))
+        fs::rename(e.path(), dir / "series" / ("slice_1" + e.path().filename().string().substr(7)));
+    makeOneSeries(dir / "series");
+    expectLoadError(dir / "series", {"('slice_1000.dcm') is 32 x 32 pixels where the series' first instance",
+                                     "is 16 x 16", "holds 2 stacks: 4 slices 16 x 16 and 4 slices 32 x 32"});
+}
+
+TEST_F(VolumeIoTest, ASeriesWithALocalizerIsRefusedNamingIt) {
+    writeSeries(dir / "series", 6, 16);
+    writeSeries(dir / "scout", 1, 32);
+    fs::rename(dir / "scout" / "slice_0000.dcm", dir / "series" / "slice_scout.dcm");
+    makeOneSeries(dir / "series");
+    expectLoadError(dir / "series", {"('slice_scout.dcm') is 32 x 32", "2 stacks", "1 slice 32 x 32 (a localizer?)", "6 slices 16 x 16"});
+}
+
+TEST_F(VolumeIoTest, ASeriesWithoutAFiniteOrientationOrPositionIsRefused) {
+    writeSeries(dir / "series", 4);
+    for (const auto &e : fs::directory_iterator(dir / "series"))
+        dicom_tags::setTags(e.path(), {{dicom_tags::kImageOrientation, "NaN\\NaN\\NaN\\NaN\\NaN\\NaN"}});
+    expectLoadError(dir / "series", {"instance 1 ('slice_0000.dcm')", "imageorientationpatient",
+                                     "not six finite numbers"});
+    writeSeries(dir / "placed", 4);
+    dicom_tags::setTags(dir / "placed" / "slice_0001.dcm", {{dicom_tags::kImagePosition, "0\\NaN\\2"}});
+    expectLoadError(dir / "placed", {"instance 2 ('slice_0001.dcm')", "imagepositionpatient", "not three finite numbers"});
+}
+
+TEST_F(VolumeIoTest, ASeriesWithOneSopInstanceUidTwiceIsRefused) {
+    writeSeries(dir / "series", 8);
+    for (const auto &e : fs::directory_iterator(dir / "series"))
+        dicom_tags::setTags(e.path(), {{dicom_tags::kSopInstanceUid, "1.2.826.0.1.3680043.2.1125.5"}});
+    expectLoadError(dir / "series", {"instance 2 ('slice_0001.dcm') is the same instance as instance 1",
+                                     "sopinstanceuid", "twice"});
+}
+
+TEST_F(VolumeIoTest, ASeriesInAnotherFrameOfReferenceIsRefused) {
+    writeSeries(dir / "series", 4);
+    dicom_tags::setTags(dir / "series" / "slice_0003.dcm",
+                        {{dicom_tags::kFrameOfReferenceUid, "1.2.826.0.1.3680043.2.1125.8"}});
+    expectLoadError(dir / "series", {"instance 4 ('slice_0003.dcm')", "frameofreferenceuid differs"});
+}
+
+// GDCM's series scan splits one series by slice thickness (among others): a series it split
+// was loaded as its first part, a silent subset; now it is refused.
+TEST_F(VolumeIoTest, ASeriesThatGdcmSplitsIsRefusedRatherThanLoadedInPart) {
+    writeSeries(dir / "series", 6);
+    dicom_tags::setTags(dir / "series" / "slice_0005.dcm", {{{0x0018, 0x0050}, "9"}});
+    expectLoadError(dir / "series", {"slice thickness", "2 stacks"});
 }
 
 } // namespace

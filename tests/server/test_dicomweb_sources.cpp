@@ -5,10 +5,13 @@
 
 #include "renderer/io/volume_io.hpp"
 #include "server_fixture.hpp"
+#include "tests/dicomweb/hostile_server.hpp"
 #include "tests/dicomweb/orthanc_fixture.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <csignal>
 #include <filesystem>
@@ -77,14 +80,15 @@ class DicomWebSources : public ::testing::Test {
 
     // A server with one source, "pacs", on the suite's Orthanc.
     static std::unique_ptr<volcast::server::Server> serverWith(const std::string &authorization,
-                                                               double budgetMiB = 512, double timeoutS = 10) {
+                                                               double budgetMiB = 512, double timeoutS = 10,
+                                                               const std::string &dicomWebUrl = {}) {
         volcast::server::ServerConfig config;
         config.port = 0;
         config.defaultVolume = "";
         config.webRoot = tmp;
         config.errorCalibration = false;
         config.memoryBudgetBytes = uint64_t(budgetMiB * 1024 * 1024);
-        config.dicomWebSources = {{"pacs", orthanc->process.dicomWebUrl(), authorization}};
+        config.dicomWebSources = {{"pacs", dicomWebUrl.empty() ? orthanc->process.dicomWebUrl() : dicomWebUrl, authorization}};
         config.dicomWebTimeoutS = timeoutS;
         auto server = std::make_unique<volcast::server::Server>(config);
         volcast::test::startAndWaitReady(*server, kTimeout);
@@ -247,6 +251,49 @@ TEST_F(DicomWebSources, APacsThatStopsAnsweringFailsTheSearchInTimeAndOthersCarr
     const auto e = errorIn(reply);
     EXPECT_EQ(e.code, ErrorCode::SourceFailed) << e.message;
     EXPECT_LT(std::chrono::steady_clock::now() - started, 20s) << "the search timed out late: " << e.message;
+    expectSessionCarriesOn(*c);
+}
+
+// A PACS that answers another series than the one asked for: here a proxy in front of the
+// suite's Orthanc that serves its series under another SeriesInstanceUID in the request. The
+// instances carry their own UIDs, and the load refuses them rather than show them as the
+// series requested.
+TEST_F(DicomWebSources, APacsAnsweringAnotherSeriesThanRequestedIsRefusedNamingIt) {
+    const std::string asked = "1.2.826.0.1.3680043.2.1125.424242";   // a series the PACS does not hold
+    volcast::dicomweb::HttpOptions toOrthanc;
+    toOrthanc.sourceName = "test Orthanc";
+    toOrthanc.authorization = volcast::test::OrthancProcess::authorization();
+    toOrthanc.connectTimeoutSeconds = 2;
+    toOrthanc.requestTimeoutSeconds = 30;
+    volcast::test::HostileServer pacs([&](int, const std::string &request) {
+        // "GET TARGET HTTP/1.1", the asked series replaced by the stored one, passed on with
+        // the request's Accept.
+        std::string target = request.substr(4, request.find(' ', 4) - 4);
+        for (size_t at; (at = target.find(asked)) != std::string::npos;) target.replace(at, asked.size(), orthanc->seriesUid);
+        std::string accept;
+        std::string lowered = request;
+        std::transform(lowered.begin(), lowered.end(), lowered.begin(), [](unsigned char ch) { return char(std::tolower(ch)); });
+        if (const size_t at = lowered.find("\r\naccept:"); at != std::string::npos) {
+            const size_t from = at + 10, to = request.find("\r\n", from);
+            accept = request.substr(from, to - from);
+            accept.erase(0, accept.find_first_not_of(' '));
+        }
+        try {
+            const auto r = volcast::dicomweb::HttpClient(toOrthanc).get(orthanc->process.url() + target, accept, 64 << 20);
+            return volcast::test::httpResponse(int(r.status), r.contentType, r.body);
+        } catch (const std::exception &e) {
+            return volcast::test::httpResponse(502, "text/plain", e.what());
+        }
+    });
+    auto server = serverWith("Basic eA==", 512, 10, pacs.url() + "/dicom-web");
+    auto c = volcast::test::helloClient(server->port(), "gtest", kTimeout);
+    const std::string name = "dicomweb:pacs/" + orthanc->studyUid + "/" + asked;
+    const auto e = errorIn(ask(*c, {{"type", "open_volume"}, {"id", 2}, {"name", name}}));
+    EXPECT_EQ(e.code, ErrorCode::LoadFailed) << e.message;
+    EXPECT_NE(e.message.find(name), std::string::npos) << "names the volume: " << e.message;
+    EXPECT_NE(e.message.find("is not of the requested series (its SeriesInstanceUID is another)"), std::string::npos)
+        << e.message;
+    EXPECT_NE(e.message.find("instance "), std::string::npos) << "names the instance: " << e.message;
     expectSessionCarriesOn(*c);
 }
 

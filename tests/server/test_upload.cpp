@@ -11,6 +11,7 @@
 #include "server/http_session.hpp"
 #include "server/server.hpp"
 #include "server/upload_store.hpp"
+#include "tests/dicom_tags.hpp"
 #include "tests/server/child_process.hpp"
 #include "tests/server/server_fixture.hpp"
 #include "util/utf8.hpp"
@@ -191,6 +192,20 @@ TEST_F(Upload, ZipOfADicomSeriesIs201) {
         files.emplace_back("study/series/../" + e.path().filename().string(), readFile(e.path()));
     writeZip(tmp / "series.zip", files);
     accepted("series.zip", readFile(tmp / "series.zip"));
+}
+
+TEST_F(Upload, ZipOfASeriesWithAnotherPatientsInstanceIs422NamingIt) {
+    const fs::path series = tmp / "mixed";
+    volcast::saveDicomSeries(testVolume(), series, volcast::VoxelType::Int16);
+    volcast::dicom_tags::makeAnotherPatients(series / "slice_0002.dcm");
+    std::vector<std::pair<std::string, std::string>> files;
+    for (const auto &e : fs::directory_iterator(series)) files.emplace_back(e.path().filename().string(), readFile(e.path()));
+    writeZip(tmp / "mixed.zip", files);
+    const auto x = upload("mixed.zip", readFile(tmp / "mixed.zip"));
+    expectRefused(x, 422, "belongs to another patient (PatientID differs from the series' first instance");
+    ASSERT_TRUE(x.response);
+    EXPECT_NE(x.response->body().find("instance 3 ("), std::string::npos) << "names the instance: " << x.response->body();
+    EXPECT_EQ(x.response->body().find("OTHER-PATIENT-7"), std::string::npos) << "quotes a PatientID";
 }
 
 TEST_F(Upload, GarbageIs422NamingTheFileAndTheServerCarriesOn) {
