@@ -233,6 +233,16 @@ void putCheckedHeader(ResultWriter &out, const Volume &v, uint32_t planSlices) {
     out.put(modalityField.data(), modalityField.size());
 }
 
+} // namespace
+
+uint64_t checkedResultBytes(const Volume &v) {
+    return sizeof(CheckedHeader) + std::min(v.modality.size(), size_t(kMaxCheckedModalityBytes)) +
+           std::min(v.modalityField.size(), size_t(kMaxCheckedModalityBytes)) +
+           uint64_t(v.voxelCount()) * uint64_t(v.narrow.bytes);
+}
+
+namespace {
+
 void writeCheckedVolume(const Volume &v, const fs::path &to) {
     ResultWriter out(to);
     putCheckedHeader(out, v, 0);
@@ -412,6 +422,7 @@ bool runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
                                      std::to_string(options.maxDimension), fmt::format("{}", options.timeLimitSeconds),
                                      std::to_string(options.maxArchiveBytes), result.string()};
     if (planAllowed) args.push_back("plan");
+    if (options.maxResultBytes != UINT64_MAX) args.push_back(fmt::format("max-result-bytes={}", options.maxResultBytes));
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -501,14 +512,23 @@ namespace volcast {
 
 int runDicomCheck(int argc, char **argv) {
     using namespace io; // the checker's limits and statuses, and the load (dicom_child.hpp)
-    const bool planAllowed = argc == 8 && std::strcmp(argv[7], "plan") == 0;
-    if (argc < 5 || argc > 8 || (argc == 8 && !planAllowed)) {
-        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT [plan]]]\n"
+    constexpr std::string_view kMaxResult = "max-result-bytes=";
+    bool planAllowed = false, usage = argc < 5;
+    const char *maxResult = nullptr;
+    for (int i = 7; i < argc; ++i) {
+        if (std::strcmp(argv[i], "plan") == 0) planAllowed = true;
+        else if (std::string_view(argv[i]).starts_with(kMaxResult)) maxResult = argv[i] + kMaxResult.size();
+        else usage = true;
+    }
+    if (usage || argc > 9) {
+        std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT "
+                             "[plan] [max-result-bytes=N]]]\n"
                              "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
                              "files from outside away from the server), and writes what it loaded to the existing "
                              "file RESULT; with 'plan', an uncompressed DICOM series in a folder is handed back as "
-                             "where its slices' pixels lie rather than as samples. Exit status 0 loaded, 1 refused, "
-                             "3 out of memory.\n",
+                             "where its slices' pixels lie rather than as samples; with max-result-bytes, a volume "
+                             "whose hand-back would be larger is refused before any of it is written. Exit status 0 "
+                             "loaded, 1 refused, 3 out of memory.\n",
                      kCheckerName);
         return kCheckUsage;
     }
@@ -518,6 +538,7 @@ int runDicomCheck(int argc, char **argv) {
         options.maxDimension = std::stoll(argv[3]);
         options.timeLimitSeconds = std::stod(argv[4]);
         if (argc >= 6) options.maxArchiveBytes = std::stoull(argv[5]);
+        if (maxResult) options.maxResultBytes = std::stoull(maxResult);
     } catch (const std::exception &) {
         std::fprintf(stderr, "%s: bad limits '%s' '%s' '%s'\n", kCheckerName, argv[2], argv[3], argv[4]);
         return kCheckUsage;

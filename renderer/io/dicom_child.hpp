@@ -24,6 +24,9 @@ bool reachesGdcm(const fs::path &path);
 Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options,
                          bool samples = true, LoadProgress *progress = nullptr);
 
+// The bytes of the checker's hand-back of v as samples (what LoadOptions::maxResultBytes bounds).
+uint64_t checkedResultBytes(const Volume &v);
+
 // A result file of the caller's, removed however the load ends.
 struct CheckedResultFile {
     fs::path path;
