@@ -49,13 +49,11 @@ namespace volcast::server {
 class ClientIdentity {
   public:
     static ClientIdentity ofAddress(std::string_view address) { return ClientIdentity("address " + std::string(address)); }
-    // "address 127.0.0.1": the kind and the value.
-    const std::string &key() const { return key_; }
     auto operator<=>(const ClientIdentity &) const = default;
 
   private:
     explicit ClientIdentity(std::string key) : key_(std::move(key)) {}
-    std::string key_;
+    std::string key_;   // the kind and the value: "address 127.0.0.1"
 };
 
 // Why an upload is refused: the HTTP status and one line for the client (no server path).
@@ -100,7 +98,6 @@ class UploadStore : public VolumeProvider {
         Pending &operator=(const Pending &) = delete;
         const std::filesystem::path &file() const { return file_; }
         const std::string &filename() const { return filename_; }
-        uint64_t reserved() const { return reserved_; }
 
       private:
         friend class UploadStore;
