@@ -29,6 +29,7 @@
 // server paths); an accepted data file is a regular file inside the canonical folder; no
 // check opens the FIFO (it would block: a libFuzzer timeout).
 
+#include "renderer/io/dicom_identity.cpp"
 #include "renderer/io/dicom_series.cpp"
 #include "renderer/io/dicom_uncompressed.cpp"
 #include "renderer/io/itk_reading.cpp"

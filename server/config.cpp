@@ -221,6 +221,24 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
                    "Disk for all uploads kept, MiB; the least recently opened are deleted to make room")
         ->envname("VOLCAST_MAX_UPLOAD_STORAGE_MIB")
         ->check(CLI::Range(1.0, 1e9));
+    double uploadQuotaMiB = double(c.uploadQuotaBytes >> 20);
+    app.add_option("--upload-quota-mib", uploadQuotaMiB,
+                   "Disk one client (one IP address) may hold in uploads, kept and under way, MiB; its own least "
+                   "recently opened are deleted to make room for its new one, never another client's")
+        ->envname("VOLCAST_UPLOAD_QUOTA_MIB")
+        ->check(CLI::Range(1.0, 1e9));
+    app.add_option("--upload-parse-workers", c.uploadParseWorkers,
+                   "Uploads parsed at once, each in a checker process; the next goes to the client with the fewest")
+        ->envname("VOLCAST_UPLOAD_PARSE_WORKERS")
+        ->check(CLI::Range(1, 64));
+    app.add_option("--upload-min-bytes-per-s", c.uploadMinBytesPerS,
+                   "An upload body must bring at least this many bytes per second over each --upload-rate-window-s; "
+                   "a slower one is cut with 408")
+        ->envname("VOLCAST_UPLOAD_MIN_BYTES_PER_S")
+        ->check(CLI::Range(0.0, 1e12));
+    app.add_option("--upload-rate-window-s", c.uploadRateWindowS, "Seconds over which --upload-min-bytes-per-s is kept")
+        ->envname("VOLCAST_UPLOAD_RATE_WINDOW_S")
+        ->check(CLI::Range(0.1, 3600.0));
     app.add_option("--upload-ttl-min", uploadTtlMin, "Minutes an upload is kept after it arrives")
         ->envname("VOLCAST_UPLOAD_TTL_MIN")
         ->check(CLI::Range(0.01, 1e6));
@@ -266,6 +284,7 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     c.maxRequestBytes = uint64_t(requestMiB * 1024.0 * 1024.0);
     c.maxUploadBytes = uint64_t(uploadMiB * 1024.0 * 1024.0);
     c.maxUploadStorageBytes = uint64_t(uploadStorageMiB * 1024.0 * 1024.0);
+    c.uploadQuotaBytes = uint64_t(uploadQuotaMiB * 1024.0 * 1024.0);
     c.uploadTtlSeconds = uploadTtlMin * 60;
     c.uploadDir = uploadDir;
     return c;

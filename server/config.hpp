@@ -64,7 +64,11 @@ struct ServerConfig {
     // Uploads: POST /api/volumes (server/upload_store.hpp; docs/hardening.md).
     uint64_t maxUploadBytes = uint64_t(1024) << 20;        // one upload's body; over it: 413
     int maxUploadsPerAddress = 2;                          // uploads at once from one IP; more: 429
-    uint64_t maxUploadStorageBytes = uint64_t(8192) << 20; // all uploads kept; oldest unused evicted, else 507
+    uint64_t maxUploadStorageBytes = uint64_t(8192) << 20; // all uploads kept and under way; full: 507
+    uint64_t uploadQuotaBytes = uint64_t(2048) << 20;      // one client's share of it; its own oldest unused evicted, else 507
+    int uploadParseWorkers = 2;                            // uploads parsed at once (each in a checker process)
+    double uploadMinBytesPerS = 1024;                      // an upload body slower than this over a window: 408
+    double uploadRateWindowS = 20;                         // the window, seconds
     double uploadTtlSeconds = 3600;                        // an upload's life (--upload-ttl-min; seconds for tests)
     std::filesystem::path uploadDir;                       // empty: a new private folder under $TMPDIR or /tmp
 

@@ -452,7 +452,7 @@ void BasicHttpSession<Stream>::startUpload() {
                       version);
     if (!chunked && length.value_or(0) == 0)
         return refuse(http::status::bad_request, "the upload is empty: send the file as the request body\n", version);
-    auto begun = store.begin(peerAddress(), name, chunked ? std::optional<uint64_t>() : length);
+    auto begun = store.begin(ClientIdentity::ofAddress(peerAddress()), name, chunked ? std::optional<uint64_t>() : length);
     if (const auto *refusal = std::get_if<UploadRefusal>(&begun))
         return refuse(http::status(refusal->status), oneLine(refusal->message) + "\n", version);
     pendingUpload_ = std::get<std::shared_ptr<UploadStore::Pending>>(std::move(begun));
@@ -468,6 +468,8 @@ void BasicHttpSession<Stream>::startUpload() {
         pendingUpload_.reset();
         return refuse(http::status::internal_server_error, "cannot store the upload\n", version);
     }
+    readingBody_ = true;
+    ++uploadRound_;
     if (expectContinue) {
         // curl asks before sending a body over 1 MiB, and waits a second for this otherwise.
         auto res = std::make_shared<http::response<http::empty_body>>(http::status::continue_, version);
@@ -487,6 +489,13 @@ void BasicHttpSession<Stream>::readUploadBody() {
         // of ours cancels the read instead, and the answer is a 408.
         stream_.expires_never();
         if (!silence_) silence_.emplace(stream_.get_executor());
+        if (windowRound_ != uploadRound_) {
+            // Started with the body's first read (after a 100 Continue), once per upload.
+            windowRound_ = uploadRound_;
+            if (!rateWindow_) rateWindow_.emplace(stream_.get_executor());
+            windowBytes_ = 0;
+            armRateWindow(uploadRound_);
+        }
         silence_->expires_after(std::chrono::milliseconds(state_->config().headerTimeoutMs));
         silence_->async_wait([self = this->shared_from_this()](beast::error_code ec) {
             if (ec) return;
@@ -500,16 +509,58 @@ void BasicHttpSession<Stream>::readUploadBody() {
 }
 
 template <class Stream>
-void BasicHttpSession<Stream>::onUploadBody(beast::error_code ec, size_t) {
+void BasicHttpSession<Stream>::armRateWindow(uint64_t round) {
+    const ServerConfig &config = state_->config();
+    rateWindow_->expires_after(
+        std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(config.uploadRateWindowS)));
+    rateWindow_->async_wait([self = this->shared_from_this(), round](beast::error_code ec) {
+        if (ec || !self->readingBody_ || round != self->uploadRound_) return;
+        const ServerConfig &c = self->state_->config();
+        if (double(self->windowBytes_) < c.uploadMinBytesPerS * c.uploadRateWindowS) {
+            // As for silence: the read is cancelled, and its handler answers 408.
+            self->tooSlow_ = true;
+            if constexpr (std::is_same_v<Stream, beast::tcp_stream>) {
+                beast::error_code ignored;
+                self->stream_.socket().cancel(ignored);
+            }
+            return;
+        }
+        self->windowBytes_ = 0;
+        self->armRateWindow(round);
+    });
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::endUploadBody() {
+    readingBody_ = false;
     if (silence_) silence_->cancel();
+    if (rateWindow_) rateWindow_->cancel();
+}
+
+template <class Stream>
+void BasicHttpSession<Stream>::onUploadBody(beast::error_code ec, size_t bytes) {
+    if (silence_) silence_->cancel();
+    windowBytes_ += bytes;
     const unsigned version = upload_->get().version();
     if (silent_) {
+        endUploadBody();
         pendingUpload_.reset();
         return refuse(http::status::request_timeout,
                       fmt::format("the upload stopped arriving: no bytes for {} ms (server flag --header-timeout-ms)\n",
                                   state_->config().headerTimeoutMs),
                       version);
     }
+    if (tooSlow_) {
+        endUploadBody();
+        pendingUpload_.reset();
+        const ServerConfig &c = state_->config();
+        return refuse(http::status::request_timeout,
+                      fmt::format("the upload arrived too slowly: {} bytes in {:g} s, under the minimum of {:g} bytes "
+                                  "per second (server flags --upload-min-bytes-per-s, --upload-rate-window-s)\n",
+                                  windowBytes_, c.uploadRateWindowS, c.uploadMinBytesPerS),
+                      version);
+    }
+    if (ec) endUploadBody();
     if (ec == http::error::body_limit) {
         pendingUpload_.reset();
         return refuse(http::status::payload_too_large,
@@ -527,17 +578,32 @@ void BasicHttpSession<Stream>::onUploadBody(beast::error_code ec, size_t) {
         pendingUpload_.reset();
         return refuse(http::status::bad_request, "malformed upload body: " + ec.message() + "\n", version);
     }
+    // What reached the file counts against the storage now, however the body is framed.
+    beast::error_code sizeError;
+    const uint64_t written = upload_->get().body().file().size(sizeError);
+    if (!sizeError) {
+        if (const auto refusal = state_->uploads().reserve(*pendingUpload_, written)) {
+            endUploadBody();
+            upload_->get().body().close();
+            pendingUpload_.reset();   // the part written is deleted with it
+            return refuse(http::status(refusal->status), oneLine(refusal->message) + "\n", version);
+        }
+    }
     if (!upload_->is_done()) return readUploadBody();
+    endUploadBody();
     upload_->get().body().close();
     // The connection may stay open for more requests: the upload's read room goes back.
     buffer_.shrink_to_fit();
-    std::error_code sizeError;
-    const uint64_t bytes = std::filesystem::file_size(pendingUpload_->file(), sizeError);
+    if (!sizeError && written == 0) {
+        // A chunked body of no chunks (a Content-Length of 0 is refused from the head).
+        pendingUpload_.reset();
+        return refuse(http::status::bad_request, "the upload is empty: send the file as the request body\n", version);
+    }
     // The answer comes back to this connection's strand; the parse never runs on a network thread.
     // The callback moves its hold on this session into the posted handler: the store's worker
     // must not drop the last reference, which could take the whole server state with it on
     // the worker itself (whose destructor joins that very thread).
-    state_->uploads().finish(std::move(pendingUpload_), sizeError ? 0 : bytes,
+    state_->uploads().finish(std::move(pendingUpload_), sizeError ? 0 : written,
                              [self = this->shared_from_this()](UploadStore::Result result) mutable {
                                  auto executor = self->stream_.get_executor();
                                  net::post(executor, [self = std::move(self), result = std::move(result)]() mutable {

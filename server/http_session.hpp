@@ -90,11 +90,16 @@ class BasicHttpSession : public std::enable_shared_from_this<BasicHttpSession<St
     // Why the request head is refused (status, message), or nullopt.
     std::optional<std::pair<boost::beast::http::status, std::string>> checkHeader() const;
 
-    // POST /api/volumes: the head's checks, then the body streamed into the upload's file
-    // (each read within the header timeout: 408 when the body stops arriving), then the parse
-    // on the store's worker, answered back on this connection's strand.
+    // POST /api/volumes: the head's checks, then the body streamed into the upload's file,
+    // its bytes reserved in the store as they arrive (507 past the room), each read within the
+    // header timeout and each --upload-rate-window-s bringing the minimum rate (408 when the
+    // body stops arriving or drips), then the parse on a parse worker of the store, answered
+    // back on this connection's strand.
     void startUpload();
     void readUploadBody();
+    void armRateWindow(uint64_t round);
+    // The body is read, refused or abandoned: its timers stop.
+    void endUploadBody();
     void onUploadBody(boost::beast::error_code ec, size_t bytes);
     void onUploadChecked(UploadStore::Result result);
     std::string peerAddress() const;
@@ -113,6 +118,13 @@ class BasicHttpSession : public std::enable_shared_from_this<BasicHttpSession<St
     std::shared_ptr<UploadStore::Pending> pendingUpload_;
     std::optional<boost::asio::steady_timer> silence_;   // a tcp_stream's upload body only
     bool silent_ = false;                               // the silence timer fired
+    std::optional<boost::asio::steady_timer> rateWindow_;   // a tcp_stream's upload body only
+    uint64_t windowBytes_ = 0;                          // bytes read in the current rate window
+    bool tooSlow_ = false;                              // a rate window ended under the minimum
+    bool readingBody_ = false;
+    // Which upload on this connection the body and the rate window belong to: a window timer
+    // of an earlier upload that fired just as it ended is ignored.
+    uint64_t uploadRound_ = 0, windowRound_ = 0;
 };
 
 // http_session.cpp instantiates it for these two streams only.

@@ -85,6 +85,9 @@ bool validUtf8(std::string_view s) {
     return true;
 }
 
+// Bytes as MiB for a message, one decimal.
+std::string mib(uint64_t bytes) { return fmt::format("{:.1f} MiB", double(bytes) / double(1 << 20)); }
+
 std::string lower(std::string_view s) {
     std::string out(s);
     std::transform(out.begin(), out.end(), out.begin(), [](unsigned char c) { return char(std::tolower(c)); });
@@ -147,22 +150,24 @@ std::optional<std::string> uploadExtension(std::string_view name) {
 
 UploadStore::UploadStore(const ServerConfig &config)
     : maxUploadBytes_(config.maxUploadBytes), maxPerAddress_(config.maxUploadsPerAddress),
-      maxStorageBytes_(config.maxUploadStorageBytes), ttl_(config.uploadTtlSeconds),
-      maxLoadBytes_(config.memoryBudgetBytes), loadTimeoutS_(config.loadTimeoutS) {
+      maxStorageBytes_(config.maxUploadStorageBytes), quotaBytes_(config.uploadQuotaBytes),
+      ttl_(config.uploadTtlSeconds), maxLoadBytes_(config.memoryBudgetBytes), loadTimeoutS_(config.loadTimeoutS) {
     folder_ = makeFolder(config.uploadDir, ownFolder_);
     spdlog::debug("uploads: kept in {}", folder_.string());
-    worker_ = std::thread([this] { work(); });
+    for (int i = 0; i < std::max(1, config.uploadParseWorkers); ++i) workers_.emplace_back([this] { work(); });
 }
 
 UploadStore::~UploadStore() {
-    std::deque<Job> dropped;
+    std::map<ClientIdentity, OwnerQueue> dropped;
     {
         std::lock_guard lock(mutex_);
         stopping_ = true;
-        dropped.swap(jobs_);
+        dropped.swap(queues_);
+        queued_ = 0;
     }
     wake_.notify_all();
-    if (worker_.joinable()) worker_.join();
+    for (auto &worker : workers_)
+        if (worker.joinable()) worker.join();
     dropped.clear();   // their Pending release into the store: while it is whole
     std::lock_guard lock(mutex_);
     for (const auto &[id, record] : uploads_) removeFolder(record.folder);
@@ -180,6 +185,11 @@ size_t UploadStore::count() const {
     return uploads_.size();
 }
 
+size_t UploadStore::queued() const {
+    std::lock_guard lock(mutex_);
+    return queued_;
+}
+
 std::optional<std::string> UploadStore::idOf(const std::string &name) const {
     if (!name.starts_with(kPrefix)) return std::nullopt;
     const std::string id = name.substr(kPrefix.size());
@@ -190,7 +200,9 @@ std::string UploadStore::notFoundMessage(const std::string &name) const {
     std::string shown = name.substr(0, 100);
     for (char &c : shown)
         if ((unsigned char)c < 0x20 || (unsigned char)c >= 0x7f) c = '?';
-    return fmt::format("no uploaded volume \"{}\" (uploads expire after {:g} minutes)", shown, ttl_.count() / 60);
+    return fmt::format("no uploaded volume \"{}\" (uploads expire after {:g} minutes, and a client's new upload may "
+                       "replace its own least recently opened ones)",
+                       shown, ttl_.count() / 60);
 }
 
 std::vector<std::pair<std::string, UploadStore::Record>> UploadStore::takeExpired(Clock::time_point now) const {
@@ -198,6 +210,8 @@ std::vector<std::pair<std::string, UploadStore::Record>> UploadStore::takeExpire
     for (auto it = uploads_.begin(); it != uploads_.end();) {
         if (now - it->second.created >= ttl_) {
             stored_ -= it->second.bytes;
+            owners_[it->second.owner].kept -= it->second.bytes;
+            dropIfIdle(it->second.owner);
             gone.emplace_back(it->first, std::move(it->second));
             it = uploads_.erase(it);
         } else {
@@ -253,25 +267,59 @@ FetchedVolume UploadStore::fetch(const std::string &name, const FetchContext &) 
     return {it->second.parsed, FetchedVolume::Form::Parsed};
 }
 
-bool UploadStore::makeRoom(uint64_t bytes, std::vector<std::pair<std::string, Record>> &evicted) {
-    const auto used = [&] { return stored_ + reserved_; };
-    if (bytes > maxStorageBytes_) return false;
-    uint64_t evictable = 0;
-    for (const auto &[id, r] : uploads_) evictable += r.bytes;
-    if (used() + bytes > maxStorageBytes_ + evictable) return false;
-    while (used() + bytes > maxStorageBytes_ && !uploads_.empty()) {
-        const auto oldest = std::min_element(uploads_.begin(), uploads_.end(), [](const auto &a, const auto &b) {
-            return a.second.lastUse < b.second.lastUse;
-        });
+void UploadStore::dropIfIdle(const ClientIdentity &owner) const {
+    const auto it = owners_.find(owner);
+    if (it != owners_.end() && it->second.kept == 0 && it->second.reserved == 0 && it->second.uploading == 0)
+        owners_.erase(it);
+}
+
+uint64_t UploadStore::roomFor(const ClientIdentity &owner) const {
+    const auto it = owners_.find(owner);
+    const OwnerUse use = it == owners_.end() ? OwnerUse{} : it->second;
+    const uint64_t others = stored_ + reserved_ - use.kept - use.reserved;
+    const uint64_t storageRoom = maxStorageBytes_ > others + use.reserved ? maxStorageBytes_ - others - use.reserved : 0;
+    const uint64_t quotaRoom = quotaBytes_ > use.reserved ? quotaBytes_ - use.reserved : 0;
+    return std::min(storageRoom, quotaRoom);
+}
+
+std::optional<UploadRefusal> UploadStore::noRoom(const ClientIdentity &owner, uint64_t bytes) const {
+    if (bytes <= roomFor(owner)) return std::nullopt;
+    const auto it = owners_.find(owner);
+    const uint64_t reserved = it == owners_.end() ? 0 : it->second.reserved;
+    if (reserved + bytes > quotaBytes_)
+        return UploadRefusal{507, fmt::format("this client's uploads would take {}, more than the {} of upload storage "
+                                              "one client may hold (server flag --upload-quota-mib)",
+                                              mib(reserved + bytes), mib(quotaBytes_))};
+    return UploadRefusal{507, fmt::format("the upload storage is full: {} more do not fit in its {}, which other "
+                                          "clients' uploads hold until they expire (server flag "
+                                          "--max-upload-storage-mib); try again later",
+                                          mib(bytes), mib(maxStorageBytes_))};
+}
+
+std::optional<UploadRefusal> UploadStore::makeRoom(const ClientIdentity &owner, uint64_t bytes,
+                                                   std::vector<std::pair<std::string, Record>> &evicted) {
+    if (auto refusal = noRoom(owner, bytes)) return refusal;
+    OwnerUse &use = owners_[owner];
+    const auto fits = [&] {
+        return stored_ + reserved_ + bytes <= maxStorageBytes_ && use.kept + use.reserved + bytes <= quotaBytes_;
+    };
+    while (!fits()) {
+        // Only the owner's own: what others keep is never taken to make room.
+        auto oldest = uploads_.end();
+        for (auto it = uploads_.begin(); it != uploads_.end(); ++it)
+            if (it->second.owner == owner && (oldest == uploads_.end() || it->second.lastUse < oldest->second.lastUse))
+                oldest = it;
+        if (oldest == uploads_.end()) break;   // roomFor said it would fit: not reached
         stored_ -= oldest->second.bytes;
+        use.kept -= oldest->second.bytes;
         evicted.emplace_back(oldest->first, std::move(oldest->second));
         uploads_.erase(oldest);
     }
-    return used() + bytes <= maxStorageBytes_;
+    return std::nullopt;
 }
 
 std::variant<std::shared_ptr<UploadStore::Pending>, UploadRefusal>
-UploadStore::begin(const std::string &address, const std::string &filename, std::optional<uint64_t> declaredBytes) {
+UploadStore::begin(const ClientIdentity &owner, const std::string &filename, std::optional<uint64_t> declaredBytes) {
     std::vector<std::pair<std::string, Record>> gone;
     std::shared_ptr<Pending> pending(new Pending());
     std::optional<UploadRefusal> refusal;
@@ -280,26 +328,22 @@ UploadStore::begin(const std::string &address, const std::string &filename, std:
         gone = takeExpired(Clock::now());
         if (stopping_) {
             refusal = UploadRefusal{503, "the server is shutting down"};
-        } else if (active_[address] >= maxPerAddress_) {
+        } else if (const auto it = owners_.find(owner); it != owners_.end() && it->second.uploading >= maxPerAddress_) {
             refusal = UploadRefusal{429, fmt::format("{} uploads from this address are already under way, the most "
                                                      "at once (server flag --max-uploads-per-address)",
-                                                     active_[address])};
-        } else if (const uint64_t need = declaredBytes.value_or(0); !makeRoom(need, gone)) {
-            refusal = UploadRefusal{507, fmt::format("no room for {} more bytes in the upload storage of {} MiB "
-                                                     "(server flag --max-upload-storage-mib)",
-                                                     need, maxStorageBytes_ >> 20)};
+                                                     it->second.uploading)};
+        } else if (auto full = noRoom(owner, declaredBytes.value_or(0))) {
+            // Nothing is reserved until bytes arrive: a head alone holds no room.
+            refusal = std::move(full);
         } else {
             pending->store_ = this;
             pending->id_ = newId();
-            pending->address_ = address;
+            pending->owner_ = owner;
             pending->filename_ = filename;
-            pending->reserved_ = need;
             pending->folder_ = folder_ / uploadFolderName(pending->id_);
             pending->file_ = pending->folder_ / ("volume" + uploadExtension(filename).value_or(".bin"));
-            reserved_ += need;
-            ++active_[address];
+            ++owners_[owner].uploading;
         }
-        if (active_[address] == 0) active_.erase(address);
     }
     forgetAll(gone);
     if (refusal) return *refusal;
@@ -313,11 +357,32 @@ UploadStore::Pending::~Pending() {
     if (store_) store_->release(*this);
 }
 
+std::optional<UploadRefusal> UploadStore::reserve(Pending &p, uint64_t total) {
+    if (total <= p.reserved_) return std::nullopt;
+    std::vector<std::pair<std::string, Record>> evicted;
+    std::optional<UploadRefusal> refusal;
+    {
+        std::lock_guard lock(mutex_);
+        const uint64_t more = total - p.reserved_;
+        refusal = makeRoom(*p.owner_, more, evicted);
+        if (!refusal) {
+            reserved_ += more;
+            owners_[*p.owner_].reserved += more;
+            p.reserved_ = total;
+        }
+    }
+    forgetAll(evicted);
+    return refusal;
+}
+
 void UploadStore::release(Pending &p) {
     {
         std::lock_guard lock(mutex_);
+        OwnerUse &use = owners_[*p.owner_];
         reserved_ -= p.reserved_;
-        if (--active_[p.address_] <= 0) active_.erase(p.address_);
+        use.reserved -= p.reserved_;
+        --use.uploading;
+        dropIfIdle(*p.owner_);
     }
     if (!p.kept_) removeFolder(p.folder_);
 }
@@ -326,9 +391,11 @@ void UploadStore::finish(std::shared_ptr<Pending> pending, uint64_t bytes, std::
     {
         std::lock_guard lock(mutex_);
         if (stopping_) return;
-        jobs_.push_back(Job{std::move(pending), bytes, std::move(done)});
+        const ClientIdentity owner = *pending->owner_;
+        queues_[owner].jobs.push_back(Job{std::move(pending), bytes, std::move(done)});
+        ++queued_;
     }
-    wake_.notify_all();
+    wake_.notify_one();
 }
 
 void UploadStore::work() {
@@ -337,13 +404,26 @@ void UploadStore::work() {
         std::clamp(ttl_ / 10, std::chrono::duration<double>(0.05), std::chrono::duration<double>(30)));
     std::unique_lock lock(mutex_);
     while (!stopping_) {
-        wake_.wait_for(lock, sweepEvery, [&] { return stopping_ || !jobs_.empty(); });
+        wake_.wait_for(lock, sweepEvery, [&] { return stopping_ || queued_ > 0; });
         if (stopping_) break;
         auto gone = takeExpired(Clock::now());
         std::optional<Job> job;
-        if (!jobs_.empty()) {
-            job = std::move(jobs_.front());
-            jobs_.pop_front();
+        std::optional<ClientIdentity> owner;
+        // The sender with the fewest parses running goes next, and among those the one that
+        // waited longest for a turn: one sender's queue does not hold back another's upload.
+        auto next = queues_.end();
+        for (auto it = queues_.begin(); it != queues_.end(); ++it)
+            if (!it->second.jobs.empty() &&
+                (next == queues_.end() || std::pair(it->second.parsing, it->second.lastTurn) <
+                                              std::pair(next->second.parsing, next->second.lastTurn)))
+                next = it;
+        if (next != queues_.end()) {
+            job = std::move(next->second.jobs.front());
+            next->second.jobs.pop_front();
+            ++next->second.parsing;
+            next->second.lastTurn = ++turns_;
+            --queued_;
+            owner = next->first;
         }
         lock.unlock();
         forgetAll(gone);
@@ -355,6 +435,10 @@ void UploadStore::work() {
             done(std::move(result));
         }
         lock.lock();
+        if (owner) {
+            const auto it = queues_.find(*owner);
+            if (it != queues_.end() && --it->second.parsing == 0 && it->second.jobs.empty()) queues_.erase(it);
+        }
     }
 }
 
@@ -365,6 +449,12 @@ UploadStore::Result UploadStore::verify(Job &job) {
     options.maxBytes = maxLoadBytes_;
     options.maxArchiveBytes = maxUploadBytes_;
     options.timeLimitSeconds = loadTimeoutS_;
+    {
+        // The parse may keep what its sender has room for: what it reserved for the body
+        // (given back once the parse replaces the file) and what evicting its own would free.
+        std::lock_guard lock(mutex_);
+        options.maxResultBytes = roomFor(*p.owner_) + p.reserved_;
+    }
     options.stopRequested = [this] {
         std::lock_guard lock(mutex_);
         return stopping_;
@@ -391,23 +481,26 @@ UploadStore::Result UploadStore::verify(Job &job) {
         // The file name may name a patient: at debug level only.
         spdlog::info("uploads: refused an upload of {} bytes", job.bytes);
         spdlog::debug("uploads: refused {}: {}", p.filename_, message);
+        // Too large once parsed for the room its sender has left: refused before it was written.
+        if (dynamic_cast<const VolumeOverResultLimit *>(&e))
+            return UploadRefusal{507, message + " (server flags --upload-quota-mib, --max-upload-storage-mib)"};
         return UploadRefusal{422, message};
     }
     std::vector<std::pair<std::string, Record>> evicted;
     std::optional<UploadRefusal> refusal;
     {
         std::lock_guard lock(mutex_);
-        // What was reserved at begin() is this upload's own room.
+        // What the body reserved is this upload's own room.
         reserved_ -= p.reserved_;
+        owners_[*p.owner_].reserved -= p.reserved_;
         p.reserved_ = 0;
-        if (!makeRoom(keptBytes, evicted)) {
-            refusal = UploadRefusal{507, fmt::format("no room for its {} bytes as parsed in the upload storage of "
-                                                     "{} MiB (server flag --max-upload-storage-mib)",
-                                                     keptBytes, maxStorageBytes_ >> 20)};
+        if (auto full = makeRoom(*p.owner_, keptBytes, evicted)) {
+            refusal = UploadRefusal{507, "no room for it as parsed: " + full->message};
         } else {
             const auto now = Clock::now();
-            uploads_[p.id_] = Record{p.folder_, parsed, p.filename_, keptBytes, now, now};
+            uploads_.emplace(p.id_, Record{*p.owner_, p.folder_, parsed, p.filename_, keptBytes, now, now});
             stored_ += keptBytes;
+            owners_[*p.owner_].kept += keptBytes;
             p.kept_ = true;
         }
     }

@@ -149,11 +149,13 @@ std::string quotableTask(std::string_view text) {
 
 // The checker's refusal, so that the caller never parses the file itself for its words: one
 // line, the mark, the kind (kRefusedPlainly, kRefusedTooLarge with the volume's float32 bytes,
-// kRefusedTimeLimit), a space, that number, a space, the message (a VolumeLoadError's what()).
+// kRefusedTimeLimit, kRefusedOverResultLimit with the hand-back's bytes), a space, that number,
+// a space, the message (a VolumeLoadError's what()).
 constexpr char kRefusalMark = '\x1f';
 constexpr char kRefusedPlainly = 'R';
 constexpr char kRefusedTooLarge = 'L';
 constexpr char kRefusedTimeLimit = 'T';
+constexpr char kRefusedOverResultLimit = 'S';
 // A line from the child is cut here (a refusal's message with it); what it says besides its
 // refusal is kept for the log up to kMaxSaidBytes.
 constexpr size_t kMaxLineBytes = 4096;
@@ -202,6 +204,7 @@ int writeRefusal(char kind, uint64_t bytes, const std::exception &e) {
     const std::string message = json_fields::quotableText(text, kMaxRefusalBytes);
     if (kind == kRefusedTooLarge) throw VolumeTooLarge(message, bytes);
     if (kind == kRefusedTimeLimit) throw VolumeLoadTimeout(message, options.timeLimitSeconds);
+    if (kind == kRefusedOverResultLimit) throw VolumeOverResultLimit(message, bytes, options.maxResultBytes);
     throw VolumeLoadError(message);
 }
 
@@ -293,6 +296,16 @@ void putCheckedHeader(ResultWriter &out, const Volume &v, uint32_t planSlices) {
     out.put(modality.data(), modality.size());
     out.put(modalityField.data(), modalityField.size());
 }
+
+} // namespace
+
+uint64_t checkedResultBytes(const Volume &v) {
+    return sizeof(CheckedHeader) + std::min(v.modality.size(), size_t(kMaxCheckedModalityBytes)) +
+           std::min(v.modalityField.size(), size_t(kMaxCheckedModalityBytes)) +
+           uint64_t(v.voxelCount()) * uint64_t(v.narrow.bytes);
+}
+
+namespace {
 
 void writeCheckedVolume(const Volume &v, const fs::path &to) {
     ResultWriter out(to);
@@ -475,6 +488,7 @@ void runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
     if (planAllowed) args.push_back("plan");
     if (options.expectedSeries)
         args.insert(args.end(), {"expect-series", options.expectedSeries->studyUid, options.expectedSeries->seriesUid});
+    if (options.maxResultBytes != UINT64_MAX) args.push_back(fmt::format("max-result-bytes={}", options.maxResultBytes));
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -567,28 +581,34 @@ namespace volcast {
 
 int runDicomCheck(int argc, char **argv) {
     using namespace io; // the checker's limits and statuses, and the load (dicom_child.hpp)
-    // After RESULT: "plan", and "expect-series STUDY SERIES" (LoadOptions::expectedSeries).
+    // After RESULT: "plan", "expect-series STUDY SERIES" (LoadOptions::expectedSeries) and
+    // "max-result-bytes=N" (LoadOptions::maxResultBytes), in any order.
+    constexpr std::string_view kMaxResult = "max-result-bytes=";
     bool planAllowed = false, usage = argc < 5;
     std::optional<SeriesIdentity> expectedSeries;
+    const char *maxResult = nullptr;
     for (int i = 7; i < argc && !usage; ++i) {
         if (std::strcmp(argv[i], "plan") == 0) {
             planAllowed = true;
         } else if (std::strcmp(argv[i], "expect-series") == 0 && i + 2 < argc) {
             expectedSeries = SeriesIdentity{argv[i + 1], argv[i + 2]};
             i += 2;
+        } else if (std::string_view(argv[i]).starts_with(kMaxResult)) {
+            maxResult = argv[i] + kMaxResult.size();
         } else {
             usage = true;
         }
     }
     if (usage) {
         std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT "
-                             "[plan] [expect-series STUDY-UID SERIES-UID]]]\n"
+                             "[plan] [expect-series STUDY-UID SERIES-UID] [max-result-bytes=N]]]\n"
                              "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
                              "files from outside away from the server), and writes what it loaded to the existing "
                              "file RESULT; with 'plan', an uncompressed DICOM series in a folder is handed back as "
                              "where its slices' pixels lie rather than as samples; with 'expect-series', a DICOM "
-                             "folder is refused unless every instance is of that study and series. Exit status 0 "
-                             "loaded, 1 refused, 3 out of memory.\n",
+                             "folder is refused unless every instance is of that study and series; with "
+                             "max-result-bytes, a volume whose hand-back would be larger is refused before any of "
+                             "it is written. Exit status 0 loaded, 1 refused, 3 out of memory.\n",
                      kCheckerName);
         return kCheckUsage;
     }
@@ -602,6 +622,7 @@ int runDicomCheck(int argc, char **argv) {
         options.maxDimension = std::stoll(argv[3]);
         options.timeLimitSeconds = std::stod(argv[4]);
         if (argc >= 6) options.maxArchiveBytes = std::stoull(argv[5]);
+        if (maxResult) options.maxResultBytes = std::stoull(maxResult);
     } catch (const std::exception &) {
         std::fprintf(stderr, "%s: bad limits '%s' '%s' '%s'\n", kCheckerName, argv[2], argv[3], argv[4]);
         return kCheckUsage;
@@ -642,6 +663,8 @@ int runDicomCheck(int argc, char **argv) {
         return writeRefusal(kRefusedTooLarge, e.bytes, e);
     } catch (const VolumeLoadTimeout &e) {
         return writeRefusal(kRefusedTimeLimit, 0, e);
+    } catch (const VolumeOverResultLimit &e) {
+        return writeRefusal(kRefusedOverResultLimit, e.needed, e);
     } catch (const VolumeLoadError &e) {
         return writeRefusal(kRefusedPlainly, 0, e);
     } catch (const std::exception &e) {

@@ -24,6 +24,9 @@ bool reachesGdcm(const fs::path &path);
 Volume readCheckedVolume(const fs::path &path, const fs::path &from, const LoadOptions &options,
                          bool samples = true, LoadProgress *progress = nullptr);
 
+// The bytes of the checker's hand-back of v as samples (what LoadOptions::maxResultBytes bounds).
+uint64_t checkedResultBytes(const Volume &v);
+
 // A result file of the caller's, removed however the load ends.
 struct CheckedResultFile {
     fs::path path;
@@ -45,10 +48,11 @@ struct CheckedResultFile {
 // Parses the file in the checker process. Returns when it loaded it (its volume, or with
 // planAllowed and a folder it reads directly, its plan, is in `result`). When it refused it,
 // throws the checker's own refusal: its words (read as hostile: one line, bounded, control
-// characters and invalid UTF-8 replaced) and its kind (VolumeTooLarge, VolumeLoadTimeout or
-// VolumeLoadError); the file is never parsed here. Any other end of the child (a signal, its
-// memory limit) throws a VolumeLoadError saying so. planAllowed only where the folder outlives
-// the reading of the result (never for a kept parse or an unpacked archive).
+// characters and invalid UTF-8 replaced) and its kind (VolumeTooLarge, VolumeLoadTimeout,
+// VolumeOverResultLimit or VolumeLoadError); the file is never parsed here. Any other end of
+// the child (a signal, its memory limit) throws a VolumeLoadError saying so. planAllowed only
+// where the folder outlives the reading of the result (never for a kept parse or an unpacked
+// archive).
 void runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &progress, bool dicom,
                 const fs::path &result, bool planAllowed = false);
 

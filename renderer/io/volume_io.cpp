@@ -65,6 +65,12 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
         // them again from the hand-back, which it does not trust.
         if (dicomInChild) computeStatistics(v);
         holdNarrow(v); // a float file (or a DICOM series, rescaled) whose samples are 8- or 16-bit integers
+        // The checker's hand-back would outgrow the room its caller has: refused before any of it is written.
+        if (const uint64_t needed = checkedResultBytes(v); needed > options.maxResultBytes)
+            throw VolumeOverResultLimit(
+                fmt::format("{}: would need {} of upload storage once parsed; {} left; it is not loaded", path.string(),
+                            humanBytes(needed), humanBytes(options.maxResultBytes)),
+                needed, options.maxResultBytes);
         progress(1, "statistics");
         spdlog::debug("{}: loaded {} x {} x {} {} voxels, spacing {} {} {}, range {} .. {}", path.string(), v.dims.x,
                       v.dims.y, v.dims.z, voxelTypeName(v.sourceType), v.spacing.x, v.spacing.y, v.spacing.z,

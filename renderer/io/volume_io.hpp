@@ -93,6 +93,10 @@ struct LoadOptions {
     // A DICOM folder retrieved as this study and series: every instance must belong to them,
     // or the load is refused (a PACS that answered another series, or mixed one in).
     std::optional<SeriesIdentity> expectedSeries;
+    // The checker's hand-back (parseToKeep's kept file) may be at most this many bytes: the
+    // room left in the caller's storage. A volume needing more is refused with
+    // VolumeOverResultLimit once its size is known, before any of it is written.
+    uint64_t maxResultBytes = UINT64_MAX;
 };
 
 // Every failure to load: the message starts with the file's path and names the problem.
@@ -105,6 +109,13 @@ struct VolumeTooLarge : VolumeLoadError {
     VolumeTooLarge(const std::string &message, uint64_t float32Bytes)
         : VolumeLoadError(message), bytes(float32Bytes) {}
     uint64_t bytes;   // the volume's size as float32 voxels
+};
+
+// The parsed volume needs more than LoadOptions::maxResultBytes.
+struct VolumeOverResultLimit : VolumeLoadError {
+    VolumeOverResultLimit(const std::string &message, uint64_t neededBytes, uint64_t limitBytes)
+        : VolumeLoadError(message), needed(neededBytes), limit(limitBytes) {}
+    uint64_t needed, limit;
 };
 
 // The load ran past LoadOptions::timeLimitSeconds.

@@ -23,10 +23,13 @@
 #include <boost/asio/write.hpp>
 
 #include <csignal>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <regex>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
 
@@ -63,6 +66,62 @@ std::string uploadHead(const std::string &filename, uint64_t length, const std::
     if (!token.empty()) r += "Authorization: Bearer " + token + "\r\n";
     if (!filename.empty()) r += "X-Volcast-Filename: " + filename + "\r\n";
     return r + "Content-Length: " + std::to_string(length) + "\r\n\r\n";
+}
+
+// rawExchange from the local address `from`: 127.0.0.2, 127.0.0.3, ... are each another
+// client (another identity) to the server.
+RawExchange rawExchangeFrom(const std::string &from, uint16_t port, const std::string &bytes,
+                            std::chrono::milliseconds timeout) {
+    namespace http = boost::beast::http;
+    boost::asio::io_context ioc;
+    boost::beast::tcp_stream stream(ioc);
+    stream.socket().open(boost::asio::ip::tcp::v4());
+    stream.socket().bind(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address(from), 0));
+    stream.connect(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address("127.0.0.1"), port));
+    stream.expires_after(timeout);
+    RawExchange out;
+    boost::beast::error_code ec;
+    boost::asio::write(stream, boost::asio::buffer(bytes), ec);
+    boost::beast::flat_buffer buffer;
+    http::response_parser<http::string_body> parser;
+    parser.body_limit(1 << 20);
+    http::read(stream, buffer, parser, ec);
+    if (ec) {
+        out.error = ec.message();
+        return out;
+    }
+    out.response = parser.release();
+    return out;
+}
+
+// A connection from `from` that has sent `bytes` and is left open.
+std::unique_ptr<boost::beast::tcp_stream> openFrom(boost::asio::io_context &ioc, const std::string &from, uint16_t port,
+                                                   const std::string &bytes) {
+    auto s = std::make_unique<boost::beast::tcp_stream>(ioc);
+    s->socket().open(boost::asio::ip::tcp::v4());
+    s->socket().bind(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address(from), 0));
+    s->connect(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address("127.0.0.1"), port));
+    boost::asio::write(*s, boost::asio::buffer(bytes));
+    return s;
+}
+
+// A chunked upload request of `body` in 64 KiB chunks.
+std::string chunkedUpload(const std::string &filename, const std::string &body) {
+    std::string r = "POST /api/volumes HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer " + std::string(kToken) +
+                    "\r\nX-Volcast-Filename: " + filename + "\r\nTransfer-Encoding: chunked\r\n\r\n";
+    for (size_t at = 0; at < body.size(); at += 64 * 1024) {
+        const std::string piece = body.substr(at, 64 * 1024);
+        r += fmt::format("{:x}\r\n", piece.size()) + piece + "\r\n";
+    }
+    return r + "0\r\n\r\n";
+}
+
+// Regular files under `folder`, at any depth.
+size_t filesUnder(const fs::path &folder) {
+    size_t n = 0;
+    for (const auto &e : fs::recursive_directory_iterator(folder))
+        if (e.is_regular_file()) ++n;
+    return n;
 }
 
 int statusOf(const RawExchange &x) { return x.response ? int(x.response->result_int()) : 0; }
@@ -396,6 +455,205 @@ TEST_F(Upload, GivenUploadDirLosesOnlyItsOwnLeftoversAtStart) {
     EXPECT_TRUE(fs::exists(dir)) << "a folder the server was given was deleted";
 }
 
+// ---- storage that no client can take from another ---------------------------------------
+
+// Eight request heads declaring the largest upload, from four addresses, held open: they
+// reserve nothing until bytes arrive, so they neither evict another client's kept upload nor
+// refuse another client's new one (before, each head reserved its whole declared length).
+TEST_F(Upload, HeadsAloneFromManyAddressesNeitherEvictNorBlockAnotherClientsUpload) {
+    auto c = config();
+    c.maxUploadStorageBytes = 2 * kMaxUploadBytes;
+    c.headerTimeoutMs = 30000;   // the heads stay held for the whole test
+    volcast::server::Server s(c);
+    volcast::test::startAndWaitReady(s, kStartTimeout);
+    const std::string nrrd = volumeFile(".nrrd");
+    const auto kept = rawExchangeFrom("127.0.0.2", s.port(), uploadHead("victim.nrrd", nrrd.size()) + nrrd, kUploadTimeout);
+    ASSERT_EQ(statusOf(kept), 201) << describe(kept);
+    const std::string victim = json::parse(kept.response->body()).at("volume");
+
+    boost::asio::io_context ioc;
+    std::vector<std::unique_ptr<boost::beast::tcp_stream>> held;
+    for (const char *from : {"127.0.0.3", "127.0.0.4", "127.0.0.5", "127.0.0.6"})
+        for (int i = 0; i < 2; ++i) held.push_back(openFrom(ioc, from, s.port(), uploadHead("held.nrrd", kMaxUploadBytes)));
+    std::this_thread::sleep_for(300ms);   // every head read and begun
+
+    auto &store = s.state().uploads();
+    EXPECT_FALSE(store.check(victim).has_value()) << "a kept upload was evicted by request heads of other clients";
+    const auto other = rawExchangeFrom("127.0.0.7", s.port(), uploadHead("other.nrrd", nrrd.size()) + nrrd, kUploadTimeout);
+    EXPECT_EQ(statusOf(other), 201) << "another client's upload is refused while the heads are held: " << describe(other);
+    EXPECT_FALSE(store.check(victim).has_value()) << "the kept upload did not survive";
+}
+
+// With the storage full of one client's upload, another client's upload is refused naming
+// that the storage is full, and the kept one survives; its own client may replace it.
+TEST_F(Upload, AKeptUploadIsNeverEvictedForAnotherClientButItsOwnClientMayReplaceIt) {
+    auto c = config();
+    // Room for one parse of the test volume (its int16 samples and a header of ~200 bytes),
+    // not for that and the file of another.
+    const uint64_t parsedBytes = uint64_t(kDims.x * kDims.y * kDims.z) * 2 + 256;
+    c.maxUploadStorageBytes = parsedBytes + parsedBytes / 2;
+    volcast::server::Server s(c);
+    volcast::test::startAndWaitReady(s, kStartTimeout);
+    const std::string nrrd = volumeFile(".nrrd");
+    const auto request = uploadHead("scan.nrrd", nrrd.size()) + nrrd;
+    const auto first = rawExchangeFrom("127.0.0.2", s.port(), request, kUploadTimeout);
+    ASSERT_EQ(statusOf(first), 201) << describe(first);
+    const std::string firstName = json::parse(first.response->body()).at("volume");
+    auto &store = s.state().uploads();
+
+    const auto other = rawExchangeFrom("127.0.0.3", s.port(), request, kUploadTimeout);
+    ASSERT_EQ(statusOf(other), 507) << describe(other);
+    EXPECT_NE(other.response->body().find("storage is full"), std::string::npos) << other.response->body();
+    EXPECT_NE(other.response->body().find("--max-upload-storage-mib"), std::string::npos) << other.response->body();
+    EXPECT_FALSE(store.check(firstName).has_value()) << "another client's upload evicted the kept one";
+    EXPECT_EQ(filesUnder(store.folder()), 1u) << "the refused upload left a file behind";
+
+    const auto again = rawExchangeFrom("127.0.0.2", s.port(), request, kUploadTimeout);
+    ASSERT_EQ(statusOf(again), 201) << "its own client cannot replace its upload: " << describe(again);
+    EXPECT_TRUE(store.check(firstName).has_value()) << "the client's older upload was not the one replaced";
+    EXPECT_FALSE(store.check(json::parse(again.response->body()).at("volume")).has_value());
+}
+
+// A chunked body declares no length: its bytes count as they arrive, and it is refused as soon
+// as they pass the client's quota, its part deleted.
+TEST_F(Upload, ChunkedBodyPastTheClientsQuotaIs507AndItsPartIsDeleted) {
+    auto c = config();
+    c.maxUploadBytes = 4 * kMaxUploadBytes;
+    c.uploadQuotaBytes = kMaxUploadBytes;
+    volcast::server::Server s(c);
+    volcast::test::startAndWaitReady(s, kStartTimeout);
+    // Half a MiB past the quota: within what the server reads and drops after its answer.
+    const auto x = rawExchangeFrom("127.0.0.2", s.port(), chunkedUpload("big.nrrd", std::string(kMaxUploadBytes * 3 / 2, 'x')),
+                                   kUploadTimeout);
+    ASSERT_EQ(statusOf(x), 507) << describe(x);
+    EXPECT_NE(x.response->body().find("--upload-quota-mib"), std::string::npos) << x.response->body();
+    EXPECT_EQ(filesUnder(s.state().uploads().folder()), 0u) << "the refused chunked body is still on disk";
+    // The quota is the client's own: another client's upload is taken.
+    const std::string nrrd = volumeFile(".nrrd");
+    const auto other = rawExchangeFrom("127.0.0.3", s.port(), chunkedUpload("small.nrrd", nrrd), kUploadTimeout);
+    EXPECT_EQ(statusOf(other), 201) << describe(other);
+}
+
+TEST_F(Upload, EmptyChunkedBodyIs400) {
+    const std::string request = "POST /api/volumes HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer " +
+                                std::string(kToken) +
+                                "\r\nX-Volcast-Filename: empty.nrrd\r\nTransfer-Encoding: chunked\r\n\r\n0\r\n\r\n";
+    expectRefused(rawExchange(port(), request, kUploadTimeout), 400, "empty");
+}
+
+// A body that keeps arriving, a byte at a time, is cut once a rate window ends under the
+// minimum (each byte comes well within the silence timeout, which alone never cuts it).
+TEST_F(Upload, ADripIsCutWith408WithinTheRateWindow) {
+    auto c = config();
+    c.uploadRateWindowS = 1;
+    c.uploadMinBytesPerS = 100;
+    volcast::server::Server s(c);
+    volcast::test::startAndWaitReady(s, kStartTimeout);
+    boost::asio::io_context ioc;
+    const auto started = std::chrono::steady_clock::now();
+    auto stream = openFrom(ioc, "127.0.0.2", s.port(), uploadHead("drip.nrrd", 1000));
+    // 5 bytes a second, for up to 10 s: the answer should come after the first window (1 s).
+    boost::beast::error_code unused;
+    while (std::chrono::steady_clock::now() - started < 10s && stream->socket().available(unused) == 0) {
+        boost::beast::error_code ec;
+        boost::asio::write(*stream, boost::asio::buffer("N", 1), ec);
+        std::this_thread::sleep_for(200ms);
+    }
+    const auto elapsed = std::chrono::steady_clock::now() - started;
+    boost::beast::flat_buffer buffer;
+    boost::beast::http::response<boost::beast::http::string_body> response;
+    boost::beast::error_code ec;
+    stream->expires_after(5s);
+    boost::beast::http::read(*stream, buffer, response, ec);
+    ASSERT_FALSE(ec) << "no answer to the drip within 10 s: " << ec.message();
+    EXPECT_EQ(response.result_int(), 408u) << response.body();
+    EXPECT_NE(response.body().find("too slowly"), std::string::npos) << response.body();
+    // One window of 1 s, then the 200 ms step of this loop, with 2 s for a loaded machine.
+    EXPECT_LT(elapsed, 3200ms) << "the drip was not cut within its window";
+    EXPECT_EQ(filesUnder(s.state().uploads().folder()), 0u) << "the cut upload's part is still on disk";
+}
+
+// A gzip NRRD of a few KiB that parses to 8 MiB, against a quota of 4 MiB: the checker
+// refuses it before writing its parse, and another client's kept upload stays.
+TEST_F(Upload, GzipNrrdExpandingPastTheRoomLeftIs507AndEvictsNoOne) {
+    auto c = config();
+    c.uploadQuotaBytes = uint64_t(4) << 20;
+    // Room for the parse of the bomb alone but not beside the kept upload: what once made the
+    // parse evict it.
+    c.maxUploadStorageBytes = (uint64_t(8) << 20) + 4096;
+    volcast::server::Server s(c);
+    volcast::test::startAndWaitReady(s, kStartTimeout);
+    const std::string nrrd = volumeFile(".nrrd");
+    const auto kept = rawExchangeFrom("127.0.0.2", s.port(), uploadHead("victim.nrrd", nrrd.size()) + nrrd, kUploadTimeout);
+    ASSERT_EQ(statusOf(kept), 201) << describe(kept);
+    const std::string victim = json::parse(kept.response->body()).at("volume");
+
+    // 256 x 256 x 128 uint8: 8 MiB of samples, nearly all zero, so gzip makes them a few KiB.
+    const fs::path bomb = tmp / "bomb.nrrd";
+    volcast::saveVolume(volcast::makeGaussianBlob({256, 256, 128}, {1, 1, 1}, 2.0, 200.0).volume, bomb,
+                        {volcast::VoxelType::UInt8, true});
+    const std::string body = readFile(bomb);
+    ASSERT_LT(body.size(), kMaxUploadBytes) << "the compressed file is not small";
+    const auto x = rawExchangeFrom("127.0.0.3", s.port(), uploadHead("bomb.nrrd", body.size()) + body, kUploadTimeout);
+    ASSERT_EQ(statusOf(x), 507) << describe(x);
+    EXPECT_NE(x.response->body().find("would need 8.0 MiB of upload storage once parsed; 4.0 MiB left"),
+              std::string::npos)
+        << x.response->body();
+    EXPECT_NE(x.response->body().find("bomb.nrrd"), std::string::npos) << x.response->body();
+    auto &store = s.state().uploads();
+    EXPECT_FALSE(store.check(victim).has_value()) << "another client's parse evicted the kept upload";
+    EXPECT_EQ(filesUnder(store.folder()), 1u) << "only the kept upload's parse stays on disk";
+}
+
+// Many uploads from one client, one from another, with one parse worker: the other client's
+// upload is parsed next, not after the whole queue. The checker waits behind a gate (a file
+// the test makes) so that the queue is built before any parse ends.
+TEST_F(Upload, AnotherClientsUploadIsParsedBeforeOneClientsQueue) {
+    const fs::path gate = tmp / "parse-gate";
+    const fs::path checker = tmp / "gated-checker.sh";
+    std::ofstream(checker) << "#!/bin/sh\nwhile [ ! -e '" << gate.string() << "' ]; do sleep 0.02; done\nexec '"
+                           << VOLCAST_DICOM_CHECK_EXE << "' \"$@\"\n";
+    fs::permissions(checker, fs::perms::owner_all);
+    ::setenv("VOLCAST_DICOM_CHECK", checker.c_str(), 1);
+    struct Unset {
+        ~Unset() { ::unsetenv("VOLCAST_DICOM_CHECK"); }
+    } unset;
+    auto c = config();
+    c.uploadParseWorkers = 1;
+    c.maxUploadsPerAddress = 8;
+    volcast::server::Server s(c);
+    volcast::test::startAndWaitReady(s, kStartTimeout);
+    auto &store = s.state().uploads();
+    const std::string nrrd = volumeFile(".nrrd");
+    std::mutex mutex;
+    std::vector<std::string> finished;
+    std::vector<std::thread> clients;
+    const auto send = [&](const std::string &from, const std::string &label) {
+        clients.emplace_back([&, from, label] {
+            const auto x = rawExchangeFrom(from, s.port(), uploadHead(label + ".nrrd", nrrd.size()) + nrrd, kUploadTimeout);
+            std::lock_guard lock(mutex);
+            finished.push_back(statusOf(x) == 201 ? label : label + " (" + describe(x) + ")");
+        });
+    };
+    const auto waitQueued = [&](size_t n) {
+        const auto until = std::chrono::steady_clock::now() + kUploadTimeout;
+        while (store.queued() < n && std::chrono::steady_clock::now() < until) std::this_thread::sleep_for(10ms);
+        return store.queued();
+    };
+    for (int i = 1; i <= 4; ++i) send("127.0.0.2", "a" + std::to_string(i));
+    EXPECT_EQ(waitQueued(3), 3u) << "one of the first client's uploads parsing, three queued";
+    send("127.0.0.3", "b");
+    EXPECT_EQ(waitQueued(4), 4u);
+    std::ofstream(gate) << "open";
+    for (auto &t : clients) t.join();
+    ASSERT_EQ(finished.size(), 5u);
+    const auto b = std::find(finished.begin(), finished.end(), "b");
+    ASSERT_NE(b, finished.end()) << "the other client's upload failed: " << ::testing::PrintToString(finished);
+    // First the upload that was parsing when it came, then it: none of the queued three before it.
+    EXPECT_EQ(b - finished.begin(), 1) << "finished in the order " << ::testing::PrintToString(finished);
+    fs::remove(gate);
+}
+
 // ---- the parts under the route ---------------------------------------------------------
 
 // A checker that crashes on everything: with parseInChild, a NRRD file (which never reaches
@@ -502,6 +760,43 @@ TEST(UploadParts, ParsedOnceAndKeptLoadsAsTheFileDoes) {
     fs::remove_all(dir);
     EXPECT_NE(message.find("damaged result"), std::string::npos) << "a cut kept parse was not refused: " << message;
     EXPECT_NE(message.find("upload:x"), std::string::npos) << "the message names the volume as shown: " << message;
+}
+
+// The room left is given to the checker, which refuses a volume whose hand-back would be larger
+// before writing any of it: the kept file never grows past the room.
+TEST(UploadParts, CheckerRefusesAParseOverTheRoomLeftBeforeWritingIt) {
+    const fs::path dir = fs::temp_directory_path() / ("volcast_result_limit_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    volcast::saveVolume(testVolume(), dir / "v.nrrd", {volcast::VoxelType::Int16, false});
+    volcast::LoadOptions options;
+    options.maxResultBytes = 1000;   // the test volume's int16 samples alone are 7680 bytes
+    std::string message;
+    try {
+        volcast::parseToKeep(dir / "v.nrrd", dir / "kept", options);
+    } catch (const volcast::VolumeOverResultLimit &e) {
+        message = e.what();
+        EXPECT_GT(e.needed, 7680u);
+        EXPECT_EQ(e.limit, 1000u);
+    }
+    EXPECT_NE(message.find("would need 7.7 KiB of upload storage once parsed; 1000 bytes left"), std::string::npos)
+        << "not refused naming the room: " << message;
+    EXPECT_FALSE(fs::exists(dir / "kept")) << "a refused parse left its file";
+    // The checker itself, given the limit, leaves its result file as it found it: empty.
+    std::ofstream(dir / "result").close();
+    const std::string command = fmt::format("'{}' '{}' 1000000000 32768 60 1000000000 '{}' max-result-bytes=1000 "
+                                            ">/dev/null 2>&1",
+                                            VOLCAST_DICOM_CHECK_EXE, (dir / "v.nrrd").string(), (dir / "result").string());
+    const int status = std::system(command.c_str());
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << "the checker did not refuse (status " << status << ")";
+    EXPECT_EQ(fs::file_size(dir / "result"), 0u) << "the checker wrote past its limit";
+    // With room enough it writes the parse.
+    const std::string roomy = fmt::format("'{}' '{}' 1000000000 32768 60 1000000000 '{}' max-result-bytes=100000 "
+                                          ">/dev/null 2>&1",
+                                          VOLCAST_DICOM_CHECK_EXE, (dir / "v.nrrd").string(), (dir / "result").string());
+    EXPECT_EQ(std::system(roomy.c_str()), 0);
+    EXPECT_GT(fs::file_size(dir / "result"), 7680u);
+    fs::remove_all(dir);
 }
 
 class ZipParts : public ::testing::Test {
