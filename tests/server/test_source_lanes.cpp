@@ -18,8 +18,9 @@
 #include <filesystem>
 #include <fstream>
 #include <future>
-#include <mutex>
+#include <iostream>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
