@@ -20,7 +20,7 @@ namespace volcast::server {
 class WorkLane {
   public:
     struct Job {
-        uint64_t owner = 0;              // jobs of one owner run in order; owners take turns
+        uint64_t owner = 0;              // jobs of one owner start in order; owners take turns
         std::function<void()> run;       // on a worker thread
         std::function<void()> dropped;   // instead of run, on the thread calling stop(), if the lane stops first
     };
