@@ -264,6 +264,14 @@ std::optional<ServerConfig> parseConfig(int argc, char **argv, int &exitCode) {
     app.add_option("--dicomweb-cache-mib", dicomWebCacheMiB, "Retrieved DICOMweb series kept on disk, MiB")
         ->envname("VOLCAST_DICOMWEB_CACHE_MIB")
         ->check(CLI::Range(0.0, 1e9));
+    app.add_option("--dicomweb-retrievals", c.dicomWebRetrievals,
+                   "Series retrieved at once from one DICOMweb source; more opens of it wait their turn")
+        ->envname("VOLCAST_DICOMWEB_RETRIEVALS")
+        ->check(CLI::Range(1, 64));
+    app.add_option("--dicomweb-searches", c.dicomWebSearches,
+                   "Study searches run at once on one DICOMweb source; more wait their turn")
+        ->envname("VOLCAST_DICOMWEB_SEARCHES")
+        ->check(CLI::Range(1, 64));
     try {
         app.parse(argc, argv);
         c.dicomWebSources = parseDicomWebSources(dicomWeb, dicomWebAuth);

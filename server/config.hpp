@@ -76,6 +76,8 @@ struct ServerConfig {
     std::vector<DicomWebSourceConfig> dicomWebSources;
     double dicomWebTimeoutS = 30;             // one search or metadata request; retrievals stall out after it
     uint64_t dicomWebCacheBytes = uint64_t(4096) << 20;   // retrieved series kept on disk
+    int dicomWebRetrievals = 2;               // retrievals running at once per source
+    int dicomWebSearches = 4;                 // searches running at once per source
 };
 
 // "NAME=URL" pairs and "NAME=FILE" credentials into sources; throws std::invalid_argument

@@ -14,8 +14,6 @@ using protocol::ProtocolError;
 
 namespace {
 
-constexpr size_t kMaxQueuedSearches = 32;   // beyond: busy, so a stalled PACS cannot pile up work
-
 uint64_t folderBytes(const fs::path &folder) {
     uint64_t total = 0;
     std::error_code ec;
@@ -58,22 +56,19 @@ std::variant<DicomWebSeriesName, std::string> parseDicomWebName(std::string_view
 }
 
 DicomWebProvider::DicomWebProvider(std::vector<dicomweb::SourceConfig> sources, fs::path cacheFolder,
-                                   uint64_t cacheBytes)
+                                   uint64_t cacheBytes, int searchesPerSource)
     : sources_(std::move(sources)), cacheFolder_(std::move(cacheFolder)), cacheBytes_(cacheBytes) {
     std::error_code ec;
     fs::remove_all(cacheFolder_, ec);   // a folder of ours from an earlier run: nothing in it is trusted
     fs::create_directories(cacheFolder_);
     fs::permissions(cacheFolder_, fs::perms::owner_all, fs::perm_options::replace);
-    searchThread_ = std::thread([this] { searchLoop(); });
+    for (const auto &s : sources_)
+        searchLanes_[s.name] = std::make_unique<WorkLane>("search " + s.name, searchesPerSource, kMaxWaitingSearches);
 }
 
 DicomWebProvider::~DicomWebProvider() {
-    {
-        std::lock_guard lock(searchMutex_);
-        stopping_ = true;
-    }
-    searchWake_.notify_all();
-    if (searchThread_.joinable()) searchThread_.join();
+    // Waiting searches are answered busy; running ones end with their request's time limit.
+    for (auto &[name, lane] : searchLanes_) lane->stop();
     std::error_code ec;
     fs::remove_all(cacheFolder_, ec);
 }
@@ -102,6 +97,28 @@ std::optional<ProtocolError> DicomWebProvider::check(const std::string &name) co
     return std::nullopt;
 }
 
+std::string DicomWebProvider::sourceOf(const std::string &name) const {
+    const auto parsed = parseDicomWebName(name);
+    const auto *series = std::get_if<DicomWebSeriesName>(&parsed);
+    return std::string(kDicomWebPrefix) + (series ? series->source : "");
+}
+
+void DicomWebProvider::release(const std::string &name, bool refused) {
+    const auto parsed = parseDicomWebName(name);
+    const auto *series = std::get_if<DicomWebSeriesName>(&parsed);
+    if (!series) return;
+    std::lock_guard lock(cacheMutex_);
+    auto it = cache_.find(series->source + "/" + series->studyUid + "/" + series->seriesUid);
+    if (it == cache_.end()) return;
+    it->second.readers = std::max(0, it->second.readers - 1);
+    if (refused && it->second.readers == 0) {
+        spdlog::info("{}: dropped from the retrieval cache, the loader refused it", name);
+        std::error_code ec;
+        fs::remove_all(it->second.folder, ec);
+        cache_.erase(it);
+    }
+}
+
 FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContext &context) {
     const auto series = std::get<DicomWebSeriesName>(parseDicomWebName(name));   // check() passed
     const std::string key = series.source + "/" + series.studyUid + "/" + series.seriesUid;
@@ -109,6 +126,7 @@ FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContex
         std::lock_guard lock(cacheMutex_);
         if (auto it = cache_.find(key); it != cache_.end()) {
             it->second.lastUse = ++useClock_;
+            ++it->second.readers;
             spdlog::debug("{}: retrieved before, loaded from the cache", name);
             return {it->second.folder, FetchedVolume::Form::Source, SeriesIdentity{series.studyUid, series.seriesUid}};
         }
@@ -167,7 +185,7 @@ FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContex
         {
             std::lock_guard lock(cacheMutex_);
             trimCache(bytes);
-            cache_[key] = {folder, bytes, ++useClock_};
+            cache_[key] = {folder, bytes, ++useClock_, 1};
         }
         spdlog::info("{}: retrieved {} instances, {} MiB in {:.2f} s", name, got.instancesDone, bytes >> 20,
                      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
@@ -187,57 +205,48 @@ FetchedVolume DicomWebProvider::fetch(const std::string &name, const FetchContex
 void DicomWebProvider::trimCache(uint64_t keepRoomFor) {
     uint64_t used = 0;
     for (const auto &[k, c] : cache_) used += c.bytes;
-    while (!cache_.empty() && used + keepRoomFor > cacheBytes_) {
-        auto oldest = std::min_element(cache_.begin(), cache_.end(),
-                                       [](const auto &a, const auto &b) { return a.second.lastUse < b.second.lastUse; });
+    while (used + keepRoomFor > cacheBytes_) {
+        // A series a load is reading stays (retrievals run beside loads): the cache may hold
+        // more than its bound until those loads end.
+        auto oldest = cache_.end();
+        for (auto it = cache_.begin(); it != cache_.end(); ++it)
+            if (it->second.readers == 0 && (oldest == cache_.end() || it->second.lastUse < oldest->second.lastUse))
+                oldest = it;
+        if (oldest == cache_.end()) break;
         used -= oldest->second.bytes;
         std::error_code ec;
-        // A load reading it now has already parsed it in the child; the folder goes only
-        // after this point, and the next open retrieves it again.
+        // The next open retrieves it again.
         fs::remove_all(oldest->second.folder, ec);
         cache_.erase(oldest);
     }
 }
 
-void DicomWebProvider::findStudies(const protocol::FindStudiesRequest &request, StudiesDone done) {
-    {
-        std::lock_guard lock(searchMutex_);
-        if (!stopping_ && searches_.size() < kMaxQueuedSearches) {
-            searches_.push_back({request, std::move(done)});
-            searchWake_.notify_one();
-            return;
-        }
-    }
-    done(ProtocolError{ErrorCode::Busy, "too many study searches are waiting; try again shortly", request.id,
-                       "find_studies"});
-}
-
-void DicomWebProvider::searchLoop() {
-    for (;;) {
-        Search next;
-        {
-            std::unique_lock lock(searchMutex_);
-            searchWake_.wait(lock, [&] { return stopping_ || !searches_.empty(); });
-            if (stopping_) {
-                for (auto &s : searches_)
-                    s.done(ProtocolError{ErrorCode::Busy, "the server is shutting down", s.request.id, "find_studies"});
-                searches_.clear();
-                return;
-            }
-            next = std::move(searches_.front());
-            searches_.pop_front();
-        }
-        StudiesResult result;
-        try {
-            result = search(next.request);
-        } catch (const std::exception &e) {
-            const dicomweb::SourceConfig *config = source(next.request.source);
-            const std::string what = dicomweb::CredentialScrubber(config ? config->authorization : "")(e.what());
-            spdlog::error("find_studies on {}: {}", next.request.source, what);
-            result = ProtocolError{ErrorCode::Internal, "internal error: " + what, next.request.id, "find_studies"};
-        }
-        next.done(std::move(result));
-    }
+void DicomWebProvider::findStudies(const protocol::FindStudiesRequest &request, uint64_t owner, StudiesDone done) {
+    const auto lane = searchLanes_.find(request.source);
+    if (lane == searchLanes_.end()) return done(search(request));   // names the unknown source
+    auto shared = std::make_shared<StudiesDone>(std::move(done));   // one of run and dropped calls it
+    const bool queued = lane->second->post(
+        {owner,
+         [this, request, shared] {
+             StudiesResult result;
+             try {
+                 result = search(request);
+             } catch (const std::exception &e) {
+                 const dicomweb::SourceConfig *config = source(request.source);
+                 const std::string what = dicomweb::CredentialScrubber(config ? config->authorization : "")(e.what());
+                 spdlog::error("find_studies on {}: {}", request.source, what);
+                 result = ProtocolError{ErrorCode::Internal, "internal error: " + what, request.id, "find_studies"};
+             }
+             (*shared)(std::move(result));
+         },
+         [request, shared] {
+             (*shared)(ProtocolError{ErrorCode::Busy, "the server is shutting down", request.id, "find_studies"});
+         }});
+    if (!queued)
+        (*shared)(ProtocolError{ErrorCode::Busy,
+                                fmt::format("more than {} study searches wait for the source \"{}\"; try again shortly",
+                                            kMaxWaitingSearches, request.source),
+                                request.id, "find_studies"});
 }
 
 DicomWebProvider::StudiesResult DicomWebProvider::search(const protocol::FindStudiesRequest &request) {

@@ -41,7 +41,7 @@ SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
     spdlog::info("back end (--device {}): {}", DeviceChoice::parse(config_.device).text(), backEnd_);
     metrics_.setBackEnd(backEnd_, device_.type);
     registry_ = std::make_unique<VolumeRegistry>(config_.dataDirs, config_.memoryBudgetBytes, cl_, metrics_,
-                                                 config_.loadTimeoutS);
+                                                 config_.loadTimeoutS, config_.dicomWebRetrievals);
     registry_->addProvider(uploads_);
     // An upload that expired or was evicted leaves memory too, once no session holds it.
     uploads_->setForgetHook([registry = registry_.get()](const std::string &name) { registry->forget(name); });
@@ -58,7 +58,7 @@ SharedState::SharedState(ServerConfig config) : config_(std::move(config)) {
             spdlog::info("DICOMweb source {}: {}{}", s.name, s.url, s.authorization.empty() ? "" : " (with credentials)");
         }
         dicomWeb_ = std::make_shared<DicomWebProvider>(std::move(sources), privateTemporaryFolder("volcast-dicomweb"),
-                                                       config_.dicomWebCacheBytes);
+                                                       config_.dicomWebCacheBytes, config_.dicomWebSearches);
         registry_->addProvider(dicomWeb_);
     }
     scheduler_ = std::make_unique<RenderScheduler>(metrics_, SchedulerOptions{config_.idleMs, config_.errorCalibration, config_.defaultTargetFrameMs,

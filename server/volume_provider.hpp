@@ -2,7 +2,8 @@
 // Volumes that do not live in the data folders: a user's uploads ("upload:<id>") and series
 // retrieved from a PACS ("dicomweb:SOURCE/STUDY/SERIES"). The registry hands a name carrying a
 // provider's prefix to that provider, which makes the volume available as a local file or
-// folder on the loader thread; the registry then loads it as it loads any file, except that
+// folder on the lane of the volume's source (a few fetches at a time per source, beside the
+// local loads: volume_registry.hpp); the registry then loads it as it loads any file, except that
 // every file, whatever its format, is parsed first in the child process (LoadOptions::
 // parseInChild): bytes from a browser or a PACS are hostile until a parse has survived.
 
@@ -67,9 +68,16 @@ class VolumeProvider {
     // A cheap check on the caller's thread, before a load is queued: nullopt if the name may
     // be opened, else the error to answer (not_found for an unknown upload or source).
     virtual std::optional<protocol::ProtocolError> check(const std::string &name) const = 0;
-    // On the loader thread: the local file or folder holding the volume, which stays there at
-    // least until the load has read it. Throws VolumeFetchError.
+    // What `name` is fetched from: fetches of one source share a lane, so a slow source holds
+    // up only its own opens. The provider's prefix by default (one source).
+    virtual std::string sourceOf(const std::string &) const { return std::string(prefix()); }
+    // On the source's lane, several at once (for different names): the local file or folder
+    // holding the volume, which stays there at least until release(). Throws VolumeFetchError.
     virtual FetchedVolume fetch(const std::string &name, const FetchContext &context) = 0;
+    // Once for each fetch() that returned, when the registry is done reading what it made
+    // available. refused: the loader refused those bytes (the checker, the series checks), so a
+    // provider that keeps them drops them, and the next open fetches again.
+    virtual void release(const std::string &, bool /*refused*/) {}
 };
 
 } // namespace volcast::server

@@ -12,6 +12,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <limits>
 #include <regex>
 
 namespace volcast::server {
@@ -95,15 +96,16 @@ protocol::VolumeInfo VolumeEntry::info() const {
 }
 
 VolumeRegistry::VolumeRegistry(std::vector<fs::path> dataDirs, uint64_t budgetBytes, std::shared_ptr<OpenClContext> cl,
-                               Metrics &metrics, double loadTimeoutSeconds)
-    : budgetBytes_(budgetBytes), loadTimeoutSeconds_(loadTimeoutSeconds), cl_(std::move(cl)), metrics_(metrics) {
+                               Metrics &metrics, double loadTimeoutSeconds, int retrievalsPerSource)
+    : budgetBytes_(budgetBytes), loadTimeoutSeconds_(loadTimeoutSeconds), retrievalsPerSource_(retrievalsPerSource),
+      cl_(std::move(cl)), metrics_(metrics) {
     for (const auto &d : dataDirs) {
         std::error_code ec;
         fs::path c = fs::canonical(d, ec);
         if (ec || !fs::is_directory(c)) throw std::invalid_argument("data folder " + d.string() + ": not a folder");
         dataDirs_.push_back(c);
     }
-    loader_ = std::thread([this] { loaderLoop(); });
+    loads_ = std::make_unique<WorkLane>("loads", 1, std::numeric_limits<size_t>::max());
 }
 
 VolumeRegistry::~VolumeRegistry() { stop(); }
@@ -131,13 +133,17 @@ void VolumeRegistry::forget(const std::string &name) {
 }
 
 void VolumeRegistry::stop() {
-    stopRequested_ = true;   // the load in progress stops at its next step
+    stopRequested_ = true;   // the fetches and the load in progress stop at their next step
+    std::vector<WorkLane *> lanes;
     {
         std::lock_guard lock(mutex_);
         stopping_ = true;
+        for (auto &[source, lane] : fetchLanes_) lanes.push_back(lane.get());
     }
-    wake_.notify_all();
-    if (loader_.joinable()) loader_.join();
+    // Fetch lanes first: a fetch that ends now still hands its volume to loads_, which then
+    // answers it; every waiter gets an answer, even at shutdown.
+    for (WorkLane *lane : lanes) lane->stop();
+    loads_->stop();
 }
 
 std::variant<fs::path, ProtocolError> VolumeRegistry::resolve(const std::string &name) const {
@@ -199,11 +205,13 @@ uint64_t VolumeRegistry::usedBytes() const {
 
 std::string VolumeRegistry::loadingNow() const {
     std::lock_guard lock(mutex_);
-    return loading_;
+    std::string names;
+    for (const auto &name : loading_) names += (names.empty() ? "" : ", ") + name;
+    return names;
 }
 
 void VolumeRegistry::open(const std::string &name, Progress progressFn, Done done,
-                          const std::shared_ptr<const VolumeEntry> &releasing) {
+                          const std::shared_ptr<const VolumeEntry> &releasing, uint64_t owner) {
     fs::path path;
     const std::shared_ptr<VolumeProvider> provider = providerFor(name);
     if (provider) {
@@ -239,15 +247,147 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
         return;
     }
     auto &pending = pending_[name];
-    if (!pending) {
+    const bool starting = !pending;
+    if (starting) {
         pending = std::make_shared<Pending>();
         pending->name = name;
         pending->path = path;
         pending->provider = provider;
-        queue_.push_back(pending);
-        wake_.notify_all();
     }
     pending->waiters.push_back({std::move(progressFn), std::move(done), releasing.get()});
+    if (!starting) return;
+    const std::shared_ptr<Pending> started = pending;
+    lock.unlock();
+    start(started, owner);
+}
+
+WorkLane &VolumeRegistry::fetchLane(const std::string &source) {
+    auto &lane = fetchLanes_[source];
+    // Waiting fetches are bounded by the sessions (one open each) long before this.
+    if (!lane) lane = std::make_unique<WorkLane>("fetch " + source, retrievalsPerSource_, 256);
+    return *lane;
+}
+
+void VolumeRegistry::start(const std::shared_ptr<Pending> &pending, uint64_t owner) {
+    if (!pending->provider) return queueLoad(pending, owner);
+    WorkLane *lane = nullptr;
+    {
+        std::lock_guard lock(mutex_);
+        if (!stopping_) lane = &fetchLane(pending->provider->sourceOf(pending->name));
+    }
+    const bool queued = lane && lane->post({owner, [this, pending, owner] { fetchStep(pending, owner); },
+                                    [this, pending] {
+                                        finish(pending, ProtocolError{ErrorCode::Busy, "the server is shutting down",
+                                                                      nullptr, "open_volume"});
+                                    }});
+    if (!queued)
+        finish(pending, ProtocolError{ErrorCode::Busy,
+                                      stopRequested_ ? std::string("the server is shutting down")
+                                                     : pending->name + ": too many volumes wait for the same source; "
+                                                                       "try again shortly",
+                                      nullptr, "open_volume"});
+}
+
+void VolumeRegistry::queueLoad(const std::shared_ptr<Pending> &pending, uint64_t owner) {
+    const auto shuttingDown = [this, pending] {
+        if (pending->fetched) pending->provider->release(pending->name, false);
+        finish(pending, ProtocolError{ErrorCode::Busy, "the server is shutting down", nullptr, "open_volume"});
+    };
+    const auto run = [this, pending] {
+        {
+            std::lock_guard lock(mutex_);
+            loading_.insert(pending->name);
+        }
+        Result result = load(*pending);
+        if (pending->fetched) pending->provider->release(pending->name, pending->refused);
+        {
+            std::lock_guard lock(mutex_);
+            loading_.erase(loading_.find(pending->name));
+        }
+        finish(pending, std::move(result));
+    };
+    if (!loads_->post({owner, run, shuttingDown})) shuttingDown();
+}
+
+void VolumeRegistry::fetchStep(const std::shared_ptr<Pending> &pending, uint64_t owner) {
+    using protocol::ProgressStage;
+    Pending &p = *pending;
+    {
+        std::lock_guard lock(mutex_);
+        loading_.insert(p.name);
+    }
+    std::optional<ProtocolError> failure;
+    try {
+        progress(p.name, ProgressStage::Loading, "", 0.0);
+        // Bytes from a browser or a PACS: fetched to a local file or folder first, then
+        // every file parsed in the child process before this one reads it (load()).
+        FetchContext context;
+        double sentFetch = -1;
+        context.progress = [&](const FetchProgress &f) {
+            if (f.fraction < sentFetch + 0.01 && f.fraction < 1) return;
+            sentFetch = f.fraction;
+            protocol::ProgressMessage m;
+            m.volume = p.name;
+            m.stage = ProgressStage::Retrieving;
+            m.task = f.task;
+            m.fraction = std::clamp(f.fraction, 0.0, 1.0);
+            if (f.instancesDone && f.instancesTotal) m.instances = std::array<int64_t, 2>{*f.instancesDone, *f.instancesTotal};
+            m.bytes = f.bytes;
+            progress(std::move(m));
+        };
+        context.stopRequested = [this] { return stopRequested_.load(); };
+        context.timeLimitSeconds = loadTimeoutSeconds_;
+        context.maxFloat32Bytes = uint64_t(double(budgetBytes_) / kMemoryFactor);
+        FetchedVolume fetched = p.provider->fetch(p.name, context);
+        p.path = std::move(fetched.path);
+        p.form = fetched.form;
+        p.expectedSeries = std::move(fetched.expectedSeries);
+        p.fetched = true;
+    } catch (const VolumeFetchError &e) {
+        spdlog::warn("fetching {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
+        failure = ProtocolError{e.code, e.what(), nullptr, "open_volume"};
+    } catch (const std::exception &e) {
+        spdlog::warn("fetching {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
+        failure = ProtocolError{ErrorCode::LoadFailed, forClients(p.name + ": " + e.what(), p), nullptr, "open_volume"};
+    }
+    {
+        std::lock_guard lock(mutex_);
+        loading_.erase(loading_.find(p.name));
+    }
+    if (failure) return finish(pending, *failure);
+    queueLoad(pending, owner);
+}
+
+void VolumeRegistry::finish(const std::shared_ptr<Pending> &pending, Result result) {
+    std::vector<Waiter> waiters;
+    std::shared_ptr<VolumeEntry> entry;
+    {
+        std::lock_guard lock(mutex_);
+        waiters = std::move(pending->waiters);
+        if (auto it = pending_.find(pending->name); it != pending_.end() && it->second == pending) pending_.erase(it);
+        if (auto *loaded = std::get_if<std::shared_ptr<VolumeEntry>>(&result)) {
+            // Room is made now that the volume is ready, and only if it can be made.
+            entry = *loaded;
+            if (auto victims = planRoom(entry->bytes, waiters)) {
+                evict(*victims);
+                loaded_[pending->name] = entry;
+                lastUse_[pending->name] = ++useClock_;
+                metrics_.volumeLoaded(entry->bytes);
+                spdlog::info("loaded volume {} ({}x{}x{}, {} MiB)", hideUploadIds(pending->name), entry->volume->dims.x,
+                             entry->volume->dims.y, entry->volume->dims.z, entry->bytes >> 20);
+            } else {
+                const std::string message = roomMessage(pending->name, entry->bytes, waiters);
+                spdlog::warn("loading {}: {}", hideUploadIds(pending->name), hideUploadIds(message));
+                result = ProtocolError{ErrorCode::LoadFailed, message, nullptr, "open_volume"};
+                entry.reset();
+            }
+        }
+        publishMemory();
+    }
+    for (auto &w : waiters) {
+        if (entry) w.done(holdOn(entry));
+        else w.done(result);
+    }
 }
 
 void VolumeRegistry::progress(const std::string &name, protocol::ProgressStage stage, const std::string &task,
@@ -276,58 +416,6 @@ void VolumeRegistry::progress(protocol::ProgressMessage message) {
     for (auto &t : targets) t(message);
 }
 
-void VolumeRegistry::loaderLoop() {
-    for (;;) {
-        std::shared_ptr<Pending> next;
-        {
-            std::unique_lock lock(mutex_);
-            wake_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
-            if (stopping_) {
-                // Every waiter gets an answer, even at shutdown.
-                for (auto &[name, p] : pending_)
-                    for (auto &w : p->waiters)
-                        w.done(ProtocolError{ErrorCode::Busy, "the server is shutting down", nullptr, "open_volume"});
-                pending_.clear();
-                return;
-            }
-            next = queue_.front();
-            queue_.pop_front();
-            loading_ = next->name;
-        }
-        Result result = load(*next);
-        std::vector<Waiter> waiters;
-        std::shared_ptr<VolumeEntry> entry;
-        {
-            std::lock_guard lock(mutex_);
-            loading_.clear();
-            waiters = std::move(pending_[next->name]->waiters);
-            pending_.erase(next->name);
-            if (auto *loaded = std::get_if<std::shared_ptr<VolumeEntry>>(&result)) {
-                // Room is made now that the volume is ready, and only if it can be made.
-                entry = *loaded;
-                if (auto victims = planRoom(entry->bytes, waiters)) {
-                    evict(*victims);
-                    loaded_[next->name] = entry;
-                    lastUse_[next->name] = ++useClock_;
-                    metrics_.volumeLoaded(entry->bytes);
-                    spdlog::info("loaded volume {} ({}x{}x{}, {} MiB)", hideUploadIds(next->name), entry->volume->dims.x,
-                                 entry->volume->dims.y, entry->volume->dims.z, entry->bytes >> 20);
-                } else {
-                    const std::string message = roomMessage(next->name, entry->bytes, waiters);
-                    spdlog::warn("loading {}: {}", hideUploadIds(next->name), hideUploadIds(message));
-                    result = ProtocolError{ErrorCode::LoadFailed, message, nullptr, "open_volume"};
-                    entry.reset();
-                }
-            }
-            publishMemory();
-        }
-        for (auto &w : waiters) {
-            if (entry) w.done(holdOn(entry));
-            else w.done(result);
-        }
-    }
-}
-
 VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
     using protocol::ProgressStage;
     const auto failed = [&](ErrorCode code, const std::string &message) -> Result {
@@ -352,32 +440,11 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
             sentTask = task;
             progress(p.name, ProgressStage::Loading, sentTask, fraction);
         };
+        // Bytes from a browser or a PACS, fetched before (fetchStep): every file is parsed in
+        // the child process before this one reads it.
         if (p.provider) {
-            // Bytes from a browser or a PACS: fetched to a local file or folder first, then
-            // every file parsed in the child process before this one reads it.
-            FetchContext context;
-            double sentFetch = -1;
-            context.progress = [&](const FetchProgress &f) {
-                if (f.fraction < sentFetch + 0.01 && f.fraction < 1) return;
-                sentFetch = f.fraction;
-                protocol::ProgressMessage m;
-                m.volume = p.name;
-                m.stage = ProgressStage::Retrieving;
-                m.task = f.task;
-                m.fraction = std::clamp(f.fraction, 0.0, 1.0);
-                if (f.instancesDone && f.instancesTotal) m.instances = std::array<int64_t, 2>{*f.instancesDone, *f.instancesTotal};
-                m.bytes = f.bytes;
-                progress(std::move(m));
-            };
-            context.stopRequested = [this] { return stopRequested_.load(); };
-            context.timeLimitSeconds = loadTimeoutSeconds_;
-            context.maxFloat32Bytes = options.maxBytes;
-            FetchedVolume fetched = p.provider->fetch(p.name, context);
-            p.path = std::move(fetched.path);
-            p.form = fetched.form;
-            options.expectedSeries = std::move(fetched.expectedSeries);
             options.parseInChild = true;
-            progress(p.name, ProgressStage::Loading, "", 0.0);
+            options.expectedSeries = p.expectedSeries;
         }
         LoadedVolume loaded = p.path.empty() ? loadSceneVolume(p.name, options)
                               : p.form == FetchedVolume::Form::Parsed
@@ -400,21 +467,20 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         entry->renderer = makeFrameRenderer(cl_, entry->volume);
         progress(p.name, ProgressStage::Uploading, "", 1.0);
         return entry;
-    } catch (const VolumeFetchError &e) {
-        spdlog::warn("fetching {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
-        return ProtocolError{e.code, e.what(), nullptr, "open_volume"};
     } catch (const VolumeTooLarge &e) {
         spdlog::warn("loading {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
         return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, uint64_t(double(e.bytes) * kMemoryFactor)));
     } catch (const VolumeLoadTimeout &e) {
         return failed(ErrorCode::LoadFailed, std::string(e.what()) + " (--load-timeout-s)");
     } catch (const VolumeLoadError &e) {
+        p.refused = true;   // the checker or the series checks refused these bytes
         return failed(ErrorCode::LoadFailed, e.what());
     } catch (const std::bad_alloc &) {
         return failed(ErrorCode::LoadFailed, p.name + ": out of memory while loading");
     } catch (const OpenClError &e) {
         return failed(ErrorCode::RenderFailed, p.name + ": " + e.what());
     } catch (const std::exception &e) {
+        p.refused = true;
         return failed(ErrorCode::LoadFailed, p.name + ": " + e.what());
     }
 }

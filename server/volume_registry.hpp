@@ -3,9 +3,14 @@
 // memory. A volume is loaded once and shared: every successful open() hands out a hold on
 // its entry (a shared_ptr whose copies, in the session and its render jobs, all count as
 // that one hold), so an entry nobody holds is unused and may be evicted when a new load
-// needs its memory (least recently opened first). Loads run on one loader thread; every
-// session waiting for a volume gets its progress and its result through callbacks, which
-// the sessions post to their own strands.
+// needs its memory (least recently opened first). Every session waiting for a volume gets
+// its progress and its result through callbacks, which the sessions post to their own strands.
+//
+// Lanes (work_lane.hpp): a provider's fetch (a PACS retrieval: network, seconds to minutes)
+// runs on the lane of its source, a few at a time (retrievalsPerSource); what a volume's
+// bytes become in memory (parse, checks, renderer) runs on the loads lane, one at a time, for
+// local files and fetched ones alike. So a local open never waits behind a retrieval, and a
+// slow source delays only the opens of that source.
 //
 // Memory budget: a volume larger than the whole budget is refused from its header, before
 // its voxels are read. Room is made only once a new volume is loaded and ready to be
@@ -21,18 +26,17 @@
 #include "renderer/model/volume.hpp"
 #include "server/metrics.hpp"
 #include "server/volume_provider.hpp"
+#include "server/work_lane.hpp"
 
 #include <atomic>
-#include <condition_variable>
-#include <deque>
 #include <filesystem>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
-#include <thread>
 #include <variant>
 #include <vector>
 
@@ -63,9 +67,10 @@ class VolumeRegistry {
 
     // cl: the OpenCL device every volume's renderer draws on; null: the native CPU path.
     // loadTimeoutSeconds: a load running longer fails (load_failed naming the limit); 0: none.
+    // retrievalsPerSource: fetches running at once for one source (--dicomweb-retrievals).
     VolumeRegistry(std::vector<std::filesystem::path> dataDirs, uint64_t budgetBytes, std::shared_ptr<OpenClContext> cl,
-                   Metrics &metrics, double loadTimeoutSeconds = 120);
-    ~VolumeRegistry();   // stops the loader after its current load (which stops at its next step)
+                   Metrics &metrics, double loadTimeoutSeconds = 120, int retrievalsPerSource = 2);
+    ~VolumeRegistry();   // stop()
 
     // Names carrying provider->prefix() are opened through it (uploads, DICOMweb), never
     // listed. Add providers before the first open.
@@ -77,15 +82,17 @@ class VolumeRegistry {
     // Every volume a client may open: built-in ones and files with known extensions.
     std::vector<protocol::VolumeInfo> list() const;
     // Open `name` (already through validateVolumeName): at once if loaded, else joining or
-    // starting its load. progress and done are called from the loader thread (or this one).
+    // starting its load. progress and done are called from a lane's thread (or this one).
     // `releasing`: the hold the caller gives up once it has the new one (its current volume).
+    // `owner`: who asks (a session), for the lanes' turns.
     void open(const std::string &name, Progress progress, Done done,
-              const std::shared_ptr<const VolumeEntry> &releasing = nullptr);
+              const std::shared_ptr<const VolumeEntry> &releasing = nullptr, uint64_t owner = 0);
     bool isLoaded(const std::string &name) const;
     // Host memory counted against the budget by the volumes in the registry.
     uint64_t usedBytes() const;
-    // The volume being loaded now, or "" (for the shutdown log).
+    // The volumes being fetched or loaded now, or "" (for the shutdown log).
     std::string loadingNow() const;
+    // Waiting opens are answered busy; a fetch or load in progress stops at its next step.
     void stop();
 
     // The file `name` stands for, or an error (not_found) when there is none inside a data
@@ -103,10 +110,19 @@ class VolumeRegistry {
         std::filesystem::path path;   // empty for built-ins; for a provider's volume, set once fetched
         FetchedVolume::Form form = FetchedVolume::Form::Source;
         std::shared_ptr<VolumeProvider> provider;   // null for built-ins and data-folder files
+        bool fetched = false;   // the provider's fetch succeeded: release() is owed
+        bool refused = false;   // the loader refused the fetched bytes (not a budget, time or shutdown failure)
+        std::optional<SeriesIdentity> expectedSeries;   // what a fetched DICOM series must be (FetchedVolume)
         std::vector<Waiter> waiters;
     };
-    void loaderLoop();
+    // Queues the pending load on its lane: the provider's source's for a fetch, else loads_.
+    void start(const std::shared_ptr<Pending> &pending, uint64_t owner);
+    void fetchStep(const std::shared_ptr<Pending> &pending, uint64_t owner);
+    void queueLoad(const std::shared_ptr<Pending> &pending, uint64_t owner);
     Result load(Pending &pending);
+    // The end of every load: the volume inserted (room made) or the error, to every waiter.
+    void finish(const std::shared_ptr<Pending> &pending, Result result);
+    WorkLane &fetchLane(const std::string &source);   // under mutex_
     void progress(const std::string &name, protocol::ProgressStage stage, const std::string &task, double fraction);
     void progress(protocol::ProgressMessage message);
     std::shared_ptr<VolumeProvider> providerFor(const std::string &name) const;
@@ -125,20 +141,20 @@ class VolumeRegistry {
     std::vector<std::shared_ptr<VolumeProvider>> providers_;
     uint64_t budgetBytes_;
     double loadTimeoutSeconds_;
-    std::atomic<bool> stopRequested_{false};   // read by the load in progress at each step
-    std::string loading_;                      // guarded by mutex_
+    int retrievalsPerSource_;
+    std::atomic<bool> stopRequested_{false};   // read by the fetches and the load in progress at each step
+    std::multiset<std::string> loading_;       // guarded by mutex_
     std::shared_ptr<OpenClContext> cl_;
     Metrics &metrics_;
 
     mutable std::mutex mutex_;
-    std::condition_variable wake_;
     std::map<std::string, std::shared_ptr<VolumeEntry>> loaded_;
     std::map<std::string, uint64_t> lastUse_;   // open counter, for least-recently-opened eviction
     uint64_t useClock_ = 0;
     std::map<std::string, std::shared_ptr<Pending>> pending_;
-    std::deque<std::shared_ptr<Pending>> queue_;
     bool stopping_ = false;
-    std::thread loader_;
+    std::map<std::string, std::unique_ptr<WorkLane>> fetchLanes_;   // by provider->sourceOf(); kept until destruction
+    std::unique_ptr<WorkLane> loads_;                             // one at a time: the memory budget
 };
 
 // Extensions the listing shows (lower case): .nhdr .nrrd .mha .mhd .nii .nii.gz.

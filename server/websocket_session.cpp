@@ -350,7 +350,8 @@ void WebsocketSession::onOpenVolume(const protocol::OpenVolumeRequest &m) {
                 if (auto self = weak.lock()) self->guarded("open_volume", [&] { self->onOpened(id, std::move(result)); }, id);
             });
         },
-        volume_);   // the volume this session gives up: it may be evicted to make room
+        volume_,   // the volume this session gives up: it may be evicted to make room
+        slot_);
 }
 
 void WebsocketSession::onFindStudies(const protocol::FindStudiesRequest &m) {
@@ -360,7 +361,7 @@ void WebsocketSession::onFindStudies(const protocol::FindStudiesRequest &m) {
                           "this server has no DICOMweb source (volcast-server --dicomweb NAME=URL adds one)", m.id,
                           "find_studies"});
     // One search at a time per session: a user who searches again waits for the first answer,
-    // and one session cannot fill the search queue that every session shares.
+    // and one session cannot fill the queue of a source that every session shares.
     if (searching_)
         return sendError({ErrorCode::Busy, "a study search is under way for this session already; wait for its answer",
                           m.id, "find_studies"});
@@ -368,7 +369,7 @@ void WebsocketSession::onFindStudies(const protocol::FindStudiesRequest &m) {
     auto weak = weak_from_this();
     auto executor = ws_.get_executor();
     const nlohmann::json id = m.id;
-    sources->findStudies(m, [weak, executor, id](DicomWebProvider::StudiesResult result) {
+    sources->findStudies(m, slot_, [weak, executor, id](DicomWebProvider::StudiesResult result) {
         net::post(executor, [weak, id, result = std::move(result)]() mutable {
             if (auto self = weak.lock())
                 self->guarded("find_studies", [&] {
