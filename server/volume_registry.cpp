@@ -6,6 +6,7 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/io/volume_source.hpp"
+#include "protocol/volume_name.hpp"
 #include "server/upload_ids.hpp"
 
 #include <spdlog/fmt/fmt.h>
@@ -205,9 +206,12 @@ std::string VolumeRegistry::loadingNow() const {
 void VolumeRegistry::open(const std::string &name, Progress progressFn, Done done,
                           const std::shared_ptr<const VolumeEntry> &releasing) {
     fs::path path;
-    const std::shared_ptr<VolumeProvider> provider = providerFor(name);
+    // A stack of a series: the series is found, fetched and resolved by its own name.
+    const protocol::StackSelection selection = protocol::splitStackSelection(name);
+    const std::string series(selection.series);
+    const std::shared_ptr<VolumeProvider> provider = providerFor(series);
     if (provider) {
-        if (auto problem = provider->check(name)) {
+        if (auto problem = provider->check(series)) {
             problem->requestType = "open_volume";
             done(*problem);
             return;
@@ -219,7 +223,7 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
             return;
         }
     } else {
-        auto resolved = resolve(name);
+        auto resolved = resolve(series);
         if (auto *e = std::get_if<ProtocolError>(&resolved)) {
             done(*e);
             return;
@@ -242,6 +246,8 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
     if (!pending) {
         pending = std::make_shared<Pending>();
         pending->name = name;
+        pending->series = series;
+        pending->stack = selection.stack;
         pending->path = path;
         pending->provider = provider;
         queue_.push_back(pending);
@@ -343,6 +349,7 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         options.maxBytes = uint64_t(double(budgetBytes_) / kMemoryFactor);
         options.timeLimitSeconds = loadTimeoutSeconds_;
         options.stopRequested = [this] { return stopRequested_.load(); };
+        options.seriesStack = p.stack;
         // The loader's own steps, thinned to what a progress bar shows: a new step, or 2 % more.
         double sent = 0;
         std::string sentTask;
@@ -372,7 +379,12 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
             context.stopRequested = [this] { return stopRequested_.load(); };
             context.timeLimitSeconds = loadTimeoutSeconds_;
             context.maxFloat32Bytes = options.maxBytes;
-            FetchedVolume fetched = p.provider->fetch(p.name, context);
+            FetchedVolume fetched = p.provider->fetch(p.series, context);
+            // An upload was parsed whole when it arrived; a stack is chosen only as a series is loaded.
+            if (p.stack && fetched.form == FetchedVolume::Form::Parsed)
+                return failed(ErrorCode::LoadFailed,
+                              p.name + ": an upload is opened whole; a stack (#stack=N) is chosen only in a series "
+                                       "from a DICOMweb source or the data folders");
             p.path = std::move(fetched.path);
             p.form = fetched.form;
             options.expectedSeries = std::move(fetched.expectedSeries);
@@ -408,6 +420,15 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, uint64_t(double(e.bytes) * kMemoryFactor)));
     } catch (const VolumeLoadTimeout &e) {
         return failed(ErrorCode::LoadFailed, std::string(e.what()) + " (--load-timeout-s)");
+    } catch (const SeriesHoldsStacks &e) {
+        // What can be shown instead: each stack by the name that opens it.
+        Result answer = failed(ErrorCode::LoadFailed, e.what());
+        auto &error = std::get<ProtocolError>(answer);
+        for (const SeriesStack &s : e.stacks)
+            error.stacks.push_back({protocol::stackVolumeName(p.series, s.number), s.slices, s.rows, s.columns,
+                                    s.orientation, s.localizer});
+        if (!error.stacks.empty()) error.message += fmt::format(" (stack 1 opens as \"{}\")", error.stacks.front().volume);
+        return answer;
     } catch (const VolumeLoadError &e) {
         return failed(ErrorCode::LoadFailed, e.what());
     } catch (const std::bad_alloc &) {
