@@ -5,10 +5,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace volcast::protocol {
 
@@ -38,12 +40,24 @@ std::optional<ErrorCode> errorCodeFromName(std::string_view name);
 // An error answer: the code, a message for people naming what was wrong (field paths as in
 // scene-file errors, e.g. "camera: must be a JSON object, got a number"), and the request
 // it answers. The server sends it as an `error` message and the connection stays usable.
+// One stack of a series that load_failed offers (a series holding several stacks): the
+// volume name that opens it, and what it holds.
+struct StackOffer {
+    std::string volume;         // the series' name with "#stack=N" (volume_name.hpp)
+    int64_t slices = 0;
+    int64_t rows = 0, columns = 0;
+    std::string orientation;    // "axial", "coronal", "sagittal", "oblique" or "unknown"
+    bool localizer = false;     // one to three slices beside a larger stack
+    bool operator==(const StackOffer &) const = default;
+};
+
 struct ProtocolError {
     static constexpr std::string_view kType = "error";
     ErrorCode code = ErrorCode::Internal;
     std::string message;
     nlohmann::json requestId;   // the request's "id" echoed; null when it had none or was unreadable
     std::string requestType;    // the request's "type" when it was a known one, else empty
+    std::vector<StackOffer> stacks = {};   // load_failed of a series of several stacks; sent only when not empty
     bool operator==(const ProtocolError &) const = default;
 };
 

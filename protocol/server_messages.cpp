@@ -125,9 +125,17 @@ json fieldsOf(const PickMessage &m) {
 }
 
 json fieldsOf(const ProtocolError &m) {
-    return {{"code", errorCodeName(m.code)},
-            {"message", m.message},
-            {"request_type", m.requestType.empty() ? json(nullptr) : json(m.requestType)}};
+    json j{{"code", errorCodeName(m.code)},
+           {"message", m.message},
+           {"request_type", m.requestType.empty() ? json(nullptr) : json(m.requestType)}};
+    if (!m.stacks.empty()) {
+        json stacks = json::array();
+        for (const StackOffer &s : m.stacks)
+            stacks.push_back({{"volume", s.volume}, {"slices", s.slices}, {"rows", s.rows}, {"columns", s.columns},
+                              {"orientation", s.orientation}, {"localizer", s.localizer}});
+        j["stacks"] = std::move(stacks);
+    }
+    return j;
 }
 
 const RequestId &idOf(const ServerMessage &message) {
@@ -389,6 +397,23 @@ ServerMessage readError(const Fields &f, RequestId id) {
     m.message = detail::string(f.require("message"), "message", kAnyLength);
     if (const json *type = f.find("request_type"); type && !type->is_null())
         m.requestType = detail::string(*type, "request_type", kAnyLength);
+    if (const json *stacks = f.find("stacks")) {
+        const json &list = detail::array(*stacks, "stacks");
+        for (size_t i = 0; i < list.size(); ++i) {
+            const Fields sf(list[i], detail::element("stacks", i), {}, kIgnore);
+            const auto count = [&](std::string_view key) {
+                return detail::integer(sf.require(key), sf.pathOf(key), 0, std::numeric_limits<int64_t>::max());
+            };
+            StackOffer s;
+            s.volume = detail::string(sf.require("volume"), sf.pathOf("volume"), kAnyLength);
+            s.slices = count("slices");
+            s.rows = count("rows");
+            s.columns = count("columns");
+            s.orientation = detail::string(sf.require("orientation"), sf.pathOf("orientation"), kAnyLength);
+            s.localizer = detail::boolean(sf.require("localizer"), sf.pathOf("localizer"));
+            m.stacks.push_back(std::move(s));
+        }
+    }
     return m;
 }
 

@@ -4,8 +4,33 @@
 
 namespace volcast::protocol {
 
+StackSelection splitStackSelection(std::string_view name) {
+    const size_t at = name.rfind(kStackSuffix);
+    if (at == std::string_view::npos || at == 0) return {name, std::nullopt};
+    const std::string_view digits = name.substr(at + kStackSuffix.size());
+    if (digits.empty() || digits.size() > 5 || digits.front() == '0') return {name, std::nullopt};
+    uint32_t n = 0;
+    for (const char c : digits) {
+        if (c < '0' || c > '9') return {name, std::nullopt};
+        n = n * 10 + uint32_t(c - '0');
+    }
+    return {name.substr(0, at), n};
+}
+
+std::string stackVolumeName(std::string_view series, uint32_t stack) {
+    return std::string(series) + std::string(kStackSuffix) + std::to_string(stack);
+}
+
 std::optional<std::string> validateVolumeName(std::string_view name, size_t maxBytes) {
     if (name.empty()) return "is empty";
+    if (name.find(kStackSuffix) != std::string_view::npos) {
+        const StackSelection selection = splitStackSelection(name);
+        if (!selection.stack)
+            return "has a \"#stack=\" that is not followed by a stack number (1 to " +
+                   std::to_string(kMaxStackNumber) + ") at its end";
+        if (selection.series.find(kStackSuffix) != std::string_view::npos)
+            return "names a stack twice (\"#stack=\")";
+    }
     if (name.size() > maxBytes)
         return "is " + std::to_string(name.size()) + " bytes long; at most " +
                std::to_string(maxBytes) + " are allowed";

@@ -6,6 +6,7 @@
 #include "renderer/cpu/cpu_renderer.hpp"
 #include "renderer/make_frame_renderer.hpp"
 #include "renderer/io/volume_source.hpp"
+#include "protocol/volume_name.hpp"
 #include "server/upload_ids.hpp"
 
 #include <spdlog/fmt/fmt.h>
@@ -213,9 +214,12 @@ std::string VolumeRegistry::loadingNow() const {
 void VolumeRegistry::open(const std::string &name, Progress progressFn, Done done,
                           const std::shared_ptr<const VolumeEntry> &releasing, uint64_t owner) {
     fs::path path;
-    const std::shared_ptr<VolumeProvider> provider = providerFor(name);
+    // A stack of a series: the series is found, fetched and resolved by its own name.
+    const protocol::StackSelection selection = protocol::splitStackSelection(name);
+    const std::string series(selection.series);
+    const std::shared_ptr<VolumeProvider> provider = providerFor(series);
     if (provider) {
-        if (auto problem = provider->check(name)) {
+        if (auto problem = provider->check(series)) {
             problem->requestType = "open_volume";
             done(*problem);
             return;
@@ -227,7 +231,7 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
             return;
         }
     } else {
-        auto resolved = resolve(name);
+        auto resolved = resolve(series);
         if (auto *e = std::get_if<ProtocolError>(&resolved)) {
             done(*e);
             return;
@@ -251,6 +255,8 @@ void VolumeRegistry::open(const std::string &name, Progress progressFn, Done don
     if (starting) {
         pending = std::make_shared<Pending>();
         pending->name = name;
+        pending->series = series;
+        pending->stack = selection.stack;
         pending->path = path;
         pending->provider = provider;
     }
@@ -273,7 +279,7 @@ void VolumeRegistry::start(const std::shared_ptr<Pending> &pending, uint64_t own
     WorkLane *lane = nullptr;
     {
         std::lock_guard lock(mutex_);
-        if (!stopping_) lane = &fetchLane(pending->provider->sourceOf(pending->name));
+        if (!stopping_) lane = &fetchLane(pending->provider->sourceOf(pending->series));
     }
     const bool queued = lane && lane->post({owner, [this, pending, owner] { fetchStep(pending, owner); },
                                     [this, pending] {
@@ -290,7 +296,7 @@ void VolumeRegistry::start(const std::shared_ptr<Pending> &pending, uint64_t own
 
 void VolumeRegistry::queueLoad(const std::shared_ptr<Pending> &pending, uint64_t owner) {
     const auto shuttingDown = [this, pending] {
-        if (pending->fetched) pending->provider->release(pending->name, false);
+        if (pending->fetched) pending->provider->release(pending->series, false);
         finish(pending, ProtocolError{ErrorCode::Busy, "the server is shutting down", nullptr, "open_volume"});
     };
     const auto run = [this, pending] {
@@ -299,7 +305,7 @@ void VolumeRegistry::queueLoad(const std::shared_ptr<Pending> &pending, uint64_t
             loading_.insert(pending->name);
         }
         Result result = load(*pending);
-        if (pending->fetched) pending->provider->release(pending->name, pending->refused);
+        if (pending->fetched) pending->provider->release(pending->series, pending->refused);
         {
             std::lock_guard lock(mutex_);
             loading_.erase(loading_.find(pending->name));
@@ -338,11 +344,17 @@ void VolumeRegistry::fetchStep(const std::shared_ptr<Pending> &pending, uint64_t
         context.stopRequested = [this] { return stopRequested_.load(); };
         context.timeLimitSeconds = loadTimeoutSeconds_;
         context.maxFloat32Bytes = uint64_t(double(budgetBytes_) / kMemoryFactor);
-        FetchedVolume fetched = p.provider->fetch(p.name, context);
+        FetchedVolume fetched = p.provider->fetch(p.series, context);
         p.path = std::move(fetched.path);
         p.form = fetched.form;
         p.expectedSeries = std::move(fetched.expectedSeries);
         p.fetched = true;
+        // An upload was parsed whole when it arrived; a stack is chosen only as a series is loaded.
+        if (p.stack && p.form == FetchedVolume::Form::Parsed)
+            failure = ProtocolError{ErrorCode::LoadFailed,
+                                    p.name + ": an upload is opened whole; a stack (#stack=N) is chosen "
+                                                            "only in a series from a DICOMweb source or the data folders",
+                                    nullptr, "open_volume"};
     } catch (const VolumeFetchError &e) {
         spdlog::warn("fetching {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
         failure = ProtocolError{e.code, e.what(), nullptr, "open_volume"};
@@ -354,7 +366,10 @@ void VolumeRegistry::fetchStep(const std::shared_ptr<Pending> &pending, uint64_t
         std::lock_guard lock(mutex_);
         loading_.erase(loading_.find(p.name));
     }
-    if (failure) return finish(pending, *failure);
+    if (failure) {
+        if (p.fetched) p.provider->release(p.series, false);
+        return finish(pending, *failure);
+    }
     queueLoad(pending, owner);
 }
 
@@ -431,6 +446,7 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         options.maxBytes = uint64_t(double(budgetBytes_) / kMemoryFactor);
         options.timeLimitSeconds = loadTimeoutSeconds_;
         options.stopRequested = [this] { return stopRequested_.load(); };
+        options.seriesStack = p.stack;
         // The loader's own steps, thinned to what a progress bar shows: a new step, or 2 % more.
         double sent = 0;
         std::string sentTask;
@@ -472,6 +488,15 @@ VolumeRegistry::Result VolumeRegistry::load(Pending &p) {
         return failed(ErrorCode::LoadFailed, tooLargeMessage(p.name, uint64_t(double(e.bytes) * kMemoryFactor)));
     } catch (const VolumeLoadTimeout &e) {
         return failed(ErrorCode::LoadFailed, std::string(e.what()) + " (--load-timeout-s)");
+    } catch (const SeriesHoldsStacks &e) {
+        // What can be shown instead: each stack by the name that opens it.
+        Result answer = failed(ErrorCode::LoadFailed, e.what());
+        auto &error = std::get<ProtocolError>(answer);
+        for (const SeriesStack &s : e.stacks)
+            error.stacks.push_back({protocol::stackVolumeName(p.series, s.number), s.slices, s.rows, s.columns,
+                                    s.orientation, s.localizer});
+        if (!error.stacks.empty()) error.message += fmt::format(" (stack 1 opens as \"{}\")", error.stacks.front().volume);
+        return answer;
     } catch (const VolumeLoadError &e) {
         p.refused = true;   // the checker or the series checks refused these bytes
         return failed(ErrorCode::LoadFailed, e.what());

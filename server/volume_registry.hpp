@@ -107,6 +107,8 @@ class VolumeRegistry {
     };
     struct Pending {
         std::string name;
+        std::string series;             // the name without its "#stack=N" (volume_name.hpp)
+        std::optional<uint32_t> stack;  // the one stack of a DICOM series asked for by name
         std::filesystem::path path;   // empty for built-ins; for a provider's volume, set once fetched
         FetchedVolume::Form form = FetchedVolume::Form::Source;
         std::shared_ptr<VolumeProvider> provider;   // null for built-ins and data-folder files

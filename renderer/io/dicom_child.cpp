@@ -22,6 +22,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <charconv>
 #include <cmath>
@@ -30,6 +31,7 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 extern char **environ;
@@ -150,8 +152,10 @@ std::string quotableTask(std::string_view text) {
 // The checker's refusal, so that the caller never parses the file itself for its words: one
 // line, the mark, the kind (kRefusedPlainly, kRefusedTooLarge with the volume's float32 bytes,
 // kRefusedTimeLimit, kRefusedOverResultLimit with the hand-back's bytes), a space, that number,
-// a space, the message (a VolumeLoadError's what()).
+// a space, the message (a VolumeLoadError's what()). kRefusedStacks (SeriesHoldsStacks) has
+// the stacks' count for its number and, before the message, the stacks (stackList).
 constexpr char kRefusalMark = '\x1f';
+constexpr char kRefusedStacks = 'K';
 constexpr char kRefusedPlainly = 'R';
 constexpr char kRefusedTooLarge = 'L';
 constexpr char kRefusedTimeLimit = 'T';
@@ -163,13 +167,64 @@ constexpr size_t kMaxSaidBytes = 4096;
 constexpr size_t kMaxRefusalBytes = 2048;
 
 // The checker's side: its refusal as that line (newlines in ITK's messages become spaces).
-int writeRefusal(char kind, uint64_t bytes, const std::exception &e) {
+int writeRefusal(char kind, uint64_t bytes, const std::exception &e, const std::string &stacks = "") {
     std::string message = e.what();
     std::replace_if(message.begin(), message.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
-    std::fprintf(stderr, "%c%c %llu %s\n", kRefusalMark, kind, static_cast<unsigned long long>(bytes),
-                 message.c_str());
+    std::fprintf(stderr, "%c%c %llu %s%s%s\n", kRefusalMark, kind, static_cast<unsigned long long>(bytes),
+                 stacks.c_str(), stacks.empty() ? "" : " ", message.c_str());
     std::fflush(stderr);
     return kCheckRefused;
+}
+
+// SeriesHoldsStacks's stacks as one word: each "slices,rows,columns,orientation,localizer"
+// (localizer 0 or 1), joined by '/', in their numbers' order.
+std::string stackList(const std::vector<SeriesStack> &stacks) {
+    std::string word;
+    for (const SeriesStack &s : stacks)
+        word += fmt::format("{}{},{},{},{},{}", word.empty() ? "" : "/", s.slices, s.rows, s.columns, s.orientation,
+                            s.localizer ? 1 : 0);
+    return word;
+}
+
+// The caller's side of stackList, read as hostile: `count` stacks of known orientations and
+// sizes DICOM can state (rows and columns are 16-bit), or nothing.
+std::optional<std::vector<SeriesStack>> readStackList(std::string_view word, uint64_t count) {
+    if (count < 2 || count > SeriesHoldsStacks::kMaxListed) return std::nullopt;
+    std::vector<SeriesStack> stacks;
+    while (!word.empty()) {
+        const size_t end = std::min(word.find('/'), word.size());
+        const std::string_view one = word.substr(0, end);
+        word = end < word.size() ? word.substr(end + 1) : std::string_view();
+        std::array<std::string_view, 5> field;
+        size_t at = 0;
+        for (size_t f = 0; f < field.size(); ++f) {
+            const size_t comma = f + 1 < field.size() ? one.find(',', at) : one.size();
+            if (comma == std::string_view::npos) return std::nullopt;
+            field[f] = one.substr(at, comma - at);
+            at = comma + 1;
+        }
+        SeriesStack s;
+        s.number = uint32_t(stacks.size() + 1);
+        const auto number = [](std::string_view text, auto &out, uint64_t most) {
+            uint64_t n = 0;
+            const auto r = std::from_chars(text.data(), text.data() + text.size(), n);
+            if (r.ec != std::errc() || r.ptr != text.data() + text.size() || n > most) return false;
+            out = static_cast<std::remove_reference_t<decltype(out)>>(n);
+            return true;
+        };
+        constexpr std::array<std::string_view, 5> kOrientations{"axial", "coronal", "sagittal", "oblique", "unknown"};
+        if (!number(field[0], s.slices, UINT32_MAX) || s.slices == 0 || !number(field[1], s.rows, 65535) ||
+            !number(field[2], s.columns, 65535) ||
+            std::find(kOrientations.begin(), kOrientations.end(), field[3]) == kOrientations.end() ||
+            (field[4] != "0" && field[4] != "1"))
+            return std::nullopt;
+        s.orientation = std::string(field[3]);
+        s.localizer = field[4] == "1";
+        stacks.push_back(std::move(s));
+        if (stacks.size() > count) return std::nullopt;
+    }
+    if (stacks.size() != count) return std::nullopt;
+    return stacks;
 }
 
 // The caller's side: the refusal line (without its newline) as the error the load throws.
@@ -187,7 +242,14 @@ int writeRefusal(char kind, uint64_t bytes, const std::exception &e) {
         std::from_chars(line.data() + 3, line.data() + numberEnd, bytes).ptr == line.data() + numberEnd;
     if (!wellFormed) fail(path, "was refused by the parser in its separate process; it is not loaded");
     const char kind = line[1];
-    const std::string_view said = std::string_view(line).substr(numberEnd + 1);
+    std::string_view said = std::string_view(line).substr(numberEnd + 1);
+    std::optional<std::vector<SeriesStack>> stacks;
+    if (kind == kRefusedStacks) {
+        const size_t wordEnd = said.find(' ');
+        if (wordEnd == std::string_view::npos) fail(path, "was refused by the parser in its separate process; it is not loaded");
+        stacks = readStackList(said.substr(0, wordEnd), bytes);
+        said = said.substr(wordEnd + 1);
+    }
     std::string text = said.starts_with(path.string()) ? "" : path.string() + ": ";
     for (size_t i = 0; i < said.size(); ++i) {
         const auto byte = [&](size_t k) { return static_cast<unsigned char>(said[k]); };
@@ -205,6 +267,8 @@ int writeRefusal(char kind, uint64_t bytes, const std::exception &e) {
     if (kind == kRefusedTooLarge) throw VolumeTooLarge(message, bytes);
     if (kind == kRefusedTimeLimit) throw VolumeLoadTimeout(message, options.timeLimitSeconds);
     if (kind == kRefusedOverResultLimit) throw VolumeOverResultLimit(message, bytes, options.maxResultBytes);
+    // Stacks that do not read as stacks: still refused, in the checker's words, with no offer.
+    if (stacks) throw SeriesHoldsStacks(message, std::move(*stacks));
     throw VolumeLoadError(message);
 }
 
@@ -488,6 +552,7 @@ void runChecker(const fs::path &path, const LoadOptions &options, LoadProgress &
     if (planAllowed) args.push_back("plan");
     if (options.expectedSeries)
         args.insert(args.end(), {"expect-series", options.expectedSeries->studyUid, options.expectedSeries->seriesUid});
+    if (options.seriesStack) args.insert(args.end(), {"stack", std::to_string(*options.seriesStack)});
     if (options.maxResultBytes != UINT64_MAX) args.push_back(fmt::format("max-result-bytes={}", options.maxResultBytes));
     std::vector<char *> argv;
     for (auto &a : args) argv.push_back(a.data());
@@ -581,11 +646,13 @@ namespace volcast {
 
 int runDicomCheck(int argc, char **argv) {
     using namespace io; // the checker's limits and statuses, and the load (dicom_child.hpp)
-    // After RESULT: "plan", "expect-series STUDY SERIES" (LoadOptions::expectedSeries) and
-    // "max-result-bytes=N" (LoadOptions::maxResultBytes), in any order.
+    // After RESULT: "plan", "expect-series STUDY SERIES" (LoadOptions::expectedSeries),
+    // "stack N" (LoadOptions::seriesStack) and "max-result-bytes=N" (LoadOptions::maxResultBytes),
+    // in any order.
     constexpr std::string_view kMaxResult = "max-result-bytes=";
     bool planAllowed = false, usage = argc < 5;
     std::optional<SeriesIdentity> expectedSeries;
+    std::optional<uint32_t> seriesStack;
     const char *maxResult = nullptr;
     for (int i = 7; i < argc && !usage; ++i) {
         if (std::strcmp(argv[i], "plan") == 0) {
@@ -593,6 +660,13 @@ int runDicomCheck(int argc, char **argv) {
         } else if (std::strcmp(argv[i], "expect-series") == 0 && i + 2 < argc) {
             expectedSeries = SeriesIdentity{argv[i + 1], argv[i + 2]};
             i += 2;
+        } else if (std::strcmp(argv[i], "stack") == 0 && i + 1 < argc) {
+            uint32_t n = 0;
+            const std::string_view text = argv[i + 1];
+            const auto r = std::from_chars(text.data(), text.data() + text.size(), n);
+            usage = r.ec != std::errc() || r.ptr != text.data() + text.size();
+            seriesStack = n;
+            i += 1;
         } else if (std::string_view(argv[i]).starts_with(kMaxResult)) {
             maxResult = argv[i] + kMaxResult.size();
         } else {
@@ -601,12 +675,13 @@ int runDicomCheck(int argc, char **argv) {
     }
     if (usage) {
         std::fprintf(stderr, "usage: %s FILE-OR-FOLDER MAX-BYTES MAX-DIMENSION TIME-LIMIT-S [MAX-ARCHIVE-BYTES [RESULT "
-                             "[plan] [expect-series STUDY-UID SERIES-UID] [max-result-bytes=N]]]\n"
+                             "[plan] [expect-series STUDY-UID SERIES-UID] [stack N] [max-result-bytes=N]]]\n"
                              "Loads a volume as volcast's loader does, in this process (volcast runs it to parse "
                              "files from outside away from the server), and writes what it loaded to the existing "
                              "file RESULT; with 'plan', an uncompressed DICOM series in a folder is handed back as "
                              "where its slices' pixels lie rather than as samples; with 'expect-series', a DICOM "
-                             "folder is refused unless every instance is of that study and series; with "
+                             "folder is refused unless every instance is of that study and series; with 'stack', "
+                             "only that stack of a DICOM series is read (the series still checked whole); with "
                              "max-result-bytes, a volume whose hand-back would be larger is refused before any of "
                              "it is written. Exit status 0 loaded, 1 refused, 3 out of memory.\n",
                      kCheckerName);
@@ -617,6 +692,7 @@ int runDicomCheck(int argc, char **argv) {
     // beside it, are sent here: the rules for a file from outside hold (an upload carries its data).
     options.parseInChild = true;
     options.expectedSeries = std::move(expectedSeries);
+    options.seriesStack = seriesStack;
     try {
         options.maxBytes = std::stoull(argv[2]);
         options.maxDimension = std::stoll(argv[3]);
@@ -646,9 +722,9 @@ int runDicomCheck(int argc, char **argv) {
             // need no parsing, left for the caller to copy from the files.
             LoadProgress progress(options, argv[1]);
             progress(0, "reading header");
-            checkDicomFolder(argv[1], options, progress);
+            const StackFiles only = checkDicomFolder(argv[1], options, progress);
             Volume placed;
-            if (const auto series = placedUncompressedSeries(argv[1], options, progress, placed)) {
+            if (const auto series = placedUncompressedSeries(argv[1], options, progress, placed, only)) {
                 writeSeriesPlan(placed, *series, argv[6]);
                 return kCheckLoaded;
             }
@@ -665,6 +741,8 @@ int runDicomCheck(int argc, char **argv) {
         return writeRefusal(kRefusedTimeLimit, 0, e);
     } catch (const VolumeOverResultLimit &e) {
         return writeRefusal(kRefusedOverResultLimit, e.needed, e);
+    } catch (const SeriesHoldsStacks &e) {
+        return writeRefusal(kRefusedStacks, e.stacks.size(), e, stackList(e.stacks));
     } catch (const VolumeLoadError &e) {
         return writeRefusal(kRefusedPlainly, 0, e);
     } catch (const std::exception &e) {

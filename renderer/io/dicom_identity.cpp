@@ -50,6 +50,7 @@ struct Stack {
     int64_t rows = 0, columns = 0;
     std::optional<std::array<double, 6>> orientation;
     size_t slices = 0;
+    std::vector<std::string> files;
     bool holds(const InstanceHeader &h, const std::optional<std::array<double, 6>> &o) const {
         if (h.rows != rows || h.columns != columns || o.has_value() != orientation.has_value()) return false;
         if (!o) return true;
@@ -69,7 +70,7 @@ std::string describeStacks(const std::vector<Stack> &stacks) {
     for (size_t i = 0; i < stacks.size(); ++i) {
         const Stack &s = stacks[i];
         if (i > 0) said += i + 1 == stacks.size() ? " and " : ", ";
-        said += fmt::format("{} slice{} {} x {}", s.slices, s.slices == 1 ? "" : "s", s.columns, s.rows);
+        said += fmt::format("stack {} has {} slice{} {} x {}", i + 1, s.slices, s.slices == 1 ? "" : "s", s.columns, s.rows);
         if (oneSize) {
             if (s.orientation) {
                 const auto &o = *s.orientation;
@@ -83,6 +84,43 @@ std::string describeStacks(const std::vector<Stack> &stacks) {
         if (s.slices <= 3 && s.slices < largest) said += " (a localizer?)";
     }
     return said;
+}
+
+// Where the slices face: the axis their normal lies within 30 degrees of (cos 30 = 0.866), in
+// the patient's LPS axes (x: sagittal, y: coronal, z: axial).
+std::string orientationName(const std::optional<std::array<double, 6>> &o) {
+    if (!o) return "unknown";
+    const auto &r = *o;
+    const std::array<double, 3> normal{r[1] * r[5] - r[2] * r[4], r[2] * r[3] - r[0] * r[5], r[0] * r[4] - r[1] * r[3]};
+    const double length = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
+    if (!(length > 0)) return "oblique";
+    constexpr std::array<const char *, 3> kAxes{"sagittal", "coronal", "axial"};
+    for (size_t a = 0; a < 3; ++a)
+        if (std::abs(normal[a]) / length >= 0.866) return kAxes[a];
+    return "oblique";
+}
+
+// The stacks in the order that numbers them (SeriesStack): most slices first, then rows,
+// columns and orientation, which tell any two stacks apart.
+void numberStacks(std::vector<Stack> &stacks) {
+    std::sort(stacks.begin(), stacks.end(), [](const Stack &a, const Stack &b) {
+        if (a.slices != b.slices) return a.slices > b.slices;
+        if (a.rows != b.rows) return a.rows > b.rows;
+        if (a.columns != b.columns) return a.columns > b.columns;
+        return a.orientation < b.orientation;
+    });
+}
+
+std::vector<SeriesStack> listedStacks(const std::vector<Stack> &stacks) {
+    size_t largest = 0;
+    for (const Stack &s : stacks) largest = std::max(largest, s.slices);
+    std::vector<SeriesStack> listed;
+    for (size_t i = 0; i < stacks.size() && i < SeriesHoldsStacks::kMaxListed; ++i) {
+        const Stack &s = stacks[i];
+        listed.push_back({uint32_t(i + 1), uint32_t(s.slices), s.rows, s.columns, orientationName(s.orientation),
+                          s.slices <= 3 && s.slices < largest});
+    }
+    return listed;
 }
 
 } // namespace
@@ -124,9 +162,14 @@ std::vector<InstanceHeader> readInstanceHeaders(const fs::path &dir, LoadProgres
     return headers;
 }
 
-void checkSeriesIdentity(const fs::path &dir, const std::vector<InstanceHeader> &instances,
-                         const std::optional<SeriesIdentity> &expected) {
-    if (instances.empty()) return;
+std::optional<std::vector<std::string>> checkSeriesIdentity(const fs::path &dir,
+                                                            const std::vector<InstanceHeader> &instances,
+                                                            const std::optional<SeriesIdentity> &expected,
+                                                            std::optional<uint32_t> selected) {
+    if (instances.empty()) {
+        if (selected && *selected != 1) fail(dir, fmt::format("holds no DICOM instances, so no stack {}", *selected));
+        return std::nullopt;
+    }
     const InstanceHeader &first = instances.front();
     const auto refuse = [&](const InstanceHeader &h, const std::string &problem) {
         fail(dir, fmt::format("{} {}; the series is not loaded", instanceName(h), problem));
@@ -191,10 +234,23 @@ void checkSeriesIdentity(const fs::path &dir, const std::vector<InstanceHeader> 
         auto stack = std::find_if(stacks.begin(), stacks.end(), [&](const Stack &s) { return s.holds(h, orientation); });
         if (stack == stacks.end()) {
             if (!stacks.empty() && !firstOfAnotherStack) firstOfAnotherStack = &h;
-            stacks.push_back({h.rows, h.columns, orientation, 0});
+            stacks.push_back({h.rows, h.columns, orientation, 0, {}});
             stack = stacks.end() - 1;
         }
         ++stack->slices;
+        stack->files.push_back(h.file);
+    }
+    numberStacks(stacks);
+    const auto refuseStacks = [&](const std::string &problem) {
+        throw SeriesHoldsStacks(fmt::format("{}: {}", dir.string(), problem), listedStacks(stacks));
+    };
+    if (selected) {
+        // Only the split into stacks is resolved by the selection: every check above held for
+        // the whole series.
+        if (*selected < 1 || *selected > stacks.size())
+            refuseStacks(fmt::format("the series holds {} stack{}, so no stack {}; it is not loaded", stacks.size(),
+                                     stacks.size() == 1 ? "" : "s", *selected));
+        return std::move(stacks[*selected - 1].files);
     }
     if (firstOfAnotherStack) {
         const InstanceHeader &h = *firstOfAnotherStack;
@@ -204,9 +260,25 @@ void checkSeriesIdentity(const fs::path &dir, const std::vector<InstanceHeader> 
                                     : fmt::format("is oriented otherwise (ImageOrientationPatient) than the series' "
                                                   "first instance, {}",
                                                   instanceName(first));
-        refuse(h, fmt::format("{}: the series holds {} stacks: {}; one volume shows one stack", how, stacks.size(),
-                              describeStacks(stacks)));
+        const std::string found = fmt::format("{} {}: the series holds {} stacks: {}", instanceName(h), how,
+                                              stacks.size(), describeStacks(stacks));
+        // Exactly one stack of several slices beside single-slice images: the stack meant is
+        // plain, and said first, but still only loaded when asked for by its number.
+        const bool oneStackBesideLocalizers =
+            stacks[0].slices > 1 &&
+            std::all_of(stacks.begin() + 1, stacks.end(), [](const Stack &s) { return s.slices == 1; });
+        if (oneStackBesideLocalizers)
+            refuseStacks(fmt::format("the series holds {} besides {} {} slices: open stack 1 for the {} slices ({}); "
+                                     "one volume shows one stack, and the series is not loaded",
+                                     stacks.size() == 2 ? "a localizer"
+                                                        : fmt::format("{} localizers", stacks.size() - 1),
+                                     stacks[0].slices, orientationName(stacks[0].orientation), stacks[0].slices,
+                                     found));
+        refuseStacks(fmt::format("{}; one volume shows one stack, and the series is not loaded: open one of its "
+                                 "stacks",
+                                 found));
     }
+    return std::nullopt;
 }
 
 } // namespace volcast::io

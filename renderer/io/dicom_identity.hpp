@@ -45,7 +45,12 @@ std::vector<InstanceHeader> readInstanceHeaders(const fs::path &dir, LoadProgres
 // orientation: a localizer or a second stack is named, with the stacks' slice counts), and an
 // orientation and position that are finite numbers where stated. Messages never quote a
 // patient's name or ID: they say which field differs. Nothing to check without instances.
-void checkSeriesIdentity(const fs::path &dir, const std::vector<InstanceHeader> &instances,
-                         const std::optional<SeriesIdentity> &expected);
+// Several stacks are refused with SeriesHoldsStacks unless `selected` selects one of them
+// (SeriesStack::number); then the names of that stack's files are returned, for the read
+// paths to read only those. Nothing is returned without a selection.
+std::optional<std::vector<std::string>> checkSeriesIdentity(const fs::path &dir,
+                                                            const std::vector<InstanceHeader> &instances,
+                                                            const std::optional<SeriesIdentity> &expected,
+                                                            std::optional<uint32_t> selected = std::nullopt);
 
 } // namespace volcast::io

@@ -47,9 +47,9 @@ void checkDicomFolderEntries(const fs::path &dir) {
     }
 }
 
-void checkDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
+StackFiles checkDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
     checkDicomFolderEntries(dir);
-    checkSeriesIdentity(dir, readInstanceHeaders(dir, progress), options.expectedSeries);
+    return checkSeriesIdentity(dir, readInstanceHeaders(dir, progress), options.expectedSeries, options.seriesStack);
 }
 
 namespace {
@@ -134,12 +134,34 @@ void checkSeriesGeometry(const fs::path &dir, const std::vector<SliceGeometry> &
     }
 }
 
+// The files (and their geometry) ascending along the first slice's normal, as GDCM's series
+// scan orders one stack; left as they are where a slice is not located.
+void sortAlongNormal(std::vector<std::string> &files, std::vector<SliceGeometry> &geometry) {
+    for (const SliceGeometry &s : geometry)
+        if (!s.position || !s.orientation) return;
+    const auto &o = *geometry.front().orientation;
+    const Vec3d normal = cross(Vec3d{o[0], o[1], o[2]}, Vec3d{o[3], o[4], o[5]});
+    std::vector<size_t> order(files.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+        return dot(*geometry[a].position, normal) < dot(*geometry[b].position, normal);
+    });
+    std::vector<std::string> sortedFiles;
+    std::vector<SliceGeometry> sortedGeometry;
+    for (const size_t i : order) {
+        sortedFiles.push_back(std::move(files[i]));
+        sortedGeometry.push_back(std::move(geometry[i]));
+    }
+    files = std::move(sortedFiles);
+    geometry = std::move(sortedGeometry);
+}
+
 } // namespace
 
 std::optional<UncompressedSeries> placedUncompressedSeries(const fs::path &dir, const LoadOptions &options,
-                                                          LoadProgress &progress, Volume &v) {
+                                                          LoadProgress &progress, Volume &v, const StackFiles &only) {
     std::string why;
-    auto series = scanUncompressedSeries(dir, why);
+    auto series = scanUncompressedSeries(dir, why, only);
     if (!series) {
         spdlog::debug("{}: read through GDCM ({})", dir.string(), why);
         return std::nullopt;
@@ -270,27 +292,35 @@ void readSeriesSamples(const fs::path &dir, itk::GDCMImageIO *io, const std::vec
 }
 
 Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress) {
-    checkDicomFolder(dir, options, progress);
+    const StackFiles only = checkDicomFolder(dir, options, progress);
     // Uncompressed slices of one series are read straight from their files; any other
     // series through ITK and GDCM, below.
     Volume v;
-    if (const auto series = placedUncompressedSeries(dir, options, progress, v)) {
+    if (const auto series = placedUncompressedSeries(dir, options, progress, v, only)) {
         readUncompressedSamples(dir, *series, progress, 0.02, 0.9, v);
         return v;
     }
     auto names = itk::GDCMSeriesFileNames::New();
     names->SetUseSeriesDetails(true);
     names->SetDirectory(dir.string());
-    const auto &uids = names->GetSeriesUIDs();
-    if (uids.empty()) fail(dir, "folder holds no DICOM series (no DICOM image files were found in it)");
-    const std::vector<std::string> files = names->GetFileNames(uids.front());
-    if (files.empty()) fail(dir, "folder holds no DICOM image files");
+    // GDCM's parts of the folder, each the files of the selected stack alone where one is.
+    std::vector<std::vector<std::string>> parts;
+    for (const std::string &uid : names->GetSeriesUIDs()) {
+        std::vector<std::string> part = names->GetFileNames(uid);
+        if (only)
+            std::erase_if(part, [&](const std::string &file) {
+                return std::find(only->begin(), only->end(), fs::path(file).filename().string()) == only->end();
+            });
+        if (!part.empty()) parts.push_back(std::move(part));
+    }
+    if (parts.empty()) fail(dir, "folder holds no DICOM series (no DICOM image files were found in it)");
+    std::vector<std::string> files = parts.front();
     // checkDicomFolder let one series through; GDCM's scan splits it further by series
     // number, sequence name and slice thickness, and loading one part would be a silent subset.
-    if (uids.size() > 1)
+    if (parts.size() > 1)
         fail(dir, fmt::format("the series' slices differ in series number, sequence name or slice thickness, "
                               "which splits them into {} stacks; one volume shows one stack, and it is not loaded",
-                              uids.size()));
+                              parts.size()));
     // One file may be a multi-frame volume on its own.
     if (files.size() == 1) {
         try {
@@ -318,6 +348,9 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
     progress(0.01, "checking slices");
     std::vector<SliceGeometry> geometry;
     for (const auto &file : files) geometry.push_back(checkDicomSlice(dir, fs::path(file), sliceBytes));
+    // GDCM orders a part by position only where all its files share an orientation; a stack
+    // taken out of a part with another stack is ordered here, along its own normal.
+    if (only) sortAlongNormal(files, geometry);
     checkSeriesGeometry(dir, geometry);
 
     // Read as the type GDCM gives after rescaling: asking ITK for floats made it convert every
@@ -370,6 +403,8 @@ Volume loadZippedSeries(const fs::path &path, const LoadOptions &options, LoadPr
         throw VolumeLoadTimeout(named(e.what()), e.limitSeconds);
     } catch (const LoadOutOfMemory &) {
         throw;
+    } catch (const SeriesHoldsStacks &e) {
+        throw SeriesHoldsStacks(named(e.what()), e.stacks);
     } catch (const VolumeLoadError &e) {
         throw VolumeLoadError(named(e.what()));
     }

@@ -29,14 +29,16 @@ void checkDicomFolderEntries(const fs::path &dir);
 
 // What every DICOM folder meets before either read path: its entries (checkDicomFolderEntries),
 // then its instances' headers, one series of one patient in one stack, of the requested
-// series where LoadOptions::expectedSeries names one (dicom_identity.hpp).
-void checkDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress);
+// series where LoadOptions::expectedSeries names one (dicom_identity.hpp). Where
+// LoadOptions::seriesStack selects a stack, the names of its files, which alone are read.
+using StackFiles = std::optional<std::vector<std::string>>;
+StackFiles checkDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress);
 
 // The folder's series when the direct reader takes it (dicom_uncompressed.hpp), checked as
 // any series is (its shape against the budget, its slices' geometry) and v placed; no
-// samples yet. Nothing when the series goes through GDCM.
+// samples yet. Nothing when the series goes through GDCM. `only`: checkDicomFolder's answer.
 std::optional<UncompressedSeries> placedUncompressedSeries(const fs::path &dir, const LoadOptions &options,
-                                                          LoadProgress &progress, Volume &v);
+                                                          LoadProgress &progress, Volume &v, const StackFiles &only);
 
 // Bytes of one stored DICOM pixel (before ITK applies the rescale slope and intercept).
 uint64_t storedDicomSize(itk::GDCMImageIO &io);

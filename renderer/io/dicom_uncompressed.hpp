@@ -80,7 +80,9 @@ struct UncompressedSeries {
 
 // The folder's series when this reader takes it (every entry a regular file, see
 // checkDicomFolderEntries), else nothing, `why` saying what it met first. Reads only headers.
-std::optional<UncompressedSeries> scanUncompressedSeries(const fs::path &dir, std::string &why);
+// With `only`, just those files of the folder (one stack of its series, checkSeriesIdentity).
+std::optional<UncompressedSeries> scanUncompressedSeries(const fs::path &dir, std::string &why,
+                                                         const std::optional<std::vector<std::string>> &only = std::nullopt);
 
 // v placed as ITK's series reader places the series: dims, spacing, origin and direction
 // (checked), the type after rescaling, modality, orientation known. No samples yet.

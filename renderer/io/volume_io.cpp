@@ -38,6 +38,9 @@ Volume loadVolumeHere(const fs::path &path, const LoadOptions &options, bool dic
         progress(0, "reading header");
         const bool folder = fs::is_directory(status);
         const bool zip = !folder && isZipName(path);
+        if (options.seriesStack && !folder && !zip)
+            fail(path, fmt::format("is not a DICOM series: a stack (#stack={}) is chosen only within a series",
+                                   *options.seriesStack));
         std::optional<Volume> checked;
         if (dicomInChild) {
             // A file from outside is not even sniffed here (ITK's CanReadFile reads, and for a

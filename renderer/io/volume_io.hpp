@@ -39,10 +39,12 @@
 //   volume can show (dicom_identity.hpp), else it is refused naming the first instance that
 //   differs and the field: one PatientID (and PatientName, IssuerOfPatientID where stated), one
 //   study, one series, one frame of reference, no SOPInstanceUID twice, one size and
-//   orientation (a localizer or a second stack is refused naming the stacks, never a subset
-//   loaded), finite image orientation and position where stated; with
-//   LoadOptions::expectedSeries, every instance of the requested study and series. A folder
-//   holding several series is refused naming how many.
+//   orientation (a localizer or a second stack is refused with SeriesHoldsStacks, listing
+//   the stacks, never a subset loaded unasked), finite image orientation and position where
+//   stated; with LoadOptions::expectedSeries, every instance of the requested study and
+//   series. A folder holding several series is refused naming how many. With
+//   LoadOptions::seriesStack, the series (checked whole as above) is read as that one of its
+//   stacks, which must itself be one regular stack.
 // - A .zip file is a DICOM series packed: unpacked (zip_extract.hpp: entry names ignored,
 //   links refused, entries, bytes and ratio bounded) into a fresh folder beside it, loaded as
 //   a folder, and the folder removed. Like every folder it is parsed first in the checker.
@@ -57,6 +59,7 @@
 #include <string>
 #include <string_view>
 #include <stdexcept>
+#include <vector>
 
 namespace volcast {
 
@@ -64,6 +67,21 @@ namespace volcast {
 struct SeriesIdentity {
     std::string studyUid;    // (0020,000D) StudyInstanceUID
     std::string seriesUid;   // (0020,000E) SeriesInstanceUID
+};
+
+// One stack of a DICOM series (one size and orientation): what SeriesHoldsStacks lists and
+// LoadOptions::seriesStack selects. Stacks are numbered from 1 by their slice count, largest
+// first (then rows, columns and orientation), so a number names the same stack however the
+// files are named or ordered.
+struct SeriesStack {
+    uint32_t number = 0;
+    uint32_t slices = 0;
+    int64_t rows = 0, columns = 0;
+    // "axial", "coronal" or "sagittal" where the slices' normal lies within 30 degrees of that
+    // axis, "oblique" otherwise, "unknown" where the slices state no orientation.
+    std::string orientation;
+    bool localizer = false;   // one to three slices beside a larger stack: a scout image
+    bool operator==(const SeriesStack &) const = default;
 };
 
 struct LoadOptions {
@@ -93,6 +111,10 @@ struct LoadOptions {
     // A DICOM folder retrieved as this study and series: every instance must belong to them,
     // or the load is refused (a PACS that answered another series, or mixed one in).
     std::optional<SeriesIdentity> expectedSeries;
+    // The one stack of a DICOM series to read (SeriesStack::number), asked for by name; the
+    // whole series is still checked as one series of one patient. Anything but a DICOM series
+    // is refused with it.
+    std::optional<uint32_t> seriesStack;
     // The checker's hand-back (parseToKeep's kept file) may be at most this many bytes: the
     // room left in the caller's storage. A volume needing more is refused with
     // VolumeOverResultLimit once its size is known, before any of it is written.
@@ -116,6 +138,15 @@ struct VolumeOverResultLimit : VolumeLoadError {
     VolumeOverResultLimit(const std::string &message, uint64_t neededBytes, uint64_t limitBytes)
         : VolumeLoadError(message), needed(neededBytes), limit(limitBytes) {}
     uint64_t needed, limit;
+};
+
+// A DICOM series holding more than one stack, without LoadOptions::seriesStack (or with one
+// it does not hold): the stacks it holds, the largest SeriesHoldsStacks::kMaxListed of them.
+struct SeriesHoldsStacks : VolumeLoadError {
+    static constexpr size_t kMaxListed = 32;
+    SeriesHoldsStacks(const std::string &message, std::vector<SeriesStack> held)
+        : VolumeLoadError(message), stacks(std::move(held)) {}
+    std::vector<SeriesStack> stacks;
 };
 
 // The load ran past LoadOptions::timeLimitSeconds.

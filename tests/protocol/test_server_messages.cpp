@@ -117,6 +117,23 @@ TEST(ServerMessages, EveryMessageRoundTrips) {
     }
 }
 
+TEST(ServerMessages, ALoadFailedOfASeriesOfSeveralStacksOffersEachByItsVolumeName) {
+    ProtocolError error{ErrorCode::LoadFailed, "the series holds a localizer besides 120 axial slices", 3, "open_volume"};
+    error.stacks = {{"dicomweb:pacs/1.2.3/1.2.3.4#stack=1", 120, 512, 512, "axial", false},
+                    {"dicomweb:pacs/1.2.3/1.2.3.4#stack=2", 1, 256, 256, "coronal", true}};
+    const std::string text = toJsonText(error);
+    EXPECT_EQ(json::parse(text).at("stacks"), json::parse(R"([
+        {"volume": "dicomweb:pacs/1.2.3/1.2.3.4#stack=1", "slices": 120, "rows": 512, "columns": 512,
+         "orientation": "axial", "localizer": false},
+        {"volume": "dicomweb:pacs/1.2.3/1.2.3.4#stack=2", "slices": 1, "rows": 256, "columns": 256,
+         "orientation": "coronal", "localizer": true}])"));
+    EXPECT_TRUE(parseServerMessage(text) == ServerMessage(error)) << text;
+    // A stack without the field a client needs to open it is not a protocol message.
+    json broken = json::parse(text);
+    broken["stacks"][1].erase("volume");
+    EXPECT_THROW(parseServerMessage(broken.dump()), DecodeError);
+}
+
 TEST(ServerMessages, EveryTypeIsCovered) {
     std::vector<bool> seen(std::variant_size_v<ServerMessage>, false);
     for (const ServerMessage &message : everyMessage()) seen[message.index()] = true;
@@ -128,6 +145,7 @@ TEST(ServerMessages, ErrorMessageForm) {
         ProtocolError{ErrorCode::BadField, "camera: must be a JSON object, got an integer", 7, "camera"}));
     EXPECT_EQ(j, json::parse(R"({"type": "error", "code": "bad_field", "id": 7, "request_type": "camera",
                                  "message": "camera: must be a JSON object, got an integer"})"));
+    EXPECT_FALSE(j.contains("stacks")) << "an error without stacks to offer sends none";
     // An error answering an unreadable request has null id and request_type.
     const json unreadable = json::parse(toJsonText(ProtocolError{ErrorCode::MalformedJson, "x", nullptr, ""}));
     EXPECT_TRUE(unreadable.at("id").is_null());

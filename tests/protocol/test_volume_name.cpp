@@ -51,6 +51,22 @@ TEST(VolumeName, RefusesEachKindWithItsOwnMessage) {
     EXPECT_EQ(kinds.size(), 13u);
 }
 
+TEST(VolumeName, AStackOfASeriesIsNamedByTheSeriesNameAndItsNumber) {
+    for (const std::string name : {"dicomweb:pacs/1.2.3/1.2.3.4#stack=1", "ct/series#stack=2", "upload:abc#stack=99999"})
+        EXPECT_EQ(validateVolumeName(name), std::nullopt) << name;
+    const StackSelection selection = splitStackSelection("dicomweb:pacs/1.2.3/1.2.3.4#stack=12");
+    EXPECT_EQ(selection.series, "dicomweb:pacs/1.2.3/1.2.3.4");
+    EXPECT_EQ(selection.stack, 12u);
+    EXPECT_EQ(stackVolumeName("ct/series", 3), "ct/series#stack=3");
+    EXPECT_EQ(splitStackSelection("ct/series").stack, std::nullopt);
+    EXPECT_EQ(splitStackSelection("ct/series").series, "ct/series");
+    const std::string noNumber = "has a \"#stack=\" that is not followed by a stack number (1 to 99999) at its end";
+    for (const std::string name : {"ct/series#stack=", "ct/series#stack=0", "ct/series#stack=01", "ct/series#stack=-1",
+                                   "ct/series#stack=100000", "ct/series#stack=1x", "#stack=1", "ct/series#stack=1/x"})
+        EXPECT_EQ(validateVolumeName(name), noNumber) << name;
+    EXPECT_EQ(validateVolumeName("ct/series#stack=1#stack=2"), "names a stack twice (\"#stack=\")");
+}
+
 TEST(VolumeName, LengthLimitIsAParameter) {
     EXPECT_EQ(validateVolumeName("abcdef", 6), std::nullopt);
     EXPECT_EQ(validateVolumeName("abcdefg", 6), "is 7 bytes long; at most 6 are allowed");

@@ -458,7 +458,8 @@ TEST_F(VolumeIoTest, ASeriesAlternatingTwoSizesIsRefusedNamingTheStacks) {
         fs::rename(e.path(), dir / "series" / ("slice_1" + e.path().filename().string().substr(7)));
     makeOneSeries(dir / "series");
     expectLoadError(dir / "series", {"('slice_1000.dcm') is 32 x 32 pixels where the series' first instance",
-                                     "is 16 x 16", "holds 2 stacks: 4 slices 16 x 16 and 4 slices 32 x 32"});
+                                     "is 16 x 16",
+                                     "holds 2 stacks: stack 1 has 4 slices 32 x 32 and stack 2 has 4 slices 16 x 16"});
 }
 
 TEST_F(VolumeIoTest, ASeriesWithALocalizerIsRefusedNamingIt) {
@@ -467,6 +468,99 @@ TEST_F(VolumeIoTest, ASeriesWithALocalizerIsRefusedNamingIt) {
     fs::rename(dir / "scout" / "slice_0000.dcm", dir / "series" / "slice_scout.dcm");
     makeOneSeries(dir / "series");
     expectLoadError(dir / "series", {"('slice_scout.dcm') is 32 x 32", "2 stacks", "1 slice 32 x 32 (a localizer?)", "6 slices 16 x 16"});
+}
+
+// The stacks a refusal offers (SeriesHoldsStacks), or a failure saying why there are none.
+std::vector<SeriesStack> offeredStacks(const fs::path &series, const LoadOptions &options = {}) {
+    try {
+        const Volume v = loadVolume(series, options);
+        ADD_FAILURE() << series << " loaded (" << v.dims.z << " slices) but holds several stacks";
+    } catch (const SeriesHoldsStacks &e) {
+        return e.stacks;
+    } catch (const std::exception &e) {
+        ADD_FAILURE() << series << " was refused without the stacks it holds: " << e.what();
+    }
+    return {};
+}
+
+std::array<int64_t, 3> dimsOf(const Volume &v) { return {v.dims.x, v.dims.y, v.dims.z}; }
+
+LoadOptions stack(uint32_t number) {
+    LoadOptions options;
+    options.seriesStack = number;
+    return options;
+}
+
+TEST_F(VolumeIoTest, ASeriesWithALocalizerOffersItsStacksAndLoadsEachByNumberOnly) {
+    writeSeries(dir / "series", 6, 16, 10);
+    writeSeries(dir / "scout", 1, 32);
+    fs::rename(dir / "scout" / "slice_0000.dcm", dir / "series" / "slice_scout.dcm");
+    makeOneSeries(dir / "series");
+    EXPECT_EQ(offeredStacks(dir / "series"),
+              (std::vector<SeriesStack>{{1, 6, 16, 16, "axial", false}, {2, 1, 32, 32, "axial", true}}));
+    expectLoadError(dir / "series", {"holds a localizer besides 6 axial slices: open stack 1 for the 6 slices"});
+    const Volume axial = loadVolume(dir / "series", stack(1));
+    EXPECT_EQ(dimsOf(axial), (std::array<int64_t, 3>{16, 16, 6})) << "stack 1 is the 6 slices of 16 x 16 and nothing else";
+    EXPECT_DOUBLE_EQ(axial.spacing[2], 2) << "their own gap, as written";
+    EXPECT_DOUBLE_EQ(axial.origin[2], 10) << "their own first position, as written";
+    const Volume scout = loadVolume(dir / "series", stack(2));
+    EXPECT_EQ(dimsOf(scout), (std::array<int64_t, 3>{32, 32, 1})) << "stack 2 is the localizer alone";
+    // A stack the series does not hold: refused naming how many it holds, offering them again.
+    expectLoadError(dir / "series", {"holds 2 stacks, so no stack 3"}, stack(3));
+    EXPECT_EQ(offeredStacks(dir / "series", stack(3)).size(), 2u);
+    // A volume that is no series has no stacks to choose.
+    writeSeries(dir / "single", 4);
+    saveVolume(loadVolume(dir / "single"), dir / "head.nrrd");
+    expectLoadError(dir / "head.nrrd", {"is not a dicom series"}, stack(1));
+}
+
+TEST_F(VolumeIoTest, ASeriesOfTwoOrientationsLoadsEachStackWithItsGeometryOnBothReadPaths) {
+    // 6 axial slices (normal +z) and 4 coronal ones (rows along x, columns along -z: normal
+    // +y) at y = 0, 3, 6, 9 mm, all of one size in one series.
+    writeSeries(dir / "series", 6, 16, 0);
+    writeSeries(dir / "coronal", 4, 16, 0);
+    int y = 0;
+    for (const auto &e : fs::directory_iterator(dir / "coronal")) {
+        dicom_tags::setTags(e.path(), {{dicom_tags::kImageOrientation, "1\\0\\0\\0\\0\\-1"},
+                                       {dicom_tags::kImagePosition, "0\\" + std::to_string(3 * y++) + "\\0"}});
+        fs::rename(e.path(), dir / "series" / ("slice_1" + e.path().filename().string().substr(7)));
+    }
+    makeOneSeries(dir / "series");
+    EXPECT_EQ(offeredStacks(dir / "series"),
+              (std::vector<SeriesStack>{{1, 6, 16, 16, "axial", false}, {2, 4, 16, 16, "coronal", false}}));
+    expectLoadError(dir / "series", {"is oriented otherwise", "holds 2 stacks", "open one of its stacks"});
+    // The direct reader's plan, then ITK's series reader (a file beside the slices that the
+    // direct reader does not take).
+    fs::copy(dir / "series", dir / "gdcm");
+    writeFile(dir / "gdcm" / "notes.txt", "not DICOM\n");
+    for (const char *folder : {"series", "gdcm"}) {
+        SCOPED_TRACE(folder);
+        const Volume axial = loadVolume(dir / folder, stack(1));
+        EXPECT_EQ(dimsOf(axial), (std::array<int64_t, 3>{16, 16, 6}));
+        EXPECT_NEAR(std::abs(axial.direction(2, 2)), 1, 1e-9) << "stacked along z";
+        const Volume coronal = loadVolume(dir / folder, stack(2));
+        EXPECT_EQ(dimsOf(coronal), (std::array<int64_t, 3>{16, 16, 4}));
+        EXPECT_NEAR(std::abs(coronal.direction(1, 2)), 1, 1e-9) << "stacked along y";
+        EXPECT_NEAR(coronal.spacing[2], 3, 1e-9) << "the coronal slices' own gap";
+    }
+}
+
+TEST_F(VolumeIoTest, AStackOfASeriesIsRefusedWhenAnotherStackBreaksTheSeriesIdentity) {
+    writeSeries(dir / "series", 6, 16);
+    writeSeries(dir / "scout", 1, 32);
+    fs::rename(dir / "scout" / "slice_0000.dcm", dir / "series" / "slice_scout.dcm");
+    makeOneSeries(dir / "series");
+    ASSERT_EQ(loadVolume(dir / "series", stack(1)).dims.z, 6) << "stack 1 of the clean series loads";
+    // The localizer, which stack 1 does not read, is another patient's: the whole series is refused.
+    dicom_tags::makeAnotherPatients(dir / "series" / "slice_scout.dcm");
+    expectLoadError(dir / "series", {"('slice_scout.dcm') belongs to another patient", "patientid differs"}, stack(1));
+    // A selected stack must itself be regular: a slice missing from it is refused as before.
+    writeSeries(dir / "gap", 6, 16);
+    writeSeries(dir / "scout2", 1, 32);
+    fs::rename(dir / "scout2" / "slice_0000.dcm", dir / "gap" / "slice_scout.dcm");
+    fs::remove(dir / "gap" / "slice_0003.dcm");
+    makeOneSeries(dir / "gap");
+    expectLoadError(dir / "gap", {"a slice is missing"}, stack(1));
 }
 
 TEST_F(VolumeIoTest, ASeriesWithoutAFiniteOrientationOrPositionIsRefused) {

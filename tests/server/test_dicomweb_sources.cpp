@@ -5,6 +5,7 @@
 
 #include "renderer/io/volume_io.hpp"
 #include "server_fixture.hpp"
+#include "tests/dicom_tags.hpp"
 #include "tests/dicomweb/hostile_server.hpp"
 #include "tests/dicomweb/orthanc_fixture.hpp"
 
@@ -294,6 +295,57 @@ TEST_F(DicomWebSources, APacsAnsweringAnotherSeriesThanRequestedIsRefusedNamingI
     EXPECT_NE(e.message.find("is not of the requested series (its SeriesInstanceUID is another)"), std::string::npos)
         << e.message;
     EXPECT_NE(e.message.find("instance "), std::string::npos) << "names the instance: " << e.message;
+    expectSessionCarriesOn(*c);
+}
+
+// A series as scanners send it: an axial stack and a localizer of another size under one
+// SeriesInstanceUID, stored in the suite's Orthanc as one series (modality OT, so that the
+// search for CT studies above still finds the suite's study alone).
+TEST_F(DicomWebSources, ASeriesWithALocalizerIsRefusedOfferingItsStacksAndAnOfferedNameOpensThatStack) {
+    const auto slices = [](int64_t size, int64_t count, const fs::path &folder) {
+        volcast::Volume v;
+        v.dims = {size, size, count};
+        v.spacing = {1, 1, 2};
+        v.voxels.resize(v.voxelCount());
+        for (size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(int(i % 300) - 100);
+        volcast::saveDicomSeries(v, folder, volcast::VoxelType::Int16);
+    };
+    const fs::path folder = tmp / "with_localizer";
+    slices(16, 6, folder);
+    slices(32, 1, tmp / "localizer");
+    fs::rename(tmp / "localizer" / "slice_0000.dcm", folder / "slice_localizer.dcm");
+    const std::string study = "1.2.826.0.1.3680043.2.1125.77", series = study + ".2";
+    std::string lastId;
+    for (const auto &entry : fs::directory_iterator(folder)) {
+        using namespace volcast::dicom_tags;
+        setTags(entry.path(), {{kStudyUid, study}, {kSeriesUid, series}, {kFrameOfReferenceUid, study + ".3"},
+                               {{0x0008, 0x0060}, "OT"}});
+        lastId = orthanc->process.upload(entry.path());
+    }
+    const json stored = orthanc->process.rest("GET", "/instances/" + lastId + "/series");
+    ASSERT_EQ(stored.at("Instances").size(), 7u) << "Orthanc keeps the localizer in the series: " << stored.dump();
+
+    auto server = serverWith(volcast::test::OrthancProcess::authorization());
+    auto c = volcast::test::helloClient(server->port(), "gtest", kTimeout);
+    const std::string name = "dicomweb:pacs/" + study + "/" + series;
+    const auto e = errorIn(ask(*c, {{"type", "open_volume"}, {"id", 2}, {"name", name}}));
+    EXPECT_EQ(e.code, ErrorCode::LoadFailed) << e.message;
+    EXPECT_NE(e.message.find("holds a localizer besides 6 axial slices: open stack 1 for the 6 slices"),
+              std::string::npos)
+        << e.message;
+    using volcast::protocol::StackOffer;
+    EXPECT_EQ(e.stacks, (std::vector<StackOffer>{{name + "#stack=1", 6, 16, 16, "axial", false},
+                                                 {name + "#stack=2", 1, 32, 32, "axial", true}}))
+        << e.message;
+    ASSERT_FALSE(e.stacks.empty());
+    const Message state = ask(*c, {{"type", "open_volume"}, {"id", 3}, {"name", e.stacks[0].volume}});
+    ASSERT_EQ(volcast::test::asError(state), nullptr) << state.text;
+    const json volume = json::parse(state.text).at("volume");
+    EXPECT_EQ(volume.at("name"), name + "#stack=1");
+    EXPECT_EQ(volume.at("dims"), json({16, 16, 6})) << "the axial stack alone";
+    // A stack the series does not hold: refused naming how many it holds.
+    const auto none = errorIn(ask(*c, {{"type", "open_volume"}, {"id", 4}, {"name", name + "#stack=3"}}));
+    EXPECT_NE(none.message.find("holds 2 stacks, so no stack 3"), std::string::npos) << none.message;
     expectSessionCarriesOn(*c);
 }
 

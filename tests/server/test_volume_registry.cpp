@@ -6,6 +6,7 @@
 #include "renderer/io/volume_io.hpp"
 #include "renderer/common/mip_pyramid.hpp"
 #include "server/volume_registry.hpp"
+#include "tests/dicom_tags.hpp"
 #include "tests/server/registry_fixture.hpp"
 
 #include <gtest/gtest.h>
@@ -173,6 +174,45 @@ TEST_F(VolumeRegistryTest, ClientMessagesNameNoServerPath) {
         EXPECT_EQ(message.find(fs::temp_directory_path().string()), std::string::npos) << message;
         EXPECT_TRUE(message.starts_with(name)) << message;
     }
+}
+
+// A data-folder DICOM folder holding an axial stack and a localizer: refused offering each
+// stack by the name that opens it; NAME#stack=N opens that stack alone.
+TEST_F(VolumeRegistryTest, ADicomFolderOfSeveralStacksOffersEachAndOpensOneByItsName) {
+    const auto slices = [](int64_t size, int64_t count, const fs::path &folder) {
+        volcast::Volume v;
+        v.dims = {size, size, count};
+        v.spacing = {1, 1, 2};
+        v.voxels.assign(v.voxelCount(), 10.0f);
+        volcast::saveDicomSeries(v, folder, volcast::VoxelType::Int16);
+    };
+    slices(16, 6, data / "ct" / "series");
+    slices(32, 1, data / "scout");
+    fs::rename(data / "scout" / "slice_0000.dcm", data / "ct" / "series" / "slice_scout.dcm");
+    fs::remove_all(data / "scout");
+    for (const auto &e : fs::directory_iterator(data / "ct" / "series"))
+        volcast::dicom_tags::setTags(e.path(), {{volcast::dicom_tags::kStudyUid, "1.2.826.0.1.3680043.2.1125.1"},
+                                                {volcast::dicom_tags::kSeriesUid, "1.2.826.0.1.3680043.2.1125.1.2"},
+                                                {volcast::dicom_tags::kFrameOfReferenceUid, "1.2.826.0.1.3680043.2.1125.1.3"}});
+    writeVolume("head.nrrd", 4, 4, 4);
+    auto r = registry(64 * kMiB);
+    const auto refused = openNow(*r, "ct/series");
+    const auto *error = std::get_if<volcast::protocol::ProtocolError>(&refused);
+    ASSERT_NE(error, nullptr) << "a series of two stacks is not opened unasked";
+    EXPECT_EQ(error->code, volcast::protocol::ErrorCode::LoadFailed);
+    EXPECT_TRUE(error->message.starts_with("ct/series: the series holds a localizer besides 6 axial slices"))
+        << error->message;
+    EXPECT_EQ(error->stacks, (std::vector<volcast::protocol::StackOffer>{{"ct/series#stack=1", 6, 16, 16, "axial", false},
+                                                                        {"ct/series#stack=2", 1, 32, 32, "axial", true}}));
+    const auto stack = entryOf(openNow(*r, "ct/series#stack=1"));
+    ASSERT_NE(stack, nullptr);
+    EXPECT_EQ(stack->name, "ct/series#stack=1");
+    EXPECT_EQ(stack->volume->dims.z, 6) << "the axial stack alone";
+    EXPECT_EQ(stack->volume->dims.x, 16);
+    const std::string none = loadFailure(openNow(*r, "ct/series#stack=3"));
+    EXPECT_NE(none.find("holds 2 stacks, so no stack 3"), std::string::npos) << none;
+    const std::string file = loadFailure(openNow(*r, "head.nrrd#stack=1"));
+    EXPECT_NE(file.find("is not a DICOM series"), std::string::npos) << file;
 }
 
 } // namespace

@@ -66,7 +66,7 @@ const isPrivateName = (name) => /^(upload|dicomweb):/.test(name ?? "");
 
 // --- widgets --------------------------------------------------------------------------
 
-const errors = new ErrorList(document);
+const errors = new ErrorList(document, (name) => openNamed(name));
 const message = new ViewMessage(document);
 const indicator = new ConnectionIndicator(document, () => session.connection.retryNow());
 const stats = new StatsOverlay(document, session.stats);
@@ -349,7 +349,8 @@ session.on("server_error", (e) => {
     e = { ...e, message: [said.title, said.detail].filter(Boolean).join(" ") };
     opener.openFailed(said.title);
   }
-  if (!saidInPanel) errors.show(e);
+  // A series of several stacks offers each over the view, wherever it was opened from.
+  if (!saidInPanel || e.stacks?.length) errors.show(e);
   // A refused quality policy leaves the server's: show that, not the refused values.
   if (e.request_type === "quality_policy") {
     session.getState().then((s) => { quality.showState(s); orientation.showState(s.scene?.quality); }, () => {});

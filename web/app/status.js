@@ -46,12 +46,23 @@ export class ConnectionIndicator {
   }
 }
 
-export class ErrorList {
-  constructor(root) { this.box = root.getElementById("errors"); }
+// "120 axial slices, 512 × 512" for one stack a refused series offers.
+export function stackLabel(s) {
+  const slices = `${s.slices} ${s.orientation && s.orientation !== "unknown" ? `${s.orientation} ` : ""}slice${s.slices === 1 ? "" : "s"}`;
+  return `${slices}, ${s.columns} × ${s.rows}${s.localizer ? " (localizer)" : ""}`;
+}
 
-  // e: {code, message, request_type?}. Shown as the server wrote it: the code and its words;
-  // a picture over the server's limits in words about the picture (the server's message, which
-  // names the flag for scripts and operators, in the tooltip).
+export class ErrorList {
+  // openVolume(name): what a stack's button does (a series of several stacks offers each).
+  constructor(root, openVolume = () => {}) {
+    this.box = root.getElementById("errors");
+    this.openVolume = openVolume;
+  }
+
+  // e: {code, message, request_type?, stacks?}. Shown as the server wrote it: the code and its
+  // words; a picture over the server's limits in words about the picture (the server's message,
+  // which names the flag for scripts and operators, in the tooltip); the stacks of a series that
+  // one volume cannot show as buttons that open each.
   show(e) {
     const item = document.createElement("div");
     item.className = "error";
@@ -78,6 +89,19 @@ export class ErrorList {
     close.title = "Dismiss";
     close.addEventListener("click", () => item.remove());
     item.append(code, text, close);
+    if (Array.isArray(e.stacks) && e.stacks.length > 0) {
+      const stacks = document.createElement("div");
+      stacks.className = "stacks";
+      for (const s of e.stacks) {
+        const open = document.createElement("button");
+        open.type = "button";
+        open.dataset.volume = s.volume;
+        open.textContent = `Open ${stackLabel(s)}`;
+        open.addEventListener("click", () => { item.remove(); this.openVolume(s.volume); });
+        stacks.append(open);
+      }
+      item.append(stacks);
+    }
     this.box.prepend(item);
     while (this.box.children.length > MAX_ERRORS_SHOWN) this.box.lastElementChild.remove();
     setTimeout(() => item.remove(), ERROR_SHOW_MS);

@@ -39,6 +39,8 @@ export class ServerError extends Error {
     this.serverMessage = msg.message;
     this.id = msg.id ?? null;
     this.requestType = msg.request_type ?? null;
+    // load_failed of a series of several stacks: each {volume, slices, rows, columns, orientation, localizer}.
+    this.stacks = Array.isArray(msg.stacks) ? msg.stacks.filter((s) => isObject(s) && typeof s.volume === "string") : [];
   }
 }
 

@@ -127,7 +127,7 @@ export class Session extends Emitter {
       if (e instanceof ServerError) {
         // The server keeps the previous volume open (a refused request changes nothing).
         this.wantedVolume = previous;
-        this.emit("server_error", { code: e.code, message: e.serverMessage, id: e.id, request_type: e.requestType });
+        this.emit("server_error", { code: e.code, message: e.serverMessage, id: e.id, request_type: e.requestType, stacks: e.stacks });
         return null;
       }
       throw e;

@@ -38,6 +38,10 @@ class ServerError(Exception):
         self.message = message.get("message")
         self.id = message.get("id")
         self.request_type = message.get("request_type")
+        # load_failed of a series of several stacks: each stack as the server sent it, a dict
+        # {"volume": the name that opens it, "slices", "rows", "columns", "orientation", "localizer"}.
+        stacks = message.get("stacks")
+        self.stacks: List[Dict[str, Any]] = [s for s in stacks if isinstance(s, dict)] if isinstance(stacks, list) else []
         super().__init__(f"{self.code}: {self.message} (request {self.request_type} id {self.id!r})")
 
 

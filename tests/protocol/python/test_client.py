@@ -317,6 +317,22 @@ class ClientTests(unittest.TestCase):
             self.assertEqual(caught.exception.id, "x")
         self.run_async(scenario())
 
+    def test_a_series_of_several_stacks_raises_with_the_stacks_to_open(self):
+        async def scenario():
+            stacks = [{"volume": "ct/series#stack=1", "slices": 120, "rows": 512, "columns": 512,
+                       "orientation": "axial", "localizer": False},
+                      {"volume": "ct/series#stack=2", "slices": 1, "rows": 256, "columns": 256,
+                       "orientation": "coronal", "localizer": True}]
+            error = {"type": "error", "id": "x", "code": "load_failed", "request_type": "open_volume",
+                     "message": "ct/series: the series holds a localizer besides 120 axial slices", "stacks": stacks}
+            client = vc.Client(FakeSocket([json.dumps(error)]))
+            with self.assertRaises(vc.ServerError) as caught:
+                await client.request(vc.open_volume("ct/series", id="x"))
+            self.assertEqual(caught.exception.stacks, stacks)
+            self.assertEqual(vc.ServerError({"code": "not_found", "message": "m"}).stacks, [],
+                             "an error without stacks has none")
+        self.run_async(scenario())
+
     def test_wait_for_final_frame_of_a_request(self):
         async def scenario():
             client = vc.Client(FakeSocket([jpeg_frame(1, 7), jpeg_frame(2, 7, final=True),

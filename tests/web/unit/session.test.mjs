@@ -95,6 +95,26 @@ test("an unknown volume: the server's error reaches the page and the old volume 
   assert.equal(s.loading, null);
 });
 
+test("a series of several stacks: the error reaches the page with each stack's name to open", async () => {
+  const { s, events } = make();
+  s.start();
+  const ws = FakeWebSocket.last;
+  await serve(ws);
+  answerOpen(ws);
+  await flush();
+  const result = s.openVolume("ct/series");
+  const open = ws.lastSent("open_volume");
+  const stacks = [
+    { volume: "ct/series#stack=1", slices: 120, rows: 512, columns: 512, orientation: "axial", localizer: false },
+    { volume: "ct/series#stack=2", slices: 1, rows: 256, columns: 256, orientation: "coronal", localizer: true },
+  ];
+  ws.serverSend({ type: "error", id: open.id, code: "load_failed", message: "ct/series: the series holds a localizer", request_type: "open_volume", stacks });
+  assert.equal(await result, null);
+  const err = events.find(([t]) => t === "server_error")[1];
+  assert.deepEqual(err.stacks, stacks);
+  assert.equal(s.wantedVolume, "builtin:demo", "nothing is opened unasked");
+});
+
 test("scene changes wait for a volume; interaction start/end are sent once each", async () => {
   const { s } = make();
   s.start();
