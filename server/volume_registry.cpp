@@ -352,8 +352,8 @@ void VolumeRegistry::fetchStep(const std::shared_ptr<Pending> &pending, uint64_t
         // An upload was parsed whole when it arrived; a stack is chosen only as a series is loaded.
         if (p.stack && p.form == FetchedVolume::Form::Parsed)
             failure = ProtocolError{ErrorCode::LoadFailed,
-                                    p.name + ": an upload is opened whole; a stack (#stack=N) is chosen "
-                                                            "only in a series from a DICOMweb source or the data folders",
+                                    p.name + ": an upload is opened whole; a stack (#stack=N) is chosen only in a "
+                                             "series from a DICOMweb source or the data folders",
                                     nullptr, "open_volume"};
     } catch (const VolumeFetchError &e) {
         spdlog::warn("fetching {}: {}", hideUploadIds(p.name), hideUploadIds(e.what()));
