@@ -48,17 +48,34 @@ int hexValue(char c) {
     return -1;
 }
 
-// How many bytes of `text` at `at` stand for `wanted`: itself, its percent-encoding in either
-// case, or '+' for a space (form encoding); 0 if none.
-size_t standsFor(std::string_view text, size_t at, char wanted) {
-    if (at >= text.size()) return 0;
-    if (text[at] == wanted) return 1;
-    if (wanted == ' ' && text[at] == '+') return 1;
-    if (text[at] == '%' && at + 2 < text.size()) {
-        const int high = hexValue(text[at + 1]), low = hexValue(text[at + 2]);
-        if (high >= 0 && low >= 0 && char(high * 16 + low) == wanted) return 3;
+// Whether `text` at `at` holds `wanted` percent-encoded, in either case.
+bool percentEncodes(std::string_view text, size_t at, char wanted) {
+    if (at + 2 >= text.size() || text[at] != '%') return false;
+    const int high = hexValue(text[at + 1]), low = hexValue(text[at + 2]);
+    return high >= 0 && low >= 0 && char(high * 16 + low) == wanted;
+}
+
+// The longest run of `secret`'s characters from `from` on, at least `enough` of them, that
+// `text` holds from `at` (each character as itself, percent-encoded, or '+' for a space): how
+// far it reaches in text bytes, or 0. A '%' before "25" may stand for itself or begin "%25"
+// (a password holding '%', sent back percent-encoded): both readings are followed.
+size_t longestRun(std::string_view text, size_t at, std::string_view secret, size_t from, size_t enough) {
+    size_t longest = 0, used = at, matched = 0;
+    for (size_t k = from; k < secret.size(); ++k, ++matched) {
+        const char wanted = secret[k];
+        const bool itself = used < text.size() && (text[used] == wanted || (wanted == ' ' && text[used] == '+'));
+        const bool encoded = percentEncodes(text, used, wanted);
+        if (itself && encoded) {
+            const size_t stillWanted = enough > matched + 1 ? enough - matched - 1 : 1;
+            const size_t rest = longestRun(text, used + 3, secret, k + 1, stillWanted);
+            if (rest > 0) longest = std::max(longest, used + 3 + rest - at);
+            else if (matched + 1 >= enough) longest = std::max(longest, used + 3 - at);
+        }
+        if (!itself && !encoded) break;
+        used += itself ? 1 : 3;
+        if (matched + 1 >= enough) longest = std::max(longest, used - at);
     }
-    return 0;
+    return longest;
 }
 
 } // namespace
@@ -95,14 +112,9 @@ std::string CredentialScrubber::withoutCredentials(std::string_view text) const 
         for (const std::string &secret : secrets_) {
             const size_t enough = std::min(kMinPartialRun, secret.size());
             for (size_t from = 0; from + enough <= secret.size(); ++from) {
-                size_t matched = 0, used = 0;
-                while (from + matched < secret.size()) {
-                    const size_t n = standsFor(text, i + used, secret[from + matched]);
-                    if (n == 0) break;
-                    used += n;
-                    ++matched;
-                }
-                if (matched >= enough) cut = std::max(cut, used);
+                // Only the character itself, a '%' or a '+' can begin a run: most bytes begin none.
+                if (text[i] != secret[from] && text[i] != '%' && text[i] != '+') continue;
+                cut = std::max(cut, longestRun(text, i, secret, from, enough));
             }
         }
         if (cut > 0) {
@@ -120,6 +132,9 @@ std::string CredentialScrubber::operator()(std::string_view text) const {
     std::string out = withoutCredentials(text);
     for (char &c : out)
         if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
+    // Those spaces can complete a credential that holds one ("pass word" sent back as
+    // "pass<TAB>word"): look again.
+    out = withoutCredentials(out);
     if (out.size() > kMaxMessageBytes) {
         size_t end = kMaxMessageBytes;
         while (end > 0 && (static_cast<unsigned char>(out[end]) & 0xC0) == 0x80) --end;

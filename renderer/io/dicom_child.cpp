@@ -227,7 +227,10 @@ std::optional<std::vector<SeriesStack>> readStackList(std::string_view word, uin
     return stacks;
 }
 
-// The caller's side: the refusal line (without its newline) as the error the load throws.
+} // namespace
+
+// The caller's side: the refusal line (without its newline) as the error the load throws
+// (dicom_child.hpp).
 // The child parsed hostile bytes and may be under their control, so the line is read as
 // hostile too: its message bounded, invalid UTF-8 and control characters replaced, and made to
 // start with the path the caller gave (as every VolumeLoadError does); the time limit is the
@@ -236,10 +239,14 @@ std::optional<std::vector<SeriesStack>> readStackList(std::string_view word, uin
     // The mark, the kind, a space, the number's digits, a space, the message.
     const size_t numberEnd = line.find(' ', 3);
     uint64_t bytes = 0;
-    const bool wellFormed =
-        line.size() > 3 && line[0] == kRefusalMark && line[2] == ' ' && numberEnd != std::string::npos &&
-        numberEnd > 3 && numberEnd + 1 < line.size() &&
-        std::from_chars(line.data() + 3, line.data() + numberEnd, bytes).ptr == line.data() + numberEnd;
+    const auto digitsRead = [&] {
+        // A number past 64 bits stops at its end too, with an error and `bytes` left at 0.
+        const auto read = std::from_chars(line.data() + 3, line.data() + numberEnd, bytes);
+        return read.ptr == line.data() + numberEnd && read.ec == std::errc();
+    };
+    const bool wellFormed = line.size() > 3 && line[0] == kRefusalMark && line[2] == ' ' &&
+                            numberEnd != std::string::npos && numberEnd > 3 && numberEnd + 1 < line.size() &&
+                            digitsRead();
     if (!wellFormed) fail(path, "was refused by the parser in its separate process; it is not loaded");
     const char kind = line[1];
     std::string_view said = std::string_view(line).substr(numberEnd + 1);
@@ -271,6 +278,8 @@ std::optional<std::vector<SeriesStack>> readStackList(std::string_view word, uin
     if (stacks) throw SeriesHoldsStacks(message, std::move(*stacks));
     throw VolumeLoadError(message);
 }
+
+namespace {
 
 // What the checker hands back: the volume it loaded, so that the file is parsed once, in the
 // child, and never again in the caller. A fixed header, the file's modality, then either the

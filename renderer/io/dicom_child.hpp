@@ -45,6 +45,11 @@ struct CheckedResultFile {
     CheckedResultFile &operator=(const CheckedResultFile &) = delete;
 };
 
+// The checker's refusal line (its mark, kind letter, number and message; without the newline)
+// as the error a load throws, read as hostile (runChecker below). Internal; fuzzed by
+// fuzz/fuzz_checker_refusal.cpp.
+[[noreturn]] void throwRefusal(const fs::path &path, const LoadOptions &options, const std::string &line);
+
 // Parses the file in the checker process. Returns when it loaded it (its volume, or with
 // planAllowed and a folder it reads directly, its plan, is in `result`). When it refused it,
 // throws the checker's own refusal: its words (read as hostile: one line, bounded, control
