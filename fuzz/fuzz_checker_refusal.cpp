@@ -3,14 +3,15 @@
 // caller as hostile text (the child parsed hostile bytes and may be under their control).
 // Byte 0 picks the path the load was asked for (plain, with spaces, with non-ASCII letters,
 // a folder); the rest is the line, without its newline: the mark 0x1F, a kind letter
-// (R plainly, L too large, T time limit, S over the result limit), a space, a number, a
-// space, the message.
+// (R plainly, L too large, T time limit, S over the result limit, K several stacks), a
+// space, a number, a space, the message (for K: the stacks as one word, a space, the message).
 // Invariants: only VolumeLoadError escapes, always; its message starts with the path, is
 // valid UTF-8 without control characters (C0, DEL, C1) and at most 2048 bytes + "…"; a
 // well-formed line keeps its kind (VolumeTooLarge with the line's number, VolumeLoadTimeout
 // with the caller's own time limit, VolumeOverResultLimit with the number and the caller's
-// limit, VolumeLoadError for any other letter) and a short printable ASCII message word for
-// word; any other line is a plain VolumeLoadError in general words; the same line gives the
+// limit, SeriesHoldsStacks with as many stacks as the number, each of sizes and an orientation
+// DICOM can state, or, where the stacks do not read, a plain VolumeLoadError; VolumeLoadError for
+// any other letter) and a short printable ASCII message word for word; any other line is a plain VolumeLoadError in general words; the same line gives the
 // same answer twice.
 
 #include "renderer/io/dicom_child.hpp"
@@ -90,6 +91,19 @@ std::string answer(const fs::path &path, const LoadOptions &options, const std::
     } catch (const VolumeOverResultLimit &e) {
         fuzz::check(e.limit == options.maxResultBytes, "a result limit other than the caller's", e.what());
         return "S " + std::to_string(e.needed) + " " + e.what();
+    } catch (const SeriesHoldsStacks &e) {
+        fuzz::check(e.stacks.size() >= 2 && e.stacks.size() <= SeriesHoldsStacks::kMaxListed,
+                    "a stack count outside 2..kMaxListed", e.what());
+        for (size_t i = 0; i < e.stacks.size(); ++i) {
+            const SeriesStack &st = e.stacks[i];
+            fuzz::check(st.number == i + 1, "stacks not numbered in order", e.what());
+            fuzz::check(st.slices >= 1 && st.rows <= 65535 && st.columns <= 65535, "a stack of sizes DICOM cannot state",
+                        e.what());
+            fuzz::check(st.orientation == "axial" || st.orientation == "coronal" || st.orientation == "sagittal" ||
+                            st.orientation == "oblique" || st.orientation == "unknown",
+                        "a stack of an unknown orientation", st.orientation);
+        }
+        return "K " + std::to_string(e.stacks.size()) + " " + e.what();
     } catch (const VolumeLoadError &e) {
         fuzz::check(typeid(e) == typeid(VolumeLoadError), "another subclass of VolumeLoadError", e.what());
         return "R " + std::string(e.what());
@@ -116,7 +130,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
 
     const char kind = got[0];
     size_t messageAt = 2;
-    if (kind == 'L' || kind == 'S') messageAt = got.find(' ', 2) + 1;
+    if (kind == 'L' || kind == 'S' || kind == 'K') messageAt = got.find(' ', 2) + 1;
     const std::string_view message = std::string_view(got).substr(messageAt);
     fuzz::check(message.starts_with(path.string()), "the message does not start with the path", message);
     fuzz::check(fuzz::isValidUtf8(message), "the message is not valid UTF-8", message);
@@ -129,6 +143,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
         fuzz::check(kind == 'R', "a malformed line refused as a particular kind", got);
         fuzz::check(message == path.string() + ": was refused by the parser in its separate process; it is not loaded",
                     "a malformed line refused in other words than the general ones", message);
+        return 0;
+    }
+    if (parsed->kind == 'K') {
+        // Stacks that do not read leave a plain refusal; the message follows the stacks' word.
+        fuzz::check(kind == 'K' || kind == 'R', "stacks refused as another particular kind", got);
+        if (kind == 'K')
+            fuzz::check(got.substr(2, messageAt - 3) == std::to_string(parsed->number),
+                        "the line's count of stacks was not carried", got);
         return 0;
     }
     const char expectedKind = parsed->kind == 'L' || parsed->kind == 'T' || parsed->kind == 'S' ? parsed->kind : 'R';
