@@ -162,8 +162,10 @@ class FakePacs {
                 return;
             }
             if (!pause(behaviour_.searchDelay)) return;
-            sendAll(fd, json(200, "[]"));
+            // Counted before the answer goes: the server may pass it on, and a test count it,
+            // before this thread runs again.
             ++searchesAnswered_;
+            sendAll(fd, json(200, "[]"));
         } else if (target.starts_with("/studies/" + studyUid_ + "/series?")) {
             sendAll(fd, json(200, "[{\"0020000E\":{\"vr\":\"UI\",\"Value\":[\"" + seriesUid_ +
                                       "\"]},\"00201209\":{\"vr\":\"IS\",\"Value\":[" + std::to_string(files_.size()) +
