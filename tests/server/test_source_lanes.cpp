@@ -113,8 +113,8 @@ class SourceLanes : public volcast::test::RegistryTest {
     }
 };
 
-// The auditor's case: two sessions retrieving series that trickle in over 10 s each held a
-// third session's open of a small local file for both retrievals, on the one loader thread.
+// Two sessions retrieving series that trickle in over 10 s each must not hold up a third
+// session's open of a small local file: a local open never waits behind a retrieval.
 TEST_F(SourceLanes, ALocalOpenIsAnsweredWhileTwoRetrievalsTrickle) {
     writeSmallNrrd(data / "small.nrrd");
     const auto files = writeSeries(series);
