@@ -88,13 +88,18 @@ struct RawExchange {
     bool closedAfter = false;   // the server closed the connection after a response without keep-alive
 };
 
-// Connect, write `bytes`, read one response and see whether the connection closes after it
-// (within `timeout`).
+// Connect (from the local address `from` when given: 127.0.0.2, 127.0.0.3, ... are each
+// another client to the server), write `bytes`, read one response and see whether the
+// connection closes after it (within `timeout`).
 inline RawExchange rawExchange(uint16_t port, const std::string &bytes,
-                               std::chrono::milliseconds timeout = std::chrono::seconds(5)) {
+                               std::chrono::milliseconds timeout = std::chrono::seconds(5), const std::string &from = {}) {
     namespace http = boost::beast::http;
     boost::asio::io_context ioc;
     boost::beast::tcp_stream stream(ioc);
+    if (!from.empty()) {
+        stream.socket().open(boost::asio::ip::tcp::v4());
+        stream.socket().bind(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address(from), 0));
+    }
     stream.connect(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address("127.0.0.1"), port));
     stream.expires_after(timeout);
     RawExchange out;

@@ -68,30 +68,10 @@ std::string uploadHead(const std::string &filename, uint64_t length, const std::
     return r + "Content-Length: " + std::to_string(length) + "\r\n\r\n";
 }
 
-// rawExchange from the local address `from`: 127.0.0.2, 127.0.0.3, ... are each another
-// client (another identity) to the server.
+// rawExchange from the local address `from`: each 127.0.0.x is another client (identity).
 RawExchange rawExchangeFrom(const std::string &from, uint16_t port, const std::string &bytes,
                             std::chrono::milliseconds timeout) {
-    namespace http = boost::beast::http;
-    boost::asio::io_context ioc;
-    boost::beast::tcp_stream stream(ioc);
-    stream.socket().open(boost::asio::ip::tcp::v4());
-    stream.socket().bind(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address(from), 0));
-    stream.connect(boost::asio::ip::tcp::endpoint(boost::asio::ip::make_address("127.0.0.1"), port));
-    stream.expires_after(timeout);
-    RawExchange out;
-    boost::beast::error_code ec;
-    boost::asio::write(stream, boost::asio::buffer(bytes), ec);
-    boost::beast::flat_buffer buffer;
-    http::response_parser<http::string_body> parser;
-    parser.body_limit(1 << 20);
-    http::read(stream, buffer, parser, ec);
-    if (ec) {
-        out.error = ec.message();
-        return out;
-    }
-    out.response = parser.release();
-    return out;
+    return rawExchange(port, bytes, timeout, from);
 }
 
 // A connection from `from` that has sent `bytes` and is left open.

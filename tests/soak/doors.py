@@ -52,7 +52,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from rawws import Closed, ConnectionLost, RawWebSocket  # noqa: E402
 from scripted import vc  # noqa: E402  (the Python client's messages and frame decoder)
-from serverproc import DEFAULT_SERVER, Server  # noqa: E402
+from serverproc import DEFAULT_SERVER, Server, rss_kib  # noqa: E402
 
 STUDY = "1.2.826.0.1.3680043.8.498.1"
 SERIES = "1.2.826.0.1.3680043.8.498.2"
@@ -302,28 +302,6 @@ async def session_request(port: int, message: dict, answer_types: Tuple[str, ...
         await ws.close()
 
 
-def peak_rss_kib(pid: int) -> Optional[int]:
-    try:
-        with open(f"/proc/{pid}/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1])
-    except OSError:
-        return None
-    return None
-
-
-def rss_now_kib(pid: int) -> Optional[int]:
-    try:
-        with open(f"/proc/{pid}/status") as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1])
-    except OSError:
-        return None
-    return None
-
-
 class RssWatch:
     """The server's resident memory sampled every 10 ms while an attack runs."""
 
@@ -334,7 +312,7 @@ class RssWatch:
 
     def _run(self) -> None:
         while not self.done.wait(0.01):
-            self.peak = max(self.peak, rss_now_kib(self.pid) or 0)
+            self.peak = max(self.peak, rss_kib(self.pid) or 0)
 
     def finish(self) -> int:
         self.done.set()
@@ -483,7 +461,7 @@ class Run:
 
     async def bomb(self, name: str, body: bytes) -> List[str]:
         pid = self.server.pid
-        idle = rss_now_kib(pid) or 0
+        idle = rss_kib(pid) or 0
         watch = RssWatch(pid)
         status, text = await asyncio.to_thread(upload, self.port, name, body, "127.0.0.11")
         peak = watch.finish()
