@@ -94,7 +94,7 @@ class WebsocketSession : public std::enable_shared_from_this<WebsocketSession> {
     // Message handlers; each may throw SceneError (bad_field) or ProtocolError.
     void onHello(const protocol::HelloRequest &m);
     void onOpenVolume(const protocol::OpenVolumeRequest &m);
-    void onFindStudies(const protocol::FindStudiesRequest &m);   // answered from the search thread
+    void onFindStudies(const protocol::FindStudiesRequest &m);   // answered from its source's search lane
     void onOpened(nlohmann::json id, VolumeRegistry::Result result);
     void joinScheduler();
     // Throws AdmissionError (too_large, naming the limit and its flag) when a view of
