@@ -61,9 +61,17 @@ struct Stack {
     }
 };
 
-std::string describeStacks(const std::vector<Stack> &stacks) {
+size_t mostSlices(const std::vector<Stack> &stacks) {
     size_t largest = 0;
     for (const Stack &s : stacks) largest = std::max(largest, s.slices);
+    return largest;
+}
+
+// A scout image beside the series' stack: one to three slices where another stack has more.
+bool looksLikeLocalizer(const Stack &s, size_t largest) { return s.slices <= 3 && s.slices < largest; }
+
+std::string describeStacks(const std::vector<Stack> &stacks) {
+    const size_t largest = mostSlices(stacks);
     bool oneSize = true;
     for (const Stack &s : stacks) oneSize = oneSize && s.rows == stacks.front().rows && s.columns == stacks.front().columns;
     std::string said;
@@ -80,8 +88,7 @@ std::string describeStacks(const std::vector<Stack> &stacks) {
                 said += " without an orientation";
             }
         }
-        // A scout image beside the series' stack: one to three slices where another stack has more.
-        if (s.slices <= 3 && s.slices < largest) said += " (a localizer?)";
+        if (looksLikeLocalizer(s, largest)) said += " (a localizer?)";
     }
     return said;
 }
@@ -112,13 +119,12 @@ void numberStacks(std::vector<Stack> &stacks) {
 }
 
 std::vector<SeriesStack> listedStacks(const std::vector<Stack> &stacks) {
-    size_t largest = 0;
-    for (const Stack &s : stacks) largest = std::max(largest, s.slices);
+    const size_t largest = mostSlices(stacks);
     std::vector<SeriesStack> listed;
     for (size_t i = 0; i < stacks.size() && i < SeriesHoldsStacks::kMaxListed; ++i) {
         const Stack &s = stacks[i];
         listed.push_back({uint32_t(i + 1), uint32_t(s.slices), s.rows, s.columns, orientationName(s.orientation),
-                          s.slices <= 3 && s.slices < largest});
+                          looksLikeLocalizer(s, largest)});
     }
     return listed;
 }
@@ -250,7 +256,9 @@ std::optional<std::vector<std::string>> checkSeriesIdentity(const fs::path &dir,
         if (*selected < 1 || *selected > stacks.size())
             refuseStacks(fmt::format("the series holds {} stack{}, so no stack {}; it is not loaded", stacks.size(),
                                      stacks.size() == 1 ? "" : "s", *selected));
-        return std::move(stacks[*selected - 1].files);
+        std::vector<std::string> files = std::move(stacks[*selected - 1].files);
+        std::sort(files.begin(), files.end());   // StackFiles: sorted for the read paths' lookups
+        return files;
     }
     if (firstOfAnotherStack) {
         const InstanceHeader &h = *firstOfAnotherStack;

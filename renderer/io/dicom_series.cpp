@@ -309,7 +309,7 @@ Volume loadDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProg
         std::vector<std::string> part = names->GetFileNames(uid);
         if (only)
             std::erase_if(part, [&](const std::string &file) {
-                return std::find(only->begin(), only->end(), fs::path(file).filename().string()) == only->end();
+                return !std::binary_search(only->begin(), only->end(), fs::path(file).filename().string());
             });
         if (!part.empty()) parts.push_back(std::move(part));
     }

@@ -30,7 +30,8 @@ void checkDicomFolderEntries(const fs::path &dir);
 // What every DICOM folder meets before either read path: its entries (checkDicomFolderEntries),
 // then its instances' headers, one series of one patient in one stack, of the requested
 // series where LoadOptions::expectedSeries names one (dicom_identity.hpp). Where
-// LoadOptions::seriesStack selects a stack, the names of its files, which alone are read.
+// LoadOptions::seriesStack selects a stack, the names of its files (sorted: the lookups of the
+// read paths are binary searches), which alone are read.
 using StackFiles = std::optional<std::vector<std::string>>;
 StackFiles checkDicomFolder(const fs::path &dir, const LoadOptions &options, LoadProgress &progress);
 

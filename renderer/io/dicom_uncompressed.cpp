@@ -330,7 +330,7 @@ std::optional<UncompressedSeries> scanUncompressedSeries(const fs::path &dir, st
     std::vector<fs::path> files;
     std::error_code ec;
     for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-        if (only && std::find(only->begin(), only->end(), it->path().filename().string()) == only->end()) continue;
+        if (only && !std::binary_search(only->begin(), only->end(), it->path().filename().string())) continue;
         if (!it->is_regular_file(ec) || it->is_symlink(ec)) {
             why = fmt::format("'{}' is not a regular file", it->path().filename().string());
             return std::nullopt;
