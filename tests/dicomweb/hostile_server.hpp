@@ -3,6 +3,8 @@
 // with bytes the test chose (malformed multipart, redirects elsewhere, endless or oversized
 // bodies, silence). One thread; one request per connection, then the connection is closed.
 
+#include "tests/loopback_listener.hpp"
+
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -27,15 +29,7 @@ class HostileServer {
     using Responder = std::function<std::string(int index, const std::string &request)>;
 
     explicit HostileServer(Responder respond) : respond_(std::move(respond)) {
-        listener_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        sockaddr_in address{};
-        address.sin_family = AF_INET;
-        address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-        socklen_t length = sizeof address;
-        if (listener_ < 0 || ::bind(listener_, reinterpret_cast<sockaddr *>(&address), sizeof address) != 0 ||
-            ::listen(listener_, 16) != 0 || ::getsockname(listener_, reinterpret_cast<sockaddr *>(&address), &length) != 0)
-            throw std::runtime_error("hostile server: no loopback socket");
-        port_ = ntohs(address.sin_port);
+        listener_ = loopbackListener(16, port_, "hostile server");
         thread_ = std::thread([this] { serve(); });
     }
     ~HostileServer() {
@@ -54,13 +48,7 @@ class HostileServer {
     }
 
   private:
-    bool waitReadable(int fd) const {
-        while (!stop_) {
-            pollfd p{fd, POLLIN, 0};
-            if (::poll(&p, 1, 50) > 0) return true;
-        }
-        return false;
-    }
+    bool waitReadable(int fd) const { return volcast::test::waitReadable(fd, stop_); }
 
     void serve() {
         int index = 0;

@@ -5,6 +5,8 @@
 // study searches with no study, and can be made slow: the retrieval's body dripped over a
 // chosen time, searches answered after a delay or never. It counts the requests it gets.
 
+#include "tests/loopback_listener.hpp"
+
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -57,16 +59,7 @@ class FakePacs {
         if (files_.empty()) throw std::invalid_argument("fake PACS: no instance to serve");
         studyUid_ = dicomUid(files_.front(), 0x0020, 0x000D);
         seriesUid_ = dicomUid(files_.front(), 0x0020, 0x000E);
-        listener_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        sockaddr_in address{};
-        address.sin_family = AF_INET;
-        address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-        socklen_t length = sizeof address;
-        if (listener_ < 0 || ::bind(listener_, reinterpret_cast<sockaddr *>(&address), sizeof address) != 0 ||
-            ::listen(listener_, 128) != 0 ||
-            ::getsockname(listener_, reinterpret_cast<sockaddr *>(&address), &length) != 0)
-            throw std::runtime_error("fake PACS: no loopback socket");
-        port_ = ntohs(address.sin_port);
+        listener_ = loopbackListener(128, port_, "fake PACS");
         acceptor_ = std::thread([this] { acceptLoop(); });
     }
     ~FakePacs() {
@@ -105,13 +98,7 @@ class FakePacs {
     int searchesAnswered() const { return searchesAnswered_; }
 
   private:
-    bool waitReadable(int fd) const {
-        while (!stop_) {
-            pollfd p{fd, POLLIN, 0};
-            if (::poll(&p, 1, 50) > 0) return true;
-        }
-        return false;
-    }
+    bool waitReadable(int fd) const { return volcast::test::waitReadable(fd, stop_); }
     bool sendAll(int fd, std::string_view bytes) const {
         while (!bytes.empty() && !stop_) {
             const ssize_t n = ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
